@@ -1,0 +1,422 @@
+"""SE(3) / SO(3) helpers.
+
+Conventions (the one page of them; see also ``docs/conventions.md``):
+
+* A pose is a 4×4 homogeneous matrix, float64, translations in **millimetres**. A batch of
+  poses is an array of shape (n, 4, 4). ``a_from_b`` maps coordinates in frame b into frame a,
+  so ``compose(a_from_b, b_from_c) == a_from_c``.
+* Angles inside tmscal are radians; degrees appear only at the edges and are named ``_deg``.
+* Quaternions are scalar first, (q0, qx, qy, qz), as NDI sends them.
+* Rotation vectors (UR) are axis × angle in radians.
+* DENSO P-type angles are degrees, R = Rz(rz) · Ry(ry) · Rx(rx) (rotations about the fixed
+  base axes, RX first).
+
+All functions are pure and accept single poses or batches where stated.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "check_pose",
+    "check_poses",
+    "make_pose",
+    "compose",
+    "invert",
+    "rotation",
+    "translation",
+    "orthonormalize",
+    "matrix_from_quaternion",
+    "quaternion_from_matrix",
+    "matrix_from_rotvec",
+    "rotvec_from_matrix",
+    "pose_from_rotvec",
+    "rotvec_pose_from_matrix",
+    "matrix_from_denso_p",
+    "denso_p_from_matrix",
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "rotation_angle",
+    "angle_between",
+    "rotation_mean",
+    "pose_mean",
+    "random_rotation",
+    "absolute_orientation",
+]
+
+_RIGID_TOL = 1e-6
+
+
+def check_poses(poses: ArrayLike, name: str = "poses", rigid: bool = True,
+                tol: float = _RIGID_TOL) -> Array:
+    """Validate and return a batch of 4×4 poses as float64, shape (n, 4, 4).
+
+    A single 4×4 is promoted to (1, 4, 4). Raises ``ValueError`` naming ``name`` and quoting
+    the actual shape when the array is not (n, 4, 4), holds NaN/inf, has a last row other
+    than [0, 0, 0, 1] or (when ``rigid``) a rotation block that is not orthonormal with
+    determinant +1 within ``tol``.
+    """
+    a = np.asarray(poses, dtype=np.float64)
+    if a.ndim == 2:
+        a = a[None]
+    if a.ndim != 3 or a.shape[1:] != (4, 4):
+        raise ValueError(f"{name}: expected 4×4 poses of shape (n, 4, 4), got shape {a.shape}")
+    bad = ~np.isfinite(a).all(axis=(1, 2))
+    if bad.any():
+        raise ValueError(f"{name}: pose {int(np.argmax(bad))} contains NaN or infinity")
+    last = np.abs(a[:, 3, :] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=1)
+    if (last > 1e-9).any():
+        i = int(np.argmax(last > 1e-9))
+        raise ValueError(f"{name}: pose {i} has last row {a[i, 3].tolist()}, "
+                         "expected [0, 0, 0, 1]")
+    if rigid:
+        R = a[:, :3, :3]
+        err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(R)
+        badr = (err > tol) | (np.abs(det - 1.0) > tol)
+        if badr.any():
+            i = int(np.argmax(badr))
+            raise ValueError(f"{name}: pose {i} is not rigid (|R Rᵀ − I| = {err[i]:.2e}, "
+                             f"det R = {det[i]:.6f})")
+    return a
+
+
+def check_pose(pose: ArrayLike, name: str = "pose", rigid: bool = True,
+               tol: float = _RIGID_TOL) -> Array:
+    """Validate one 4×4 pose (mm) and return it as float64 (4, 4); see :func:`check_poses`."""
+    a = np.asarray(pose, dtype=np.float64)
+    if a.shape != (4, 4):
+        raise ValueError(f"{name}: expected a 4×4 pose, got shape {a.shape}")
+    return check_poses(a, name, rigid, tol)[0]
+
+
+def make_pose(R: ArrayLike | None = None, t: ArrayLike | None = None) -> Array:
+    """Build 4×4 poses from rotations (…, 3, 3) and translations (…, 3) in mm."""
+    Ra = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
+    ta = np.zeros(3) if t is None else np.asarray(t, dtype=np.float64)
+    shape = np.broadcast_shapes(Ra.shape[:-2], ta.shape[:-1])
+    T = np.zeros(shape + (4, 4))
+    T[..., :3, :3] = Ra
+    T[..., :3, 3] = ta
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def compose(*poses: ArrayLike) -> Array:
+    """Compose poses left to right: ``compose(a_from_b, b_from_c) -> a_from_c``. Batched."""
+    out = np.asarray(poses[0], dtype=np.float64)
+    for p in poses[1:]:
+        out = out @ np.asarray(p, dtype=np.float64)
+    return out
+
+
+def invert(pose: ArrayLike) -> Array:
+    """Invert rigid poses (…, 4, 4): ``invert(a_from_b) -> b_from_a``; mm in, mm out."""
+    T = np.asarray(pose, dtype=np.float64)
+    R = T[..., :3, :3]
+    Rt = np.swapaxes(R, -1, -2)
+    out = np.zeros_like(T)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -(Rt @ T[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def rotation(pose: ArrayLike) -> Array:
+    """The 3×3 rotation block(s) of pose(s) (…, 4, 4)."""
+    return np.asarray(pose, dtype=np.float64)[..., :3, :3]
+
+
+def translation(pose: ArrayLike) -> Array:
+    """The translation(s) of pose(s) (…, 4, 4), in mm, shape (…, 3)."""
+    return np.asarray(pose, dtype=np.float64)[..., :3, 3]
+
+
+def orthonormalize(M: ArrayLike) -> Array:
+    """Nearest rotation(s) to 3×3 matrices, or the pose(s) with their 3×3 block projected.
+
+    Uses the SVD M = U Σ Vᵀ and returns U diag(1, 1, det(U Vᵀ)) Vᵀ, so the result is a proper
+    rotation (det +1) even for reflections. Accepts (…, 3, 3) or (…, 4, 4); for 4×4 input the
+    translation column is kept and the last row reset to [0, 0, 0, 1].
+    """
+    A = np.asarray(M, dtype=np.float64)
+    if A.shape[-2:] == (4, 4):
+        out = A.copy()
+        out[..., :3, :3] = orthonormalize(A[..., :3, :3])
+        out[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
+        return out
+    if A.shape[-2:] != (3, 3):
+        raise ValueError(f"orthonormalize: expected (…, 3, 3) or (…, 4, 4), got {A.shape}")
+    U, _, Vt = np.linalg.svd(A)
+    d = np.sign(np.linalg.det(U @ Vt))
+    d = np.where(d == 0, 1.0, d)
+    D = np.zeros(A.shape[:-2] + (3,))
+    D[..., 0] = 1.0
+    D[..., 1] = 1.0
+    D[..., 2] = d
+    return (U * D[..., None, :]) @ Vt
+
+
+# --- elementary rotations -------------------------------------------------------------
+
+def rot_x(a: ArrayLike) -> Array:
+    """Rotation(s) about x by angle(s) ``a`` in radians, shape (…, 3, 3)."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    R[..., 0, 0] = 1.0
+    R[..., 1, 1] = c
+    R[..., 1, 2] = -s
+    R[..., 2, 1] = s
+    R[..., 2, 2] = c
+    return R
+
+
+def rot_y(a: ArrayLike) -> Array:
+    """Rotation(s) about y by angle(s) ``a`` in radians, shape (…, 3, 3)."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    R[..., 1, 1] = 1.0
+    R[..., 0, 0] = c
+    R[..., 0, 2] = s
+    R[..., 2, 0] = -s
+    R[..., 2, 2] = c
+    return R
+
+
+def rot_z(a: ArrayLike) -> Array:
+    """Rotation(s) about z by angle(s) ``a`` in radians, shape (…, 3, 3)."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    R[..., 2, 2] = 1.0
+    R[..., 0, 0] = c
+    R[..., 0, 1] = -s
+    R[..., 1, 0] = s
+    R[..., 1, 1] = c
+    return R
+
+
+# --- quaternions (scalar first, as NDI) -------------------------------------------------
+
+def matrix_from_quaternion(q: ArrayLike) -> Array:
+    """Rotation matrices (…, 3, 3) from quaternions (…, 4) = (q0, qx, qy, qz).
+
+    The quaternion is normalised first; a zero quaternion raises ``ValueError``.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(n < 1e-12):
+        raise ValueError("matrix_from_quaternion: zero-length quaternion")
+    w, x, y, z = np.moveaxis(q / n, -1, 0)
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def quaternion_from_matrix(R: ArrayLike) -> Array:
+    """Unit quaternions (…, 4) = (q0, qx, qy, qz), q0 ≥ 0, from rotation matrices (…, 3, 3).
+
+    Accepts 4×4 poses too (the rotation block is used). Robust for all angles (Shepperd).
+    """
+    M = np.asarray(R, dtype=np.float64)
+    if M.shape[-2:] == (4, 4):
+        M = M[..., :3, :3]
+    m = M.reshape(-1, 3, 3)
+    out = np.empty((m.shape[0], 4))
+    tr = np.trace(m, axis1=1, axis2=2)
+    diag = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    k = np.argmax(diag, axis=1)
+    for case in range(4):
+        sel = k == case
+        if not sel.any():
+            continue
+        a = m[sel]
+        if case == 0:
+            s = np.sqrt(1.0 + tr[sel]) * 2
+            out[sel] = np.stack([0.25 * s, (a[:, 2, 1] - a[:, 1, 2]) / s,
+                                 (a[:, 0, 2] - a[:, 2, 0]) / s, (a[:, 1, 0] - a[:, 0, 1]) / s], 1)
+        elif case == 1:
+            s = np.sqrt(1.0 + a[:, 0, 0] - a[:, 1, 1] - a[:, 2, 2]) * 2
+            out[sel] = np.stack([(a[:, 2, 1] - a[:, 1, 2]) / s, 0.25 * s,
+                                 (a[:, 0, 1] + a[:, 1, 0]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s], 1)
+        elif case == 2:
+            s = np.sqrt(1.0 + a[:, 1, 1] - a[:, 0, 0] - a[:, 2, 2]) * 2
+            out[sel] = np.stack([(a[:, 0, 2] - a[:, 2, 0]) / s, (a[:, 0, 1] + a[:, 1, 0]) / s,
+                                 0.25 * s, (a[:, 1, 2] + a[:, 2, 1]) / s], 1)
+        else:
+            s = np.sqrt(1.0 + a[:, 2, 2] - a[:, 0, 0] - a[:, 1, 1]) * 2
+            out[sel] = np.stack([(a[:, 1, 0] - a[:, 0, 1]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s,
+                                 (a[:, 1, 2] + a[:, 2, 1]) / s, 0.25 * s], 1)
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    out[out[:, 0] < 0] *= -1
+    return out.reshape(M.shape[:-2] + (4,))
+
+
+# --- rotation vectors (UR) -------------------------------------------------------------
+
+def matrix_from_rotvec(rv: ArrayLike) -> Array:
+    """Rotation matrices (…, 3, 3) from rotation vectors (…, 3), axis × angle in radians."""
+    rv = np.asarray(rv, dtype=np.float64)
+    theta = np.linalg.norm(rv, axis=-1)
+    small = theta < 1e-12
+    safe = np.where(small, 1.0, theta)
+    k = rv / safe[..., None]
+    K = np.zeros(rv.shape[:-1] + (3, 3))
+    K[..., 0, 1] = -k[..., 2]
+    K[..., 0, 2] = k[..., 1]
+    K[..., 1, 0] = k[..., 2]
+    K[..., 1, 2] = -k[..., 0]
+    K[..., 2, 0] = -k[..., 1]
+    K[..., 2, 1] = k[..., 0]
+    s = np.sin(theta)[..., None, None]
+    c = np.cos(theta)[..., None, None]
+    R = np.eye(3) + s * K + (1 - c) * (K @ K)
+    return np.where(small[..., None, None], np.eye(3), R)
+
+
+def rotvec_from_matrix(R: ArrayLike) -> Array:
+    """Rotation vectors (…, 3), axis × angle in radians (angle in [0, π]), from (…, 3, 3)."""
+    M = np.asarray(R, dtype=np.float64)
+    if M.shape[-2:] == (4, 4):
+        M = M[..., :3, :3]
+    q = quaternion_from_matrix(M)
+    w = np.clip(q[..., 0], -1.0, 1.0)
+    v = q[..., 1:]
+    s = np.linalg.norm(v, axis=-1)
+    angle = 2 * np.arctan2(s, w)
+    scale = np.where(s < 1e-12, 2.0, angle / np.where(s < 1e-12, 1.0, s))
+    return v * scale[..., None]
+
+
+def pose_from_rotvec(xyz_m_rv: ArrayLike) -> Array:
+    """4×4 pose (mm) from a UR pose vector [x, y, z (metres), rx, ry, rz (rotation vector, rad)]."""
+    v = np.asarray(xyz_m_rv, dtype=np.float64)
+    if v.shape[-1] != 6:
+        raise ValueError(f"pose_from_rotvec: expected 6 values, got shape {v.shape}")
+    return make_pose(matrix_from_rotvec(v[..., 3:]), v[..., :3] * 1000.0)
+
+
+def rotvec_pose_from_matrix(pose: ArrayLike) -> Array:
+    """UR pose vector [x, y, z (metres), rx, ry, rz (rad)] from a 4×4 pose in mm."""
+    T = np.asarray(pose, dtype=np.float64)
+    return np.concatenate([T[..., :3, 3] / 1000.0, rotvec_from_matrix(T[..., :3, :3])], axis=-1)
+
+
+# --- DENSO P-type ---------------------------------------------------------------------------
+
+def matrix_from_denso_p(p: ArrayLike) -> Array:
+    """4×4 pose (mm) from DENSO P-type values [x, y, z (mm), rx, ry, rz (deg)].
+
+    R = Rz(rz) · Ry(ry) · Rx(rx): rotations about the fixed base axes, RX applied first.
+    Extra trailing values (the ``fig`` code) are ignored.
+    """
+    v = np.asarray(p, dtype=np.float64)
+    if v.shape[-1] < 6:
+        raise ValueError(f"matrix_from_denso_p: expected ≥ 6 values, got shape {v.shape}")
+    a = np.radians(v[..., 3:6])
+    R = rot_z(a[..., 2]) @ rot_y(a[..., 1]) @ rot_x(a[..., 0])
+    return make_pose(R, v[..., :3])
+
+
+def denso_p_from_matrix(pose: ArrayLike) -> Array:
+    """DENSO P-type [x, y, z (mm), rx, ry, rz (deg)] from a 4×4 pose in mm.
+
+    Inverse of :func:`matrix_from_denso_p`; ry is returned in [−90°, 90°].
+    """
+    T = np.asarray(pose, dtype=np.float64)
+    R = T[..., :3, :3]
+    ry = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    cy = np.cos(ry)
+    gimbal = np.abs(cy) < 1e-9
+    rx = np.where(gimbal, np.arctan2(-R[..., 1, 2], R[..., 1, 1]),
+                  np.arctan2(R[..., 2, 1], R[..., 2, 2]))
+    rz = np.where(gimbal, 0.0, np.arctan2(R[..., 1, 0], R[..., 0, 0]))
+    ang = np.degrees(np.stack([rx, ry, rz], axis=-1))
+    return np.concatenate([T[..., :3, 3], ang], axis=-1)
+
+
+# --- angles, means, sampling --------------------------------------------------------------------
+
+def rotation_angle(R: ArrayLike) -> Array:
+    """Rotation angle(s) in radians, in [0, π], of rotation matrices or poses (…, 3|4, 3|4).
+
+    Computed from the quaternion (atan2), accurate for small angles too.
+    """
+    q = quaternion_from_matrix(R)
+    return 2 * np.arctan2(np.linalg.norm(q[..., 1:], axis=-1), np.abs(q[..., 0]))
+
+
+def angle_between(a: ArrayLike, b: ArrayLike) -> Array:
+    """Angle(s) in radians of the relative rotation Rᵃᵀ Rᵇ between poses/rotations a and b."""
+    Ra = np.asarray(a, dtype=np.float64)[..., :3, :3]
+    Rb = np.asarray(b, dtype=np.float64)[..., :3, :3]
+    return rotation_angle(np.swapaxes(Ra, -1, -2) @ Rb)
+
+
+def rotation_mean(R: ArrayLike) -> Array:
+    """Chordal L2 mean of rotations (n, 3, 3) (or poses (n, 4, 4)): the rotation nearest to
+    their arithmetic mean, found by SVD with the determinant fix. Returns (3, 3)."""
+    M = np.asarray(R, dtype=np.float64)
+    if M.ndim != 3 or M.shape[0] == 0:
+        raise ValueError(f"rotation_mean: expected (n, 3, 3) with n ≥ 1, got {M.shape}")
+    return orthonormalize(M[:, :3, :3].mean(axis=0))
+
+
+def pose_mean(poses: ArrayLike) -> Array:
+    """Mean of poses (n, 4, 4) in mm: arithmetic mean translation, chordal mean rotation."""
+    P = np.asarray(poses, dtype=np.float64)
+    return make_pose(rotation_mean(P), P[:, :3, 3].mean(axis=0))
+
+
+def random_rotation(rng: np.random.Generator, n: int | None = None) -> Array:
+    """Uniformly distributed random rotation(s) (Haar measure) from the given generator."""
+    q = rng.standard_normal((1 if n is None else n, 4))
+    R = matrix_from_quaternion(q)
+    return R[0] if n is None else R
+
+
+def absolute_orientation(model: ArrayLike, measured: ArrayLike) -> Array:
+    """Horn's closed-form absolute orientation (unit quaternions, no scale), batched.
+
+    ``model`` (k, 3) are points in the body frame (mm); ``measured`` (…, k, 3) the same points
+    seen in the sensor frame (mm). Returns sensor_from_body poses (…, 4, 4) minimising the
+    sum of squared distances (Horn 1987, J. Opt. Soc. Am. A 4(4):629).
+    """
+    P = np.asarray(model, dtype=np.float64)
+    Q = np.asarray(measured, dtype=np.float64)
+    pc = P.mean(axis=-2)
+    qc = Q.mean(axis=-2)
+    S = np.einsum("ki,...kj->...ij", P - pc, Q - qc[..., None, :])
+    Sxx, Sxy, Sxz = S[..., 0, 0], S[..., 0, 1], S[..., 0, 2]
+    Syx, Syy, Syz = S[..., 1, 0], S[..., 1, 1], S[..., 1, 2]
+    Szx, Szy, Szz = S[..., 2, 0], S[..., 2, 1], S[..., 2, 2]
+    N = np.empty(S.shape[:-2] + (4, 4))
+    N[..., 0, 0] = Sxx + Syy + Szz
+    N[..., 0, 1] = N[..., 1, 0] = Syz - Szy
+    N[..., 0, 2] = N[..., 2, 0] = Szx - Sxz
+    N[..., 0, 3] = N[..., 3, 0] = Sxy - Syx
+    N[..., 1, 1] = Sxx - Syy - Szz
+    N[..., 1, 2] = N[..., 2, 1] = Sxy + Syx
+    N[..., 1, 3] = N[..., 3, 1] = Szx + Sxz
+    N[..., 2, 2] = -Sxx + Syy - Szz
+    N[..., 2, 3] = N[..., 3, 2] = Syz + Szy
+    N[..., 3, 3] = -Sxx - Syy + Szz
+    _, vecs = np.linalg.eigh(N)
+    R = matrix_from_quaternion(vecs[..., :, -1])
+    t = qc - (R @ pc[:, None])[..., 0]
+    return make_pose(R, t)

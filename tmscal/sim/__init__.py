@@ -1,0 +1,9 @@
+"""The simulated rig: ground truth X, Y, Z, robot motion, tool geometry and noise models.
+
+Used by ``tmscal simulate`` and served by every mock device.
+"""
+
+from .rig import TMS_RIG_P0, TOOL_8700340_MM, Noise, SimRig, Truth, simulate_poses, tms_rig_truth
+
+__all__ = ["Noise", "SimRig", "Truth", "simulate_poses", "tms_rig_truth", "TMS_RIG_P0",
+           "TOOL_8700340_MM"]

@@ -1,0 +1,231 @@
+"""The simulated rig (seed 000's simulation protocol, after Ernst et al. 2012).
+
+Frames: ``base_from_flange`` (A), ``tracker_from_<body>`` (B for the marker, C for the probe),
+``flange_from_<body>`` (X for the marker, Y for the probe), ``base_from_tracker`` (Z). All
+4×4, mm.
+
+The rig knows the truth and the current flange pose, and returns noisy observations:
+
+* tracker noise: each body carries a four-sphere passive tool; the spheres are placed at the
+  true pose, every coordinate gets Gaussian noise (σ = ``fiducial_sigma_mm``), and the pose is
+  recovered by Horn's absolute orientation without scale;
+* robot noise: the flange ends up at commanded · δ, δ a rotation about a random axis by an
+  angle ~ N(0, ``robot_rot_sigma_deg``) and a translation ~ N(0, ``robot_trans_sigma_mm``) per
+  component. The robot reports the commanded pose (its encoders are repeatable; the error is
+  kinematic), so the reported A differs from the true flange pose by δ, exactly as in the paper's
+  "distort the robot matrices". ``robot_read_sigma_*`` adds independent jitter per reading.
+
+The mocks (Polaris, UR, DENSO) all serve one ``SimRig``: the robot mock calls
+``move_flange`` and reads ``reported_flange``; the tracker mock calls ``observe``.
+The rig is thread-safe (one lock) because mock servers run in threads.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import (
+    absolute_orientation,
+    compose,
+    invert,
+    make_pose,
+    matrix_from_rotvec,
+    random_rotation,
+)
+
+#: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
+#: 56, 89, 62 mm). Sphere centres in the tool frame, mm; the origin is the centroid. The
+#: exact ROM geometry was a figure in seed 000; this planar layout reproduces those distances
+#: to within 2 mm, which is what matters for the noise of Horn's fit.
+TOOL_8700340_MM = np.array([
+    [0.0, 0.0, 0.0],
+    [50.0, 0.0, 0.0],
+    [99.73, 25.75, 0.0],
+    [136.23, -22.05, 0.0],
+])
+TOOL_8700340_MM = TOOL_8700340_MM - TOOL_8700340_MM.mean(axis=0)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth: X = flange_from_marker, Y = flange_from_probe (None for a marker-only
+    rig), Z = base_from_tracker; 4×4 mm."""
+
+    X: np.ndarray
+    Z: np.ndarray
+    Y: np.ndarray | None = None
+
+    def flange_from(self, body: str) -> np.ndarray:
+        """flange_from_<body>, 4×4 mm, for body "marker" (X) or "probe" (Y)."""
+        if body == "marker":
+            return self.X
+        if body == "probe" and self.Y is not None:
+            return self.Y
+        raise KeyError(f"the rig has no body {body!r}")
+
+    def as_dict(self) -> dict[str, list]:
+        d = {"X": self.X.tolist(), "Z": self.Z.tolist()}
+        if self.Y is not None:
+            d["Y"] = self.Y.tolist()
+        return d
+
+    @classmethod
+    def random(cls, rng: np.random.Generator, with_probe: bool = True) -> Truth:
+        """Seed 000's truth: random rotations; t(X), t(Y) entries uniform in [−50, 50] mm;
+        t(Z) entries of magnitude uniform in [500, 2000] mm with random sign."""
+        def rnd_small() -> np.ndarray:
+            return make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
+        X = rnd_small()
+        Y = rnd_small() if with_probe else None
+        tz = rng.uniform(500, 2000, 3) * rng.choice([-1.0, 1.0], 3)
+        Z = make_pose(random_rotation(rng), tz)
+        return cls(X=X, Z=Z, Y=Y)
+
+
+#: Start pose P0 of the built-in TMS rig: base_from_flange, flange 500 mm in front of the
+#: base, 400 mm up, tool axis (flange z) pointing down. mm.
+TMS_RIG_P0 = make_pose(np.diag([1.0, -1.0, -1.0]), [500.0, 0.0, 400.0])
+
+
+def tms_rig_truth(distance_mm: float = 1500.0) -> Truth:
+    """A plausible robotized-TMS rig (fixed, for mocks and the demo).
+
+    The coil hangs below the flange: the marker sits on top of the coil (X: 60 mm along the
+    tool axis, tilted 15°) and the probe at the coil's effective centre (Y: 110 mm along the
+    tool axis). The tracker stands ``distance_mm`` away from the coil at P0, looking at it, so
+    both tools appear near (0, 0, −distance) in tracker coordinates, like seed 000's set-up
+    (|x|, |y| < 100 mm, z ≈ −1500 mm). All 4×4, mm.
+    """
+    from ..geometry import rot_x, rot_z
+    X = make_pose(rot_z(np.radians(30)) @ rot_x(np.radians(-15)), [12.0, -8.0, 60.0])
+    Y = make_pose(rot_z(np.radians(-20)), [3.0, 5.0, 110.0])
+    coil_centre = (TMS_RIG_P0 @ Y)[:3, 3]
+    # tracker in front of the rig along −y of the base, its +z pointing away from the scene
+    z_axis = np.array([0.0, -1.0, 0.0])
+    x_axis = np.array([1.0, 0.0, 0.0])
+    y_axis = np.cross(z_axis, x_axis)
+    R = np.stack([x_axis, y_axis, z_axis], axis=1)
+    Z = make_pose(R, coil_centre + distance_mm * z_axis)
+    return Truth(X=X, Z=Z, Y=Y)
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Noise model: tracker fiducial σ (mm), robot positioning error σ (deg, mm) per move,
+    optional robot reading jitter σ (deg, mm) per read. Defaults are seed 000's."""
+
+    fiducial_sigma_mm: float = 0.05
+    robot_rot_sigma_deg: float = 0.05
+    robot_trans_sigma_mm: float = 0.05
+    robot_read_rot_sigma_deg: float = 0.0
+    robot_read_trans_sigma_mm: float = 0.0
+
+    @classmethod
+    def none(cls) -> Noise:
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _perturbation(rng: np.random.Generator, rot_sigma_deg: float, trans_sigma_mm: float,
+                  n: int | None = None) -> np.ndarray:
+    """Random small rigid motion(s): rotation about a random axis by N(0, σ_rot) degrees,
+    translation N(0, σ_t) mm per component."""
+    m = 1 if n is None else n
+    axis = rng.standard_normal((m, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    ang = np.radians(rng.normal(0.0, rot_sigma_deg, m)) if rot_sigma_deg > 0 else np.zeros(m)
+    t = rng.normal(0.0, trans_sigma_mm, (m, 3)) if trans_sigma_mm > 0 else np.zeros((m, 3))
+    T = make_pose(matrix_from_rotvec(axis * ang[:, None]), t)
+    return T[0] if n is None else T
+
+
+@dataclass
+class SimRig:
+    """A simulated robot + tracker rig with known truth.
+
+    ``tools`` maps body names to sphere centres (k, 3) in the body frame, mm (default: the
+    8700340-like tool for every body of the truth). ``flange`` is the true base_from_flange
+    and ``commanded`` the last commanded one (what the robot reports).
+    """
+
+    truth: Truth
+    noise: Noise = field(default_factory=Noise)
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    tools: Mapping[str, np.ndarray] | None = None
+    start: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self._lock = threading.RLock()
+        if self.tools is None:
+            names = ["marker"] + (["probe"] if self.truth.Y is not None else [])
+            self.tools = {n: TOOL_8700340_MM for n in names}
+        p0 = np.eye(4) if self.start is None else np.asarray(self.start, dtype=float)
+        self.commanded = p0.copy()
+        self.flange = p0.copy()
+
+    @property
+    def bodies(self) -> list[str]:
+        """Names of the tracked bodies, e.g. ["marker", "probe"]."""
+        return list(self.tools or {})
+
+    # --- robot side ---
+    def move_flange(self, base_from_flange: np.ndarray) -> None:
+        """Put the flange at the commanded pose (4×4 mm, base frame), with the robot's
+        positioning error applied to the true pose."""
+        cmd = np.asarray(base_from_flange, dtype=np.float64)
+        with self._lock:
+            d = _perturbation(self.rng, self.noise.robot_rot_sigma_deg,
+                              self.noise.robot_trans_sigma_mm)
+            self.commanded = cmd.copy()
+            self.flange = cmd @ d
+
+    def reported_flange(self) -> np.ndarray:
+        """What the controller reports: base_from_flange 4×4 mm (commanded pose, plus read
+        jitter if configured)."""
+        with self._lock:
+            if self.noise.robot_read_rot_sigma_deg or self.noise.robot_read_trans_sigma_mm:
+                return self.commanded @ _perturbation(self.rng,
+                                                      self.noise.robot_read_rot_sigma_deg,
+                                                      self.noise.robot_read_trans_sigma_mm)
+            return self.commanded.copy()
+
+    # --- tracker side ---
+    def true_body(self, body: str) -> np.ndarray:
+        """Noise-free tracker_from_<body> = Z⁻¹ · A_true · (X or Y), 4×4 mm."""
+        with self._lock:
+            return compose(invert(self.truth.Z), self.flange, self.truth.flange_from(body))
+
+    def observe(self, body: str, n: int | None = None) -> np.ndarray:
+        """Noisy tracker_from_<body> (4×4 mm), or n independent observations (n, 4, 4):
+        fiducials at the true pose + N(0, σ) per coordinate, pose by Horn's method."""
+        T = self.true_body(body)
+        assert self.tools is not None
+        pts = np.asarray(self.tools[body], dtype=np.float64)
+        m = 1 if n is None else n
+        world = (T[:3, :3] @ pts.T).T + T[:3, 3]
+        with self._lock:
+            noisy = world[None] + (self.rng.normal(0.0, self.noise.fiducial_sigma_mm,
+                                                   (m,) + world.shape)
+                                   if self.noise.fiducial_sigma_mm > 0 else 0.0)
+        if self.noise.fiducial_sigma_mm == 0:
+            out = np.repeat(T[None], m, axis=0)
+        else:
+            out = absolute_orientation(pts, noisy)
+        return out[0] if n is None else out
+
+
+def simulate_poses(rig: SimRig, plan: np.ndarray) -> dict[str, np.ndarray]:
+    """Visit every commanded pose of ``plan`` (n, 4, 4) mm once and take one observation per
+    body. Returns {"A": (n,4,4) reported base_from_flange, "<body>": (n,4,4) tracker_from_body}.
+    """
+    A = np.empty_like(plan)
+    obs = {b: np.empty_like(plan) for b in rig.bodies}
+    for i, P in enumerate(plan):
+        rig.move_flange(P)
+        A[i] = rig.reported_flange()
+        for b in rig.bodies:
+            obs[b][i] = rig.observe(b)
+    return {"A": A, **obs}
