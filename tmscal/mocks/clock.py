@@ -1,0 +1,27 @@
+"""The mock clock: real time (frame rates and motion durations are honoured) or fast (no
+waits: frames advance once per request, motions complete at once). Every mock device takes
+one, so a test runs in milliseconds and a demo can run at wall-clock speed."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Clock:
+    """``fast=False``: real time; ``fast=True``: no waits. ``now()`` is monotonic seconds."""
+
+    fast: bool = False
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        """Sleep ``seconds`` on the real-time clock; return at once on the fast clock."""
+        if not self.fast and seconds > 0:
+            time.sleep(seconds)
+
+
+REAL_TIME = Clock(fast=False)
+FAST = Clock(fast=True)
