@@ -1,0 +1,126 @@
+"""Calibration solvers (pure numerics, no I/O): QR24, QR36, error metrics, convergence study.
+
+Use without any hardware code::
+
+    from tmscal.calib import solve
+    cal = solve(A, B, C, method="qr36")      # A, B, C: (n, 4, 4) mm
+    cal.X, cal.Y, cal.Z                      # orthonormal 4×4 mm
+    cal.errors(A_test, B_test, C_test)       # seed 000's hold-out metrics
+
+Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
+X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibrationError
+from ..geometry import check_poses
+from .linear import design_matrix, orthonormal_from_raw, solve_linear
+from .metrics import coil_placement_errors, holdout_errors, noise_floor, truth_errors
+
+METHODS = ("qr24", "qr36")
+
+__all__ = ["solve", "Calibration", "METHODS", "design_matrix", "holdout_errors",
+           "truth_errors", "coil_placement_errors", "noise_floor", "check_inputs"]
+
+
+@dataclass
+class Calibration:
+    """Result of a solve. All 4×4, mm.
+
+    ``X``, ``Y``, ``Z``: orthonormal (rotations projected to SO(3), translations re-solved).
+    ``X_raw``, ``Y_raw``, ``Z_raw``: the linear solution, general 3×4 (last row 0001).
+    ``Z_probe_raw`` / ``Z_probe``: QR24 on two bodies solves the probe separately; this is its Z.
+    ``applied``: "raw" (the paper's way: raw matrices, orthonormalise the product) or
+    "orthonormal" — which set :meth:`used` returns and :meth:`errors` applies.
+    Y is None for marker-only data.
+    """
+
+    method: str
+    n_poses: int
+    X: np.ndarray
+    Z: np.ndarray
+    X_raw: np.ndarray
+    Z_raw: np.ndarray
+    Y: np.ndarray | None = None
+    Y_raw: np.ndarray | None = None
+    Z_probe: np.ndarray | None = None
+    Z_probe_raw: np.ndarray | None = None
+    applied: str = "raw"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def used(self) -> dict[str, np.ndarray | None]:
+        """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal)."""
+        if self.applied == "raw":
+            return {"X": self.X_raw, "Y": self.Y_raw, "Z": self.Z_raw,
+                    "Z_probe": self.Z_probe_raw}
+        return {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
+
+    def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
+               ) -> dict[str, Any]:
+        """Seed 000's errors on the poses given (n, 4, 4): per body "trans_mm", "rot_deg";
+        "e_t_mm", "theta_t_deg"; "e_z_mm", "theta_z_deg" for QR24 on two bodies."""
+        u = self.used()
+        bodies = {"marker": B}
+        X_of = {"marker": u["X"]}
+        Z_of = {"marker": u["Z"]}
+        if C is not None and u["Y"] is not None:
+            bodies["probe"] = C
+            X_of["probe"] = u["Y"]
+            Z_of["probe"] = u["Z_probe"] if u["Z_probe"] is not None else u["Z"]
+        return holdout_errors(A, bodies, X_of, Z_of)
+
+
+def check_inputs(A: Any, B: Any, C: Any = None) -> tuple[np.ndarray, np.ndarray,
+                                                         np.ndarray | None]:
+    """Validate pose arrays (n, 4, 4) mm: equal counts, finite, rigid (tolerance 1e-5).
+    Raises CalibrationError naming the array and pose."""
+    try:
+        A = check_poses(A, "A (base_from_flange)", tol=1e-5)
+        B = check_poses(B, "B (tracker_from_marker)", tol=1e-5)
+        C = None if C is None else check_poses(C, "C (tracker_from_probe)", tol=1e-5)
+    except ValueError as e:
+        raise CalibrationError(str(e)) from None
+    for name, arr in (("B", B), ("C", C)):
+        if arr is not None and len(arr) != len(A):
+            raise CalibrationError(f"{name} has {len(arr)} poses but A has {len(A)}")
+    return A, B, C
+
+
+def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool = False
+          ) -> Calibration:
+    """Solve the calibration from poses A (base_from_flange), B (tracker_from_marker) and
+    optionally C (tracker_from_probe), each (n, 4, 4) in mm.
+
+    method "qr36" (needs C): X, Y, Z jointly (seed 000). "qr24": marker alone (X, Z), and, if
+    C is given, the probe separately (Y, Z_probe). ``orthonormal`` selects which matrices are
+    applied by :meth:`Calibration.errors` (default: the raw matrices, the paper's way).
+    Raises CalibrationError for unusable data (fewer than 3 poses, degenerate rotations,
+    non-rigid or NaN poses, qr36 without C).
+    """
+    method = method.lower()
+    if method not in METHODS:
+        raise CalibrationError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+    A, B, C = check_inputs(A, B, C)
+    if method == "qr36":
+        if C is None:
+            raise CalibrationError("qr36 needs probe poses C (this data is marker-only); "
+                                   "use method qr24")
+        Z_raw, (X_raw, Y_raw) = solve_linear(A, B, C)
+        Z, (X, Y) = orthonormal_from_raw(A, [B, C], Z_raw, [X_raw, Y_raw])
+        return Calibration("qr36", len(A), X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw, Y=Y,
+                           Y_raw=Y_raw, applied="orthonormal" if orthonormal else "raw")
+    Z_raw, (X_raw,) = solve_linear(A, B)
+    Z, (X,) = orthonormal_from_raw(A, [B], Z_raw, [X_raw])
+    cal = Calibration("qr24", len(A), X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw,
+                      applied="orthonormal" if orthonormal else "raw")
+    if C is not None:
+        ZP_raw, (Y_raw,) = solve_linear(A, C)
+        ZP, (Y,) = orthonormal_from_raw(A, [C], ZP_raw, [Y_raw])
+        cal.Y, cal.Y_raw, cal.Z_probe, cal.Z_probe_raw = Y, Y_raw, ZP, ZP_raw
+    return cal

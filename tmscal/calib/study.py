@@ -1,0 +1,93 @@
+"""Convergence study (seed 000, Tables 1 and 3, Figure 3): train on the first n poses for
+n = n_min … n_max, test on the poses after n_max, and summarise the error curve.
+
+Frames as everywhere: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe;
+(n, 4, 4) mm. Errors in mm and degrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibrationError
+from . import solve
+
+__all__ = ["convergence", "summarize", "threshold_n"]
+
+
+def convergence(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
+                methods: Sequence[str] = ("qr24", "qr36"), n_min: int = 5, n_max: int = 250,
+                orthonormal: bool = False, progress: Any = None) -> dict[str, Any]:
+    """Error curves for each method. The test set is every pose from index ``n_max`` on
+    (seed 000: train on P1…Pn, test on P251…P500); needs more than ``n_max`` poses.
+
+    Returns {"n": [..], "n_test": int, "methods": {name: {"e_t_mm": [..], "theta_t_deg": [..],
+    "marker_trans_mm": [..], …, "e_z_mm": [..] (qr24 with probe)}}}. ``progress`` is an
+    optional callable taking the number of solves done (for a progress bar)."""
+    N = len(A)
+    if n_max >= N:
+        raise CalibrationError(f"the study needs more than n_max = {n_max} poses to keep a "
+                               f"test set; the data has {N} (lower --n-max)")
+    if n_min < 3 or n_min > n_max:
+        raise CalibrationError(f"n_min must be in 3…n_max, got {n_min}")
+    At, Bt = A[n_max:], B[n_max:]
+    Ct = None if C is None else C[n_max:]
+    ns = list(range(n_min, n_max + 1))
+    out: dict[str, Any] = {"n": ns, "n_test": int(N - n_max), "methods": {}}
+    for m in methods:
+        rows: list[dict[str, float]] = []
+        for n in ns:
+            try:
+                cal = solve(A[:n], B[:n], None if C is None else C[:n], method=m,
+                            orthonormal=orthonormal)
+                rows.append(_flatten(cal.errors(At, Bt, Ct)))
+            except CalibrationError:
+                rows.append({})
+            if progress is not None:
+                progress(1)
+        keys = sorted({k for r in rows for k in r})
+        curves = {k: [r.get(k, float("nan")) for r in rows] for k in keys}
+        out["methods"][m] = curves
+    return out
+
+
+def _flatten(err: dict[str, Any]) -> dict[str, float]:
+    flat = {"e_t_mm": err["e_t_mm"], "theta_t_deg": err["theta_t_deg"]}
+    for b, d in err["bodies"].items():
+        flat[f"{b}_trans_mm"] = d["trans_mm"]
+        flat[f"{b}_rot_deg"] = d["rot_deg"]
+    if "e_z_mm" in err:
+        flat["e_z_mm"] = err["e_z_mm"]
+        flat["theta_z_deg"] = err["theta_z_deg"]
+    return flat
+
+
+def summarize(values: Sequence[float], ns: Sequence[int]) -> dict[str, dict[str, float]]:
+    """Min, 25th percentile, median, 75th percentile and max of an error curve, each with
+    the n at which it occurs (for percentiles: the n whose value is nearest). NaNs ignored."""
+    v = np.asarray(values, dtype=float)
+    n = np.asarray(ns)
+    ok = np.isfinite(v)
+    if not ok.any():
+        return {}
+    v, n = v[ok], n[ok]
+    out = {}
+    for name, q in (("min", 0), ("p25", 25), ("median", 50), ("p75", 75), ("max", 100)):
+        val = float(np.percentile(v, q))
+        i = int(np.argmin(np.abs(v - val)))
+        out[name] = {"value": val, "n": int(n[i])}
+    return out
+
+
+def threshold_n(values: Sequence[float], ns: Sequence[int], threshold: float) -> int | None:
+    """Smallest n from which on the error stays below ``threshold`` (None if it never
+    does by the last n)."""
+    v = np.asarray(values, dtype=float)
+    above = ~(v < threshold)
+    if above[-1]:
+        return None
+    idx = np.nonzero(above)[0]
+    return int(ns[0] if len(idx) == 0 else ns[idx[-1] + 1])
