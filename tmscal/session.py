@@ -334,3 +334,21 @@ def sha256_of(path: str | os.PathLike[str]) -> str:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
+
+
+def records_from_arrays(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | None = None,
+                        commanded: np.ndarray | None = None, samples: int = 1
+                        ) -> list[PoseRecord]:
+    """PoseRecords (index 0…n−1) from arrays (n, 4, 4) mm, e.g. for simulated sessions."""
+    out = []
+    for i in range(len(A)):
+        s = {"A": samples}
+        if B is not None:
+            s["B"] = samples
+        if C is not None:
+            s["C"] = samples
+        out.append(PoseRecord(index=i, A=A[i], B=None if B is None else B[i],
+                              C=None if C is None else C[i],
+                              commanded=None if commanded is None else commanded[i],
+                              time=float(i), samples=s))
+    return out

@@ -3,7 +3,16 @@
 Used by ``tmscal simulate`` and served by every mock device.
 """
 
-from .rig import TMS_RIG_P0, TOOL_8700340_MM, Noise, SimRig, Truth, simulate_poses, tms_rig_truth
+from .rig import (
+    TMS_RIG_P0,
+    TOOL_8700340_MM,
+    Noise,
+    SimRig,
+    Truth,
+    facing_start,
+    simulate,
+    tms_rig_truth,
+)
 
-__all__ = ["Noise", "SimRig", "Truth", "simulate_poses", "tms_rig_truth", "TMS_RIG_P0",
+__all__ = ["Noise", "SimRig", "Truth", "simulate", "facing_start", "tms_rig_truth", "TMS_RIG_P0",
            "TOOL_8700340_MM"]

@@ -217,15 +217,41 @@ class SimRig:
         return out[0] if n is None else out
 
 
-def simulate_poses(rig: SimRig, plan: np.ndarray) -> dict[str, np.ndarray]:
-    """Visit every commanded pose of ``plan`` (n, 4, 4) mm once and take one observation per
-    body. Returns {"A": (n,4,4) reported base_from_flange, "<body>": (n,4,4) tracker_from_body}.
+def facing_start(truth: Truth, distance_mm: float = 1500.0) -> np.ndarray:
+    """A start pose P0 (base_from_flange, mm) that puts the marker at (0, 0, −distance) in
+    tracker coordinates, as in seed 000's experiment (tools near the volume's centre)."""
+    target = make_pose(np.eye(3), [0.0, 0.0, -distance_mm])
+    return compose(truth.Z, target, invert(truth.X))
+
+
+def simulate(n: int, rng: np.random.Generator, plan: str = "eq14", noise: Noise | None = None,
+             truth: Truth | None = None, samples: int = 1, with_probe: bool = True,
+             radius_mm: float | None = None, rotation_deg: float = 10.0
+             ) -> tuple[Truth, dict[str, np.ndarray]]:
+    """Seed 000's simulation: a truth (random unless given), n poses by ``plan`` ("random":
+    fully random robot poses; "eq14": Eq. 14 around a P0 facing the tracker), and noisy
+    observations, ``samples`` of them averaged per pose (chordal mean).
+
+    Returns (truth, {"A", "commanded", "marker", ["probe"]}) with (n, 4, 4) mm arrays.
     """
-    A = np.empty_like(plan)
-    obs = {b: np.empty_like(plan) for b in rig.bodies}
-    for i, P in enumerate(plan):
-        rig.move_flange(P)
-        A[i] = rig.reported_flange()
+    from ..acquisition.plan import eq14_poses, random_poses
+    from ..geometry import pose_mean
+
+    truth = truth or Truth.random(rng, with_probe=with_probe)
+    if plan == "random":
+        P = random_poses(n, rng, r_mm=500.0 if radius_mm is None else radius_mm)
+    elif plan == "eq14":
+        P = eq14_poses(facing_start(truth), n, rng, r_mm=100.0 if radius_mm is None
+                       else radius_mm, d_deg=rotation_deg)
+    else:
+        raise ValueError(f"unknown plan {plan!r}; expected 'random' or 'eq14'")
+    rig = SimRig(truth, noise=noise or Noise(), rng=rng)
+    out: dict[str, np.ndarray] = {"commanded": P, "A": np.empty_like(P)}
+    for b in rig.bodies:
+        out[b] = np.empty_like(P)
+    for i, cmd in enumerate(P):
+        rig.move_flange(cmd)
+        out["A"][i] = rig.reported_flange()
         for b in rig.bodies:
-            obs[b][i] = rig.observe(b)
-    return {"A": A, **obs}
+            out[b][i] = rig.observe(b) if samples == 1 else pose_mean(rig.observe(b, samples))
+    return truth, out
