@@ -1,0 +1,90 @@
+import numpy as np
+import pytest
+
+from tmscal import geometry as g
+
+
+def test_quaternion_hand_worked_90deg_about_z():
+    q = [np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)]
+    R = g.matrix_from_quaternion(q)
+    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
+    np.testing.assert_allclose(g.quaternion_from_matrix(R), q, atol=1e-15)
+
+
+def test_quaternion_round_trip_batched_and_scalar_first_positive():
+    rng = np.random.default_rng(0)
+    R = g.random_rotation(rng, 200)
+    q = g.quaternion_from_matrix(R)
+    assert q.shape == (200, 4)
+    assert (q[:, 0] >= 0).all()
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(g.matrix_from_quaternion(q), R, atol=1e-12)
+
+
+def test_rotvec_hand_worked():
+    R = g.matrix_from_rotvec([0.0, 0.0, np.pi / 2])
+    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
+    np.testing.assert_allclose(g.rotvec_from_matrix(np.eye(3)), [0, 0, 0], atol=1e-15)
+    # UR pose vector: metres + rotvec -> mm
+    T = g.pose_from_rotvec([0.1, -0.2, 0.3, np.pi, 0, 0])
+    np.testing.assert_allclose(T[:3, 3], [100, -200, 300])
+    np.testing.assert_allclose(T[:3, :3], np.diag([1, -1, -1]), atol=1e-15)
+
+
+def test_denso_p_hand_worked():
+    # rx = 90° only: y -> z
+    T = g.matrix_from_denso_p([10, 20, 30, 90, 0, 0])
+    np.testing.assert_allclose(T[:3, :3], [[1, 0, 0], [0, 0, -1], [0, 1, 0]], atol=1e-15)
+    np.testing.assert_allclose(T[:3, 3], [10, 20, 30])
+    # rx then rz (fixed axes): Rz(90)·Rx(90)
+    T = g.matrix_from_denso_p([0, 0, 0, 90, 0, 90])
+    np.testing.assert_allclose(T[:3, :3], [[0, 0, 1], [1, 0, 0], [0, 1, 0]], atol=1e-15)
+    np.testing.assert_allclose(g.denso_p_from_matrix(T), [0, 0, 0, 90, 0, 90], atol=1e-12)
+
+
+def test_compose_invert():
+    rng = np.random.default_rng(1)
+    T = g.make_pose(g.random_rotation(rng, 5), rng.normal(0, 100, (5, 3)))
+    np.testing.assert_allclose(g.compose(T, g.invert(T)), np.broadcast_to(np.eye(4), T.shape),
+                               atol=1e-12)
+
+
+def test_orthonormalize_fixes_reflection_and_keeps_translation():
+    M = np.diag([1.0, 1.0, -1.0])
+    R = g.orthonormalize(M)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    P = np.eye(4)
+    P[:3, :3] = 1.01 * g.matrix_from_rotvec([0.1, 0.2, 0.3])
+    P[:3, 3] = [1, 2, 3]
+    Q = g.orthonormalize(P)
+    np.testing.assert_allclose(Q[:3, :3], g.matrix_from_rotvec([0.1, 0.2, 0.3]), atol=1e-12)
+    np.testing.assert_allclose(Q[:3, 3], [1, 2, 3])
+
+
+def test_rotation_angle_and_mean():
+    R = g.rot_x(np.radians(30.0))
+    assert np.degrees(g.rotation_angle(R)) == pytest.approx(30.0)
+    # symmetric spread around a rotation averages back to it
+    Rs = np.stack([R @ g.rot_z(a) for a in np.radians([-5.0, 5.0])])
+    np.testing.assert_allclose(g.rotation_mean(Rs), R, atol=1e-12)
+
+
+def test_absolute_orientation_recovers_pose():
+    rng = np.random.default_rng(2)
+    pts = rng.normal(0, 50, (4, 3))
+    T = g.make_pose(g.random_rotation(rng), [10.0, -20.0, -1500.0])
+    seen = (T[:3, :3] @ pts.T).T + T[:3, 3]
+    np.testing.assert_allclose(g.absolute_orientation(pts, seen), T, atol=1e-9)
+
+
+def test_check_pose_errors_quote_shape_and_problem():
+    with pytest.raises(ValueError, match=r"shape \(3, 3\)"):
+        g.check_pose(np.eye(3))
+    bad = np.eye(4)
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        g.check_pose(bad)
+    shear = np.eye(4)
+    shear[0, 1] = 0.3
+    with pytest.raises(ValueError, match="not rigid"):
+        g.check_pose(shear)
