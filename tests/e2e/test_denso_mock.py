@@ -1,0 +1,310 @@
+"""Our b-CAP client and DensoRobot against our DENSO mock over real loopback sockets,
+including the error paths (no TakeArm, motor off, busy, faults, dropped connection), and the
+client's handling of keep-alives and foreign serials against a scripted server."""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from tmscal.drivers.base import Envelope
+from tmscal.drivers.denso.bcap import (
+    E_ACCESSDENIED,
+    E_BUSY_PROC,
+    E_EMERGENCY_STOP,
+    E_HANDLE,
+    E_INVALIDPACKET,
+    E_MOTOR_OFF,
+    S_EXECUTING,
+    S_OK,
+    VT_ARRAY,
+    VT_BSTR,
+    VT_I2,
+    VT_I4,
+    VT_R4,
+    VT_UI4,
+    VT_VARIANT,
+    BCAPClient,
+    Fn,
+    PacketFramer,
+    Variant,
+    encode_packet,
+)
+from tmscal.drivers.denso.robot import DensoRobot
+from tmscal.errors import ConnectionLost, DeviceError, DeviceTimeout, RobotFault, SafetyError
+from tmscal.geometry import make_pose, rot_x, rot_y, rot_z
+from tmscal.mocks.clock import FAST, REAL_TIME
+from tmscal.mocks.denso import DensoFaults, DensoMock
+from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
+
+pytestmark = pytest.mark.e2e
+
+
+def new_rig() -> SimRig:
+    return SimRig(tms_rig_truth(), noise=Noise.none(), start=TMS_RIG_P0)
+
+
+def port_of(endpoint: str) -> int:
+    host, _, port = endpoint.rpartition(":")
+    assert host == "127.0.0.1"
+    return int(port)
+
+
+@pytest.fixture
+def rig() -> SimRig:
+    return new_rig()
+
+
+@pytest.fixture
+def mock(rig: SimRig) -> Iterator[DensoMock]:
+    with DensoMock(rig, clock=FAST) as m:
+        yield m
+
+
+@pytest.fixture
+def client(mock: DensoMock) -> Iterator[BCAPClient]:
+    with BCAPClient("127.0.0.1", port_of(mock.start()), timeout_s=5.0) as c:
+        yield c
+
+
+def open_robot(c: BCAPClient, wdt: str = "") -> int:
+    c.service_start(wdt)
+    h = c.controller_connect("", "CaoProv.DENSO.VRC", "localhost", "")
+    return c.controller_get_robot(h, "Arm", "")
+
+
+# expected rotation for P(…, 180, 0, 90): Rz(90)·Rx(180), hand-computed
+R_180_0_90 = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def test_move_without_takearm_then_without_motor(client: BCAPClient, rig: SimRig) -> None:
+    r = open_robot(client)
+    pose = "@P P(400, 50, 300, 180, 0, 90, -1)"
+    with pytest.raises(DeviceError) as ei:
+        client.robot_move(r, 2, pose, "")
+    assert ei.value.code == E_ACCESSDENIED and ei.value.text == "E_ACCESSDENIED"
+    client.take_arm(r)
+    with pytest.raises(RobotFault) as ei:
+        client.robot_move(r, 2, pose, "")
+    assert ei.value.code == E_MOTOR_OFF == 0x81501003 and ei.value.text == "motor off"
+    assert "Robot_Move" in str(ei.value) and "0x81501003" in str(ei.value)
+    assert np.array_equal(rig.commanded, TMS_RIG_P0)  # nothing moved
+    client.motor(r, True)
+    client.robot_move(r, 1, pose, "SPEED=50")  # MOVE P with a text pose
+    assert np.allclose(rig.commanded[:3, :3], R_180_0_90, atol=1e-12)
+    assert np.allclose(rig.commanded[:3, 3], [400, 50, 300])
+
+
+def test_variant_array_pose_with_mixed_number_types(client: BCAPClient, rig: SimRig) -> None:
+    r = open_robot(client)
+    client.take_arm(r)
+    client.motor(r, True)
+    nums = Variant(VT_VARIANT | VT_ARRAY, [
+        Variant(VT_I2, 400), Variant(VT_I4, -50), Variant(VT_UI4, 300),
+        Variant(VT_R4, 90.0), Variant(VT_I4, 0), Variant(VT_I2, 0), Variant(VT_I4, -1)])
+    pose = Variant(VT_VARIANT | VT_ARRAY, [nums, Variant(VT_BSTR, "P"), Variant(VT_BSTR, "@P")])
+    client.robot_move(r, 2, pose, "SPEED=10,NEXT")
+    assert np.allclose(rig.commanded[:3, 3], [400, -50, 300])
+    assert np.allclose(rig.commanded[:3, :3], [[1, 0, 0], [0, 0, -1], [0, 1, 0]], atol=1e-12)
+
+
+def test_curpos_and_current_position_variable(client: BCAPClient) -> None:
+    r = open_robot(client)
+    p = client.cur_pos(r)
+    assert len(p) == 7 and np.allclose(p[:3], [500, 0, 400])
+    assert np.isclose(abs(p[3]), 180) and np.allclose(p[4:6], 0, atol=1e-9)
+    v = client.robot_get_variable(r, "@CURRENT_POSITION")
+    q = client.variable_get_value(v)
+    client.variable_release(v)
+    assert np.allclose(q, p)
+    assert len(client.cur_jnt(r)) == 8
+
+
+def test_variables_errors_and_descriptions(client: BCAPClient) -> None:
+    client.service_start("")
+    h = client.controller_connect()
+    v = client.controller_get_variable(h, "I1")
+    client.variable_put_value(v, 42)
+    assert client.variable_get_value(v) == 42
+    assert client.controller_execute(h, "GetErrorDescription", 0x81501003) == "motor off"
+    with pytest.raises(DeviceError) as ei:
+        client.robot_execute(9999, "CurPos")
+    assert ei.value.code == E_HANDLE and not isinstance(ei.value, RobotFault)
+    assert client.controller_get_robot_names(h) == ["Arm"]
+    client.controller_disconnect(h)
+    client.service_stop()
+
+
+def test_busy_while_next_motion_runs_then_halt(rig: SimRig) -> None:
+    # motion_time_s=60: the second request certainly arrives while the motion runs
+    with DensoMock(rig, clock=REAL_TIME, motion_time_s=60.0) as m, \
+            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=5.0) as c:
+        r = open_robot(c)
+        c.take_arm(r)
+        c.motor(r, True)
+        c.robot_move(r, 2, "@P P(500, 0, 300, 180, 0, 0)", "NEXT")  # answers at once
+        with pytest.raises(DeviceError) as ei:
+            c.cur_pos(r)
+        assert ei.value.code == E_BUSY_PROC and ei.value.text == "E_BUSY_PROC"
+        c.robot_halt(r)
+        assert np.allclose(c.cur_pos(r)[:3], [500, 0, 400])  # halted: rig not moved
+        assert m.stats["busy"] == 1
+
+
+def test_watchdog_keepalives_are_discarded(rig: SimRig) -> None:
+    # a blocking move of 0.22 s with WDT=50 ms: keep-alives at 50, 100, 150, 200 ms
+    with DensoMock(rig, clock=REAL_TIME, motion_time_s=0.22) as m, \
+            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=10.0) as c:
+        r = open_robot(c, ",WDT=50")
+        c.take_arm(r)
+        c.motor(r, True)
+        c.robot_move(r, 2, "@P P(510, 0, 400, 180, 0, 0)", "")
+        # returned only with the final reply: the rig is already at the target
+        assert np.allclose(rig.commanded[:3, 3], [510, 0, 400])
+        assert m.stats["keepalives"] == 4
+        assert np.allclose(c.cur_pos(r)[:3], [510, 0, 400])
+
+
+def test_dropped_connection_raises_connection_lost(rig: SimRig) -> None:
+    with DensoMock(rig, clock=FAST, faults=DensoFaults(drop_at_request=2)) as m, \
+            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=5.0) as c:
+        c.service_start("")
+        with pytest.raises(ConnectionLost, match="Controller_Connect"):
+            c.controller_connect()
+        assert not c.connected
+        with pytest.raises(ConnectionLost):
+            c.service_stop()
+
+
+def test_malformed_request_gets_invalidpacket_reply(mock: DensoMock) -> None:
+    bad = bytearray(encode_packet(5, Fn.SERVICE_START, [""]))
+    bad[15] += 1  # argument length no longer matches its VARIANT
+    with socket.create_connection(("127.0.0.1", port_of(mock.start())), timeout=5) as s:
+        s.sendall(bytes(bad))
+        f = PacketFramer()
+        while (p := f.next_packet()) is None:
+            f.feed(s.recv(4096))
+    assert (p.serial, p.code, p.args) == (5, E_INVALIDPACKET, ())
+
+
+# --- the client against a scripted server -----------------------------------------------------
+
+def scripted_server(replies: Callable[[int], bytes]) -> tuple[int, threading.Thread, socket.socket]:
+    """Accept one connection, read one request, send ``replies(serial)`` in one sendall, then
+    keep the connection open until the client closes it."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    srv.settimeout(5)
+
+    def run() -> None:
+        conn, _ = srv.accept()
+        with conn:
+            conn.settimeout(5)
+            f = PacketFramer()
+            while (p := f.next_packet()) is None:
+                f.feed(conn.recv(4096))
+            data = replies(p.serial)
+            if data:
+                conn.sendall(data)
+            try:
+                conn.recv(1)  # until the client closes
+            except OSError:
+                pass
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return srv.getsockname()[1], t, srv
+
+
+def test_client_skips_foreign_serials_and_keepalives() -> None:
+    port, t, srv = scripted_server(lambda s: (
+        encode_packet((s + 5) & 0xFFFF, S_OK, [Variant(VT_I4, 99)])
+        + encode_packet(s, S_EXECUTING) + encode_packet(s, S_EXECUTING)
+        + encode_packet(s, S_OK, [Variant(VT_I4, 7)])))
+    with srv, BCAPClient("127.0.0.1", port, timeout_s=5.0) as c:
+        assert c.controller_connect() == 7
+    t.join(5)
+
+
+def test_client_timeout_names_the_function() -> None:
+    port, t, srv = scripted_server(lambda s: b"")
+    with srv, BCAPClient("127.0.0.1", port, timeout_s=0.2) as c:
+        with pytest.raises(DeviceTimeout, match="Service_Start") as ei:
+            c.service_start("")
+        assert isinstance(ei.value, TimeoutError)
+    t.join(5)
+
+
+def test_client_connect_refused() -> None:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    with pytest.raises(ConnectionLost, match=str(port)):
+        BCAPClient("127.0.0.1", port, timeout_s=1.0).connect()
+
+
+# --- DensoRobot ----------------------------------------------------------------------------
+
+def test_denso_robot_moves_the_sim_rig(rig: SimRig, mock: DensoMock) -> None:
+    rng = np.random.default_rng(3)
+    env = Envelope(center=TMS_RIG_P0, max_offset_mm=200, max_rotation_deg=40)
+    with DensoRobot(port=port_of(mock.start()), envelope=env, watchdog_ms=None) as robot:
+        ident = robot.identity()
+        assert ident["driver"] == "denso" and ident["robot_name"] == "Arm"
+        assert ident["provider"] == "CaoProv.DENSO.VRC" and "version" in ident["controller"]
+        assert np.allclose(robot.flange_pose(), TMS_RIG_P0, atol=1e-9)
+        for _ in range(10):
+            ang = np.radians(rng.uniform(-25, 25, 3))
+            target = TMS_RIG_P0 @ make_pose(rot_z(ang[2]) @ rot_y(ang[1]) @ rot_x(ang[0]),
+                                            rng.uniform(-100, 100, 3))
+            robot.move_to(target, speed_mm_s=50.0)
+            assert np.allclose(rig.flange, target, atol=1e-9)  # noise-free rig: true pose
+            assert np.allclose(robot.flange_pose(), target, atol=1e-9)
+        with pytest.raises(SafetyError):
+            robot.move_to(TMS_RIG_P0 @ make_pose(t=[0, 0, 500]))
+    assert mock.motor_on is False
+    assert mock.stats["moves"] == 10
+
+
+def test_denso_robot_move_fault_and_motor_state(rig: SimRig) -> None:
+    faults = DensoFaults(fail_move_at=2, fail_move_hresult=E_EMERGENCY_STOP)
+    with DensoMock(rig, clock=FAST, faults=faults) as m, \
+            DensoRobot(port=port_of(m.start())) as robot:
+        first = TMS_RIG_P0 @ make_pose(t=[10, 0, 0])
+        robot.move_to(first)
+        with pytest.raises(RobotFault) as ei:
+            robot.move_to(TMS_RIG_P0 @ make_pose(t=[20, 0, 0]))
+        assert ei.value.code == 0x83500178
+        assert ei.value.text == "not executable during emergency stop"
+        assert np.allclose(rig.flange, first)
+        robot.move_to(TMS_RIG_P0)  # one-shot fault: the next move works
+        assert np.allclose(rig.flange, TMS_RIG_P0)
+
+
+def test_denso_robot_connection_lost_during_move(rig: SimRig) -> None:
+    with DensoMock(rig, clock=FAST) as m:
+        robot = DensoRobot(port=port_of(m.start()))
+        robot.open()
+        m.faults.drop_at_request = m.stats["requests"] + 1
+        with pytest.raises(ConnectionLost):
+            robot.move_to(TMS_RIG_P0 @ make_pose(t=[5, 0, 0]))
+        robot.close()  # best effort, does not raise
+        assert np.allclose(rig.flange, TMS_RIG_P0)
+
+
+def test_denso_robot_open_fails_cleanly_on_unknown_robot(rig: SimRig, mock: DensoMock) -> None:
+    robot = DensoRobot(port=port_of(mock.start()), robot_name="NoSuchArm")
+    with pytest.raises(DeviceError, match="Controller_GetRobot"):
+        robot.open()
+    assert not robot.is_open
+
+
+def test_mock_refuses_non_loopback(rig: SimRig) -> None:
+    with pytest.raises(ValueError, match="loopback"):
+        DensoMock(rig, host="0.0.0.0")
