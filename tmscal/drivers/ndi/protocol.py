@@ -443,9 +443,10 @@ class HandleRecord:
 
     @classmethod
     def valid(cls, handle: int, quaternion: Sequence[float], translation_mm: Sequence[float],
-              error_mm: float, port_status: int, frame: int) -> HandleRecord:
-        """A valid record; the pose is computed from the quaternion and translation.
-        Raises ``ProtocolError`` for a non-finite or zero-length quaternion."""
+              error_mm: float, port_status: int, frame: int,
+              pose: np.ndarray | None = None) -> HandleRecord:
+        """A valid record; the pose is computed from the quaternion and translation unless
+        given. Raises ``ProtocolError`` for a non-finite or zero-length quaternion."""
         q = tuple(float(v) for v in quaternion)
         t = tuple(float(v) for v in translation_mm)
         if len(q) != 4 or len(t) != 3:
@@ -456,7 +457,8 @@ class HandleRecord:
                                 device=DEVICE)
         if math.sqrt(sum(v * v for v in q)) < 1e-6:
             raise ProtocolError(f"handle {handle:02X}: zero-length quaternion", device=DEVICE)
-        pose = make_pose(matrix_from_quaternion(np.array(q)), np.array(t))
+        if pose is None:
+            pose = make_pose(matrix_from_quaternion(np.array(q)), np.array(t))
         return cls(handle, VALID, int(port_status), int(frame), q, t,  # type: ignore[arg-type]
                    float(error_mm), pose)
 
@@ -466,7 +468,8 @@ class HandleRecord:
         """A valid record from a 4×4 pose (tracker_from_tool, mm); used by the mock."""
         T = np.asarray(tracker_from_tool, dtype=np.float64)
         q = quaternion_from_matrix(T[:3, :3])
-        return cls.valid(handle, q.tolist(), T[:3, 3].tolist(), error_mm, port_status, frame)
+        return cls.valid(handle, q.tolist(), T[:3, 3].tolist(), error_mm, port_status, frame,
+                         pose=T.copy())
 
     @classmethod
     def missing_tool(cls, handle: int, port_status: int, frame: int) -> HandleRecord:
@@ -600,9 +603,9 @@ def encode_bx(records: Iterable[HandleRecord], system_status: int = 0) -> bytes:
     return head + struct.pack("<H", crc16(head)) + bytes(body) + struct.pack("<H", crc16(body))
 
 
-def decode_bx(raw: bytes | bytearray) -> TrackingReply:
-    """Decode one complete BX reply (options 0001/0801). Checks the start sequence, both
-    CRCs and that the body is consumed exactly; raises ``ProtocolError`` otherwise."""
+def check_bx(raw: bytes | bytearray) -> bytes:
+    """Check the framing of one complete BX reply (start sequence, header CRC, length, body
+    CRC) without decoding the body; returns the body. ``ProtocolError`` otherwise."""
     data = bytes(raw)
     if len(data) < 8:
         raise ProtocolError(f"BX reply too short ({len(data)} bytes): {data.hex(' ')}",
@@ -620,6 +623,13 @@ def decode_bx(raw: bytes | bytearray) -> TrackingReply:
     if crc16(body) != body_crc:
         raise ProtocolError(f"BX body CRC mismatch ({body_crc:04X} != {crc16(body):04X})",
                             device=DEVICE)
+    return body
+
+
+def decode_bx(raw: bytes | bytearray) -> TrackingReply:
+    """Decode one complete BX reply (options 0001/0801). Checks the start sequence, both
+    CRCs and that the body is consumed exactly; raises ``ProtocolError`` otherwise."""
+    body = check_bx(raw)
     try:
         pos = 0
         count = body[pos]
@@ -717,6 +727,7 @@ __all__ = [
     "encode_command", "parse_command", "Command", "frame_reply", "reply_length", "Reply",
     "split_reply", "classify_reply", "parse_reply", "raise_for_error", "encode_error",
     "encode_warning", "OKAY_REPLY", "HandleRecord", "TrackingReply", "decode_tx", "encode_tx",
-    "encode_bx", "decode_bx", "encode_phsr", "decode_phsr", "decode_phrq", "pvwr_params",
+    "encode_bx", "decode_bx", "check_bx", "encode_phsr", "decode_phsr", "decode_phrq",
+    "pvwr_params",
     "rom_chunks", "parse_ver", "BAUD_CODES", "BAUD_FROM_CODE", "RESET_REPLY",
 ]

@@ -1,0 +1,347 @@
+"""NDI Polaris (Vicra / Spectra) driver over a serial line (or anything pyserial's
+``serial_for_url`` opens: ``/dev/ttyUSB0``, a pty path, ``socket://127.0.0.1:PORT``).
+
+Session: optional reset by serial break (fallback: no RESET answer → just INIT), INIT,
+VER / GETINFO for the identity, COMM to the configured rate (the host switches after the
+OKAY), passive tools loaded from .rom files (PHRQ, PVWR in 64-byte chunks, PINIT, PENA D) after
+freeing stale handles, TSTART; every :meth:`NDITracker.read` sends BX (or TX) and returns a
+:class:`~tmscal.drivers.base.TrackerFrame` whose tools are keyed by OUR tool names, each pose
+tracker_from_tool 4×4 in mm. ``close()`` sends TSTOP and closes the port, also after errors.
+
+Errors: a corrupt (CRC) or torn reply and a reply that does not come in time are retried up
+to ``retries`` times (the command is re-sent), then raised as ``ProtocolError`` /
+``DeviceTimeout`` naming the command; ``ERRORxx`` replies raise ``DeviceError`` with
+``code`` (int NDI code) and ``text`` (its meaning) at once.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import serial
+
+from ...errors import ConfigError, ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
+from ..base import ToolState, Tracker, TrackerFrame
+from . import protocol as p
+
+log = logging.getLogger(__name__)
+
+_PHRQ_PASSIVE = "*********1****"
+_READ_SLICE_S = 0.05
+
+
+class NDITracker(Tracker):
+    """NDI Polaris tracker driver.
+
+    Parameters (keywords):
+
+    * ``port``: serial device or pyserial URL (``/dev/ttyUSB0``, ``/dev/pts/3``,
+      ``socket://127.0.0.1:8765``).
+    * ``tools``: our tool name → .rom file path, e.g. ``{"marker": "marker.rom",
+      "probe": "probe.rom"}``. A ``None`` path means "use a tool already loaded on the
+      device": such names take the remaining enabled/initialised handles in handle order.
+    * ``baud``: line rate after COMM (9600 … 921600, 230400, 1228739); the device starts at
+      9600.
+    * ``frame_rate_hz``: the tracker's frame rate (Spectra 60, Vicra 20), for callers.
+    * ``reply``: ``"bx"`` (binary, default) or ``"tx"`` (text) tracking replies.
+    * ``timeout_s``: per-command reply timeout (s). ``retries``: re-sends after a corrupt,
+      torn or missing reply.
+    * ``reset``: send a serial break first (None = only when every tool has a .rom file,
+      since a reset unloads the tools on the device). ``reset_wait_s``: how long to wait for
+      the ``RESET`` answer before falling back to INIT.
+    * ``options``: TX/BX reply option word (default 0x0801: transforms incl. out-of-volume).
+    """
+
+    name = "ndi"
+
+    def __init__(self, port: str, tools: Mapping[str, str | os.PathLike[str] | None], *,
+                 baud: int = 115200, frame_rate_hz: float = 60.0, reply: str = "bx",
+                 timeout_s: float = 2.0, retries: int = 3, reset: bool | None = None,
+                 reset_wait_s: float = 0.5, options: int = 0x0801) -> None:
+        if not tools:
+            raise ValueError("NDITracker needs at least one tool")
+        if reply not in ("bx", "tx"):
+            raise ValueError(f"reply must be 'bx' or 'tx', got {reply!r}")
+        if baud not in p.BAUD_CODES:
+            raise ValueError(f"unsupported baud {baud}; choose from {sorted(p.BAUD_CODES)}")
+        if timeout_s <= 0 or retries < 0:
+            raise ValueError("timeout_s must be > 0 and retries >= 0")
+        super().__init__(list(tools), frame_rate_hz)
+        self.port = port
+        self.rom_paths: dict[str, Path | None] = {
+            k: (Path(v) if v is not None else None) for k, v in tools.items()}
+        self.baud = int(baud)
+        self.reply = reply
+        self.timeout_s = float(timeout_s)
+        self.retries = int(retries)
+        self.reset = reset
+        self.reset_wait_s = float(reset_wait_s)
+        self.options = int(options)
+        self.handles: dict[str, int] = {}
+        self._ser: Any = None
+        self._tracking = False
+        self._identity: dict[str, Any] = {}
+
+    # --- lifecycle ---------------------------------------------------------------------------
+    def _open(self) -> None:
+        roms: dict[str, bytes] = {}
+        for tool, path in self.rom_paths.items():
+            if path is None:
+                continue
+            try:
+                roms[tool] = path.read_bytes()
+            except OSError as e:
+                raise ConfigError(f"tool {tool!r}: cannot read ROM file {path}: {e}") from e
+        try:
+            self._ser = serial.serial_for_url(self.port, baudrate=9600, bytesize=8,
+                                              parity="N", stopbits=1, timeout=_READ_SLICE_S,
+                                              write_timeout=self.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise ConnectionLost(f"ndi: cannot open {self.port}: {e}", device=self.name) from e
+        self._ser.reset_input_buffer()
+        do_reset = self.reset if self.reset is not None else all(
+            v is not None for v in self.rom_paths.values())
+        if do_reset:
+            self._break_reset()
+        self._init()
+        self._identify()
+        if self.baud != 9600:
+            self._command("COMM", f"{p.BAUD_CODES[self.baud]}0000")
+            time.sleep(0.1)  # the device switches after its OKAY
+            self._ser.baudrate = self.baud
+        self._load_tools(roms)
+        self._command("TSTART")
+        self._tracking = True
+        log.info("ndi: tracking on %s, handles %s", self.port, self.handles)
+
+    def _close(self) -> None:
+        ser = self._ser
+        if ser is None:
+            return
+        try:
+            if self._tracking:
+                try:
+                    self._command("TSTOP")
+                except DeviceError as e:
+                    log.warning("ndi: TSTOP failed on close: %s", e)
+        finally:
+            self._tracking = False
+            self._ser = None
+            try:
+                ser.close()
+            except Exception:  # pragma: no cover - best effort
+                log.debug("ndi: closing the port raised", exc_info=True)
+
+    def _break_reset(self) -> None:
+        try:
+            self._ser.send_break(0.25)
+        except (serial.SerialException, OSError, NotImplementedError) as e:
+            log.debug("ndi: send_break not possible (%s); INIT only", e)
+            return
+        raw = self._read_reply(self.reset_wait_s)
+        if raw == p.RESET_REPLY:
+            log.info("ndi: device reset")
+        else:
+            log.debug("ndi: no RESET answer to the break (%r); INIT only", raw[:20])
+        self._ser.reset_input_buffer()
+
+    def _init(self) -> None:
+        try:
+            self._command("INIT")
+        except DeviceTimeout:
+            if self.baud == 9600:
+                raise
+            # a device left at the working rate by an earlier session without reset
+            log.info("ndi: no answer at 9600 baud; trying INIT at %d", self.baud)
+            self._ser.baudrate = self.baud
+            self._command("INIT")
+
+    def _identify(self) -> None:
+        ident: dict[str, Any] = {"driver": self.name, "port": self.port}
+        try:
+            ver = p.parse_ver(self._command("VER", "4").text)
+        except DeviceError as e:
+            log.debug("ndi: VER:4 refused (%s); trying VER:0", e)
+            ver = p.parse_ver(self._command("VER", "0").text)
+        tag = ver.get("Freeze Tag", "")
+        ident["model"] = tag.rsplit(" Rev", 1)[0].strip() if " Rev" in tag \
+            else ver.get("title", "unknown").replace(" Control Firmware", "")
+        ident["firmware"] = tag or None
+        ident["serial"] = ver.get("Serial Number") or ver.get("NDI S/N")
+        try:
+            info = self._command("GETINFO", "Features.Firmware.Version").text
+            ident["firmware_version"] = info.partition("=")[2].split(";")[0] or info
+        except DeviceError as e:
+            log.debug("ndi: GETINFO unavailable: %s", e)
+        self._identity = ident
+
+    def identity(self) -> dict[str, Any]:
+        """{"driver", "port", "model", "firmware" (VER freeze tag), "serial",
+        "firmware_version" (GETINFO, when the device has it), "handles"}."""
+        return {"driver": self.name, "port": self.port, **self._identity,
+                "handles": dict(self.handles)}
+
+    def _load_tools(self, roms: Mapping[str, bytes]) -> None:
+        for h, _ in p.decode_phsr(self._command("PHSR", "01").text):
+            self._command("PHF", f"{h:02X}")
+        preloaded = [t for t, path in self.rom_paths.items() if path is None]
+        if not preloaded:  # we load every tool: free whatever an earlier session left
+            for h, _ in p.decode_phsr(self._command("PHSR", "00").text):
+                self._command("PHF", f"{h:02X}")
+        for tool, rom in roms.items():
+            h = p.decode_phrq(self._command("PHRQ", _PHRQ_PASSIVE).text)
+            for addr, chunk in p.rom_chunks(rom):
+                self._command("PVWR", p.pvwr_params(h, addr, chunk))
+            self._command("PINIT", f"{h:02X}")
+            self._command("PENA", f"{h:02X}D")
+            self.handles[tool] = h
+        if preloaded:
+            ours = set(self.handles.values())
+            avail = [(h, s) for h, s in p.decode_phsr(self._command("PHSR", "00").text)
+                     if h not in ours and s & p.HANDLE_OCCUPIED]
+            if len(avail) < len(preloaded):
+                raise DeviceError(f"ndi: {len(preloaded)} tools {preloaded} should be loaded "
+                                  f"on the device, but only {len(avail)} occupied handles "
+                                  f"are free", device=self.name)
+            for tool, (h, s) in zip(preloaded, sorted(avail), strict=False):
+                if not s & p.HANDLE_INITIALIZED:
+                    self._command("PINIT", f"{h:02X}")
+                if not s & p.HANDLE_ENABLED:
+                    self._command("PENA", f"{h:02X}D")
+                self.handles[tool] = h
+
+    # --- reading -----------------------------------------------------------------------------
+    def _read(self) -> TrackerFrame:
+        opts = f"{self.options:04X}"
+        if self.reply == "bx":
+            raw = self._transact("BX", opts)
+            if raw[:2] != b"\xc4\xa5":
+                p.raise_for_error(self._parse_text(raw, "BX"), f"BX:{opts}")
+                raise ProtocolError(f"ndi: BX answered with text {raw[:40]!r}",
+                                    device=self.name)
+            data = p.decode_bx(raw)
+        else:
+            data = p.decode_tx(self._command("TX", opts).text)
+        host_time = time.monotonic()
+        by_handle = data.by_handle()
+        tools: dict[str, ToolState] = {}
+        for tool in self.tools:
+            rec = by_handle.get(self.handles.get(tool, -1))
+            if rec is None:
+                tools[tool] = ToolState(pose=None, missing=True)
+                continue
+            tools[tool] = ToolState(
+                pose=rec.pose if not rec.missing else None, missing=rec.missing,
+                out_of_volume=rec.out_of_volume,
+                partially_out_of_volume=rec.partially_out_of_volume,
+                error_mm=rec.error_mm, port_status=rec.port_status)
+        frame = data.frame
+        return TrackerFrame(frame=frame if frame is not None else -1, host_time=host_time,
+                            tools=tools, system_status=data.system_status)
+
+    # --- command / reply ---------------------------------------------------------------------
+    def _command(self, name: str, params: str = "") -> p.Reply:
+        """Send a text command and return its (non-error) reply; ERRORxx → DeviceError."""
+        raw = self._transact(name, params)
+        return p.raise_for_error(self._parse_text(raw, name), f"{name}:{params}"[:40])
+
+    def _parse_text(self, raw: bytes, name: str) -> p.Reply:
+        reply = p.parse_reply(raw)
+        if reply.kind == "warning":
+            log.warning("ndi %s: WARNING%02X (%s)", name, reply.code, reply.meaning)
+        return reply
+
+    def _transact(self, name: str, params: str = "") -> bytes:
+        """Send ``name:params`` with CRC and return the raw reply, re-sending after corrupt,
+        torn or missing replies up to ``retries`` times."""
+        if self._ser is None:
+            raise DeviceError(f"ndi: {name} on a closed port", device=self.name)
+        cmd = p.encode_command(name, params)
+        last: DeviceError | None = None
+        for attempt in range(self.retries + 1):
+            if attempt:
+                log.info("ndi: retrying %s (attempt %d): %s", name, attempt + 1, last)
+                self._ser.reset_input_buffer()
+            try:
+                self._ser.write(cmd)
+            except (serial.SerialException, OSError) as e:
+                raise ConnectionLost(f"ndi: writing {name} failed: {e}",
+                                     device=self.name) from e
+            try:
+                raw = self._read_reply(self.timeout_s)
+            except ProtocolError as e:
+                last = ProtocolError(f"ndi {name}: {e}", device=self.name)
+                continue
+            if not raw:
+                last = DeviceTimeout(f"ndi: no reply to {name} within {self.timeout_s:g} s",
+                                     device=self.name)
+                continue
+            need = p.reply_length(raw)
+            if need is None or len(raw) < need:
+                last = ProtocolError(f"ndi {name}: torn reply {raw[:60]!r} (timed out after "
+                                     f"{self.timeout_s:g} s)", device=self.name)
+                continue
+            if raw[:2] == b"\xc4\xa5":
+                try:
+                    p.check_bx(raw)  # CRC check here so a corrupt BX is retried
+                except ProtocolError as e:
+                    last = ProtocolError(f"ndi {name}: {e}", device=self.name)
+                    continue
+                return raw
+            try:
+                p.split_reply(raw)
+            except ProtocolError as e:
+                last = ProtocolError(f"ndi {name}: {e}", device=self.name)
+                continue
+            return raw
+        assert last is not None
+        raise type(last)(f"{last} (after {self.retries + 1} attempts)", device=self.name)
+
+    def _read_reply(self, timeout_s: float) -> bytes:
+        """Bytes of one reply, or what arrived before ``timeout_s`` (possibly empty)."""
+        ser = self._ser
+        buf = bytearray()
+        deadline = time.monotonic() + timeout_s
+        while True:
+            need = p.reply_length(buf)
+            if need is not None and len(buf) >= need:
+                return bytes(buf[:need])
+            if time.monotonic() > deadline:
+                return bytes(buf)
+            want = (need - len(buf)) if need is not None else max(1, ser.in_waiting)
+            try:
+                chunk = ser.read(want)
+            except (serial.SerialException, OSError) as e:
+                raise ConnectionLost(f"ndi: reading from {self.port} failed: {e}",
+                                     device=self.name) from e
+            buf += chunk
+
+
+def iter_frames(tracker: Tracker, n: int | None = None, *, distinct: bool = True,
+                stall_timeout_s: float = 5.0) -> Iterator[TrackerFrame]:
+    """Yield frames from an open ``tracker`` (poses tracker_from_tool, 4×4 mm): ``n`` of them,
+    or forever when ``n`` is None (the caller stops iterating). With ``distinct`` a frame
+    number already seen is skipped (polling faster than the frame rate repeats frames);
+    ``DeviceTimeout`` if no new frame comes within ``stall_timeout_s`` seconds."""
+    count = 0
+    last: int | None = None
+    stall_since = time.monotonic()
+    while n is None or count < n:
+        frame = tracker.read()
+        if distinct and frame.frame == last:
+            if time.monotonic() - stall_since > stall_timeout_s:
+                raise DeviceTimeout(f"no new tracker frame within {stall_timeout_s:g} s "
+                                    f"(stuck at {last})")
+            continue
+        last = frame.frame
+        stall_since = time.monotonic()
+        count += 1
+        yield frame
+
+
+__all__ = ["NDITracker", "iter_frames"]
