@@ -308,3 +308,27 @@ def test_denso_robot_open_fails_cleanly_on_unknown_robot(rig: SimRig, mock: Dens
 def test_mock_refuses_non_loopback(rig: SimRig) -> None:
     with pytest.raises(ValueError, match="loopback"):
         DensoMock(rig, host="0.0.0.0")
+
+
+def test_denso_robot_stop_halts_a_blocking_move(rig: SimRig) -> None:
+    from tmscal.drivers.base import wait_until
+
+    with DensoMock(rig, clock=REAL_TIME, motion_time_s=60.0) as m, \
+            DensoRobot(port=port_of(m.start()), timeout_s=30.0) as robot:
+        errors: list[BaseException] = []
+
+        def move() -> None:
+            try:
+                robot.move_to(TMS_RIG_P0 @ make_pose(t=[0, 0, 50]))
+            except BaseException as e:  # handed to the test thread
+                errors.append(e)
+
+        t = threading.Thread(target=move, daemon=True)
+        t.start()
+        wait_until(lambda: m.stats["moves"] == 1, 10.0, "the mock to start the move")
+        robot.stop()  # the move thread holds the connection: halt is sent without waiting
+        t.join(10.0)
+        assert not t.is_alive()
+        assert len(errors) == 1 and isinstance(errors[0], RobotFault)
+        assert errors[0].code == 0x80004005  # the mock answers a halted move with E_FAIL
+        assert np.allclose(robot.flange_pose(), TMS_RIG_P0)
