@@ -50,6 +50,8 @@ __all__ = [
 ]
 
 _RIGID_TOL = 1e-6
+_OFF_L = np.array([0, 1, 2, 0, 1, 2, 3, 4, 5])
+_OFF_R = np.array([3, 4, 5, 6, 7, 8, 6, 7, 8])
 
 
 def check_poses(poses: ArrayLike, name: str = "poses", rigid: bool = True,
@@ -66,8 +68,8 @@ def check_poses(poses: ArrayLike, name: str = "poses", rigid: bool = True,
         a = a[None]
     if a.ndim != 3 or a.shape[1:] != (4, 4):
         raise ValueError(f"{name}: expected 4×4 poses of shape (n, 4, 4), got shape {a.shape}")
-    bad = ~np.isfinite(a).all(axis=(1, 2))
-    if bad.any():
+    if not np.isfinite(a).all():
+        bad = ~np.isfinite(a).all(axis=(1, 2))
         raise ValueError(f"{name}: pose {int(np.argmax(bad))} contains NaN or infinity")
     last = np.abs(a[:, 3, :] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=1)
     if (last > 1e-9).any():
@@ -76,14 +78,24 @@ def check_poses(poses: ArrayLike, name: str = "poses", rigid: bool = True,
                          "expected [0, 0, 0, 1]")
     if rigid:
         R = a[:, :3, :3]
-        err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
-        det = np.linalg.det(R)
+        R9 = R.reshape(-1, 9)  # rows r0 | r1 | r2, contiguous copy
+        diag = (R9 * R9).reshape(-1, 3, 3).sum(axis=2) - 1.0  # |r_i|² − 1
+        off = (R9[:, _OFF_L] * R9[:, _OFF_R]).reshape(-1, 3, 3).sum(axis=2)  # r0·r1, r0·r2, r1·r2
+        err = np.maximum(np.abs(diag).max(axis=1), np.abs(off).max(axis=1))
+        det = _det3(R)
         badr = (err > tol) | (np.abs(det - 1.0) > tol)
         if badr.any():
             i = int(np.argmax(badr))
-            raise ValueError(f"{name}: pose {i} is not rigid (|R Rᵀ − I| = {err[i]:.2e}, "
+            raise ValueError(f"{name}: pose {i} is not rigid (max |R Rᵀ − I| = {err[i]:.2e}, "
                              f"det R = {det[i]:.6f})")
     return a
+
+
+def _det3(R: np.ndarray) -> np.ndarray:
+    """Determinants of (n, 3, 3) matrices (cofactor expansion; faster than LAPACK for 3×3)."""
+    return (R[:, 0, 0] * (R[:, 1, 1] * R[:, 2, 2] - R[:, 1, 2] * R[:, 2, 1])
+            - R[:, 0, 1] * (R[:, 1, 0] * R[:, 2, 2] - R[:, 1, 2] * R[:, 2, 0])
+            + R[:, 0, 2] * (R[:, 1, 0] * R[:, 2, 1] - R[:, 1, 1] * R[:, 2, 0]))
 
 
 def check_pose(pose: ArrayLike, name: str = "pose", rigid: bool = True,
