@@ -381,7 +381,7 @@ def raise_for_error(reply: Reply, command: str) -> Reply:
     otherwise. ``command`` names the command in the message."""
     if reply.kind == "error":
         assert reply.code is not None
-        raise DeviceError(f"NDI {command}: ERROR{reply.code:02X} ({reply.meaning})",
+        raise DeviceError(f"NDI {command} answered ERROR{reply.code:02X} ({reply.meaning})",
                           code=reply.code, text=reply.meaning, device=DEVICE)
     return reply
 

@@ -33,6 +33,10 @@ log = logging.getLogger(__name__)
 
 _PHRQ_PASSIVE = "*********1****"
 _READ_SLICE_S = 0.05
+#: errors that, on a re-sent command, mean the first (unanswered) attempt already worked.
+#: PHRQ is not idempotent: a lost PHRQ reply leaves an empty handle behind (harmless).
+_DONE_ON_RETRY: dict[str, tuple[int, ...]] = {"TSTART": (0x0C,), "TSTOP": (0x0C,),
+                                              "PHF": (0x08, 0x2B)}
 
 
 class NDITracker(Tracker):
@@ -219,7 +223,7 @@ class NDITracker(Tracker):
     def _read(self) -> TrackerFrame:
         opts = f"{self.options:04X}"
         if self.reply == "bx":
-            raw = self._transact("BX", opts)
+            raw, _ = self._transact("BX", opts)
             if raw[:2] != b"\xc4\xa5":
                 p.raise_for_error(self._parse_text(raw, "BX"), f"BX:{opts}")
                 raise ProtocolError(f"ndi: BX answered with text {raw[:40]!r}",
@@ -247,8 +251,13 @@ class NDITracker(Tracker):
     # --- command / reply ---------------------------------------------------------------------
     def _command(self, name: str, params: str = "") -> p.Reply:
         """Send a text command and return its (non-error) reply; ERRORxx → DeviceError."""
-        raw = self._transact(name, params)
-        return p.raise_for_error(self._parse_text(raw, name), f"{name}:{params}"[:40])
+        raw, attempts = self._transact(name, params)
+        reply = self._parse_text(raw, name)
+        if attempts > 1 and reply.kind == "error" and reply.code in _DONE_ON_RETRY.get(name, ()):
+            # the first attempt was executed but its reply was lost or corrupt
+            log.info("ndi: %s already done before the retry (ERROR%02X)", name, reply.code)
+            return p.classify_reply("OKAY")
+        return p.raise_for_error(reply, f"{name}:{params}"[:40])
 
     def _parse_text(self, raw: bytes, name: str) -> p.Reply:
         reply = p.parse_reply(raw)
@@ -256,9 +265,9 @@ class NDITracker(Tracker):
             log.warning("ndi %s: WARNING%02X (%s)", name, reply.code, reply.meaning)
         return reply
 
-    def _transact(self, name: str, params: str = "") -> bytes:
-        """Send ``name:params`` with CRC and return the raw reply, re-sending after corrupt,
-        torn or missing replies up to ``retries`` times."""
+    def _transact(self, name: str, params: str = "") -> tuple[bytes, int]:
+        """Send ``name:params`` with CRC and return (raw reply, attempts used), re-sending
+        after corrupt, torn or missing replies up to ``retries`` times."""
         if self._ser is None:
             raise DeviceError(f"ndi: {name} on a closed port", device=self.name)
         cmd = p.encode_command(name, params)
@@ -292,13 +301,13 @@ class NDITracker(Tracker):
                 except ProtocolError as e:
                     last = ProtocolError(f"ndi {name}: {e}", device=self.name)
                     continue
-                return raw
+                return raw, attempt + 1
             try:
                 p.split_reply(raw)
             except ProtocolError as e:
                 last = ProtocolError(f"ndi {name}: {e}", device=self.name)
                 continue
-            return raw
+            return raw, attempt + 1
         assert last is not None
         raise type(last)(f"{last} (after {self.retries + 1} attempts)", device=self.name)
 
