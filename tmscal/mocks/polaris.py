@@ -65,6 +65,7 @@ MAX_HANDLES = 12
 _FIRST_HANDLE = 0x01
 _MAX_ROM_BYTES = 0x10000
 _MAX_LINE = 4096
+_OBS_BATCH = 32
 
 
 @dataclass(frozen=True)
@@ -217,6 +218,7 @@ class PolarisMock:
             self._alloc_count = 0
             self._t0 = self.clock.now()
             self._fast_frame = 0
+            self._obs_cache: dict[str, tuple[np.ndarray, list[np.ndarray]]] = {}
             self._frame_cache: tuple[int, dict[int, tuple[str, np.ndarray | None, int]],
                                      int] | None = None
 
@@ -696,7 +698,7 @@ class PolarisMock:
             if f.missing_fraction > 0 and rng.random() < f.missing_fraction:
                 out[h.number] = ("missing", None, status)
                 continue
-            pose = self.rig.observe(h.body)
+            pose = self._observe(h.body)
             kind = "valid"
             if self.volume is not None:
                 spheres = np.asarray((self.rig.tools or {}).get(h.body, np.zeros((1, 3))))
@@ -711,17 +713,28 @@ class PolarisMock:
         self._frame_cache = (frame, out, sys_status)
         return out, sys_status
 
+    def _observe(self, body: str) -> np.ndarray:
+        """One noisy ``rig.observe(body)`` (tracker_from_body, 4×4 mm). Observations are
+        drawn from the rig in batches of ``_OBS_BATCH`` at the current true pose and used one
+        per frame; a batch is discarded as soon as the true pose changes (the robot moved),
+        so each frame still gets an independent observation of where the body is now."""
+        true = self.rig.true_body(body)
+        cached = self._obs_cache.get(body)
+        if cached is None or not np.array_equal(cached[0], true) or not cached[1]:
+            batch = self.rig.observe(body, _OBS_BATCH)
+            cached = (true, list(batch[::-1]))
+            self._obs_cache[body] = cached
+        return cached[1].pop()
+
     def _records(self, options: int) -> tuple[list[p.HandleRecord], int]:
         frame = self._current_frame()
         state, sys_status = self._frame_state(frame)
-        recs = []
-        for number, (kind, pose, status) in state.items():
-            if kind == "valid" or (kind == "oov" and options & p.OPT_OUT_OF_VOLUME):
-                assert pose is not None
-                recs.append(p.HandleRecord.from_pose(number, pose, self.error_mm, status,
-                                                     frame))
-            else:
-                recs.append(p.HandleRecord.missing_tool(number, status, frame))
+        seen = [(number, pose, self.error_mm, status, frame)
+                for number, (kind, pose, status) in state.items()
+                if kind == "valid" or (kind == "oov" and options & p.OPT_OUT_OF_VOLUME)]
+        valid = {r.handle: r for r in p.records_from_poses(seen)}  # type: ignore[arg-type]
+        recs = [valid.get(number) or p.HandleRecord.missing_tool(number, status, frame)
+                for number, (_, _, status) in state.items()]
         return recs, sys_status
 
 

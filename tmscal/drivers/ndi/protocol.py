@@ -459,6 +459,8 @@ class HandleRecord:
             raise ProtocolError(f"handle {handle:02X}: zero-length quaternion", device=DEVICE)
         if pose is None:
             pose = make_pose(matrix_from_quaternion(np.array(q)), np.array(t))
+        elif pose is _DEFERRED:
+            pose = None  # filled in by _fill_poses (batched conversion)
         return cls(handle, VALID, int(port_status), int(frame), q, t,  # type: ignore[arg-type]
                    float(error_mm), pose)
 
@@ -475,6 +477,34 @@ class HandleRecord:
     def missing_tool(cls, handle: int, port_status: int, frame: int) -> HandleRecord:
         """A record for a tool that is enabled but not seen."""
         return cls(handle, MISSING, int(port_status), int(frame))
+
+
+_DEFERRED = np.empty((0,))
+
+
+def _fill_poses(records: list[HandleRecord]) -> list[HandleRecord]:
+    """Compute the poses of valid records whose pose was deferred, in one batched call."""
+    idx = [i for i, r in enumerate(records) if r.status == VALID and r.pose is None]
+    if idx:
+        q = np.array([records[i].quaternion for i in idx], dtype=np.float64)
+        t = np.array([records[i].translation_mm for i in idx], dtype=np.float64)
+        poses = make_pose(matrix_from_quaternion(q), t)
+        for k, i in enumerate(idx):
+            object.__setattr__(records[i], "pose", poses[k])
+    return records
+
+
+def records_from_poses(items: Sequence[tuple[int, np.ndarray, float, int, int]]
+                       ) -> list[HandleRecord]:
+    """Valid records from (handle, tracker_from_tool 4×4 mm, error_mm, port_status, frame)
+    tuples, converting all rotations to quaternions in one batched call (used by the mock)."""
+    if not items:
+        return []
+    T = np.array([it[1] for it in items], dtype=np.float64)
+    q = quaternion_from_matrix(T[:, :3, :3])
+    return [HandleRecord.valid(h, q[k].tolist(), T[k, :3, 3].tolist(), err, port, frame,
+                               pose=T[k].copy())
+            for k, (h, _, err, port, frame) in enumerate(items)]
 
 
 @dataclass(frozen=True)
@@ -537,7 +567,7 @@ def decode_tx(payload: str) -> TrackingReply:
             q = [int(v) * 1e-4 for v in g[0:4]]
             t = [int(v) * 0.01 for v in g[4:7]]
             records.append(HandleRecord.valid(handle, q, t, int(g[7]) * 1e-4, int(g[8], 16),
-                                              int(g[9], 16)))
+                                              int(g[9], 16), pose=_DEFERRED))
             continue
         m = _TX_MISSING_RE.fullmatch(body)
         if m:
@@ -552,7 +582,7 @@ def decode_tx(payload: str) -> TrackingReply:
     tail = parts[-1]
     if len(tail) != 4:
         raise ProtocolError(f"TX system status {tail!r} is not 4 hex digits", device=DEVICE)
-    return TrackingReply(tuple(records), _hex(tail, "TX system status"))
+    return TrackingReply(tuple(_fill_poses(records)), _hex(tail, "TX system status"))
 
 
 def _signed(value: float, scale: float, digits: int) -> str:
@@ -644,7 +674,7 @@ def decode_bx(raw: bytes | bytearray) -> TrackingReply:
                 port, frame = struct.unpack_from("<II", body, pos)
                 pos += 8
                 records.append(HandleRecord.valid(handle, vals[0:4], vals[4:7], vals[7], port,
-                                                  frame))
+                                                  frame, pose=_DEFERRED))
             elif status == BX_MISSING:
                 port, frame = struct.unpack_from("<II", body, pos)
                 pos += 8
@@ -662,7 +692,7 @@ def decode_bx(raw: bytes | bytearray) -> TrackingReply:
     if pos != len(body):
         raise ProtocolError(f"BX body has {len(body) - pos} unexplained trailing bytes",
                             device=DEVICE)
-    return TrackingReply(tuple(records), system_status)
+    return TrackingReply(tuple(_fill_poses(records)), system_status)
 
 
 # --- handle management replies ---------------------------------------------------------------
@@ -728,6 +758,6 @@ __all__ = [
     "split_reply", "classify_reply", "parse_reply", "raise_for_error", "encode_error",
     "encode_warning", "OKAY_REPLY", "HandleRecord", "TrackingReply", "decode_tx", "encode_tx",
     "encode_bx", "decode_bx", "check_bx", "encode_phsr", "decode_phsr", "decode_phrq",
-    "pvwr_params",
+    "pvwr_params", "records_from_poses",
     "rom_chunks", "parse_ver", "BAUD_CODES", "BAUD_FROM_CODE", "RESET_REPLY",
 ]
