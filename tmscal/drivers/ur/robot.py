@@ -1,0 +1,345 @@
+"""Universal Robots driver on the ``ur_rtde`` client library (PyPI ``ur-rtde``).
+
+Frames and units: ``flange_pose()`` and ``move_to()`` take and return base_from_flange as a
+4×4 matrix in mm; speeds are mm/s and accelerations mm/s². UR's own form (metres + rotation
+vector, m/s, m/s²) exists only at this edge, converted by ``tmscal.geometry.pose_from_rotvec``
+and ``rotvec_pose_from_matrix``.
+
+TCP versus flange: RTDE reports and ``moveL`` commands the *TCP* pose (base_from_tcp). The
+driver reads the controller's active TCP offset (flange_from_tcp, ``getTCPOffset``) once when it
+opens and converts: base_from_flange = base_from_tcp · tcp_from_flange. Keep the TCP offset
+fixed while tmscal runs (a zero offset, TCP = flange, is the simplest and is what the mock
+reports); the offset found is recorded in ``identity()``.
+
+Warning: ur_rtde's constructors hold Python's GIL while they wait for the controller, so an
+``URRobot`` cannot talk to a ``tmscal.mocks.ur.URMock`` served from the same Python process:
+run the mock in another process (``tmscal mock``) or the robot in a subprocess.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError, RobotFault
+from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
+from ..base import Envelope, Robot
+
+log = logging.getLogger(__name__)
+
+#: UR safety modes (RTDE ``safety_mode``).
+SAFETY_MODES = {
+    1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
+    6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT",
+    10: "VALIDATE_JOINT_ID", 11: "UNDEFINED_SAFETY_MODE", 12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
+    13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
+}
+#: UR program runtime states (RTDE ``runtime_state``).
+RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED",
+                  5: "RESUMING"}
+#: What the driver asks the controller to stream (everything its checks read).
+RECEIVE_VARIABLES = ["timestamp", "actual_TCP_pose", "robot_mode", "safety_mode",
+                     "safety_status_bits", "runtime_state", "robot_status_bits"]
+_SAFE_MODES = (1, 2)   # NORMAL, REDUCED: motion allowed
+
+
+def base_from_flange_from_tcp(tcp_pose: Any, flange_from_tcp: np.ndarray) -> np.ndarray:
+    """base_from_flange (4×4 mm) from a UR TCP pose vector [x, y, z (m), rx, ry, rz (rad)]
+    and the TCP offset flange_from_tcp (4×4 mm)."""
+    return pose_from_rotvec(tcp_pose) @ invert(flange_from_tcp)
+
+
+def tcp_pose_from_base_from_flange(base_from_flange: np.ndarray,
+                                   flange_from_tcp: np.ndarray) -> list[float]:
+    """The UR TCP pose vector [x, y, z (m), rx, ry, rz (rad)] that puts the flange at
+    ``base_from_flange`` (4×4 mm), given the TCP offset flange_from_tcp (4×4 mm)."""
+    return [float(v) for v in rotvec_pose_from_matrix(base_from_flange @ flange_from_tcp)]
+
+
+class URRobot(Robot):
+    """A Universal Robots arm (CB3 / e-Series) through ``ur_rtde``.
+
+    Parameters
+    ----------
+    host:
+        Controller address (IPv4 or name). The ports are UR's fixed ones (30004 RTDE,
+        29999 dashboard, 30003 script).
+    envelope, speed_mm_s, accel_mm_s2:
+        Safety envelope and default linear speed (mm/s) and acceleration (mm/s²); see
+        ``Robot``.
+    upload_script:
+        True (default): ur_rtde uploads its ``rtde_control`` URScript (replacing a running
+        program). False: ``flags=0``, the control script must already run on the controller
+        (e.g. through the ur_rtde URCap or a program that contains it).
+    frequency_hz:
+        RTDE data rate; None lets ur_rtde choose (500 Hz on e-Series, 125 Hz on CB3).
+    timeout_s:
+        Longest a single move, or a wait for controller data, may take (s); beyond it the
+        driver raises ``DeviceTimeout``.
+
+    ``move_to`` sends a synchronous ``moveL`` and returns once the controller reported it done
+    and a newer data package has arrived (so ``flange_pose()`` then reads the final pose).
+    ur_rtde 1.6.5 can block forever inside a control call when the link drops during it, so
+    the call runs in a worker thread that the driver abandons (raising ``ConnectionLost``)
+    when the RTDE receive link is lost.
+    """
+
+    name = "ur"
+
+    def __init__(self, host: str, envelope: Envelope | None = None, speed_mm_s: float = 100.0,
+                 accel_mm_s2: float = 500.0, upload_script: bool = True,
+                 frequency_hz: float | None = None, timeout_s: float = 30.0) -> None:
+        super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
+        if not host:
+            raise ValueError("URRobot: host must be a non-empty address")
+        if frequency_hz is not None and not frequency_hz > 0:
+            raise ValueError(f"URRobot: frequency_hz must be positive, got {frequency_hz}")
+        if not timeout_s > 0:
+            raise ValueError(f"URRobot: timeout_s must be positive, got {timeout_s}")
+        self.host = host
+        self.upload_script = bool(upload_script)
+        self.frequency_hz = frequency_hz
+        self.timeout_s = float(timeout_s)
+        self.flange_from_tcp = np.eye(4)
+        self._rx: Any = None
+        self._ctl: Any = None
+        self._identity: dict[str, Any] = {}
+        self._stuck = False     # a control call was abandoned: the library may be wedged
+
+    # --- lifecycle ----------------------------------------------------------------------------
+
+    def _open(self) -> None:
+        try:
+            import rtde_control
+            import rtde_receive
+        except ImportError as e:  # pragma: no cover - the ur extra is missing
+            raise DeviceError(f"ur {self.host}: the ur_rtde library is not installed ({e}); "
+                              "pip install 'tmscal[ur]'", device="ur") from e
+        freq = -1.0 if self.frequency_hz is None else float(self.frequency_hz)
+        flags = (rtde_control.RTDEControlInterface.Flags.FLAG_UPLOAD_SCRIPT
+                 if self.upload_script else 0)
+        try:
+            self._rx = rtde_receive.RTDEReceiveInterface(self.host, freq, RECEIVE_VARIABLES)
+            self._ctl = rtde_control.RTDEControlInterface(self.host, freq, int(flags))
+        except RuntimeError as e:
+            raise ConnectionLost(f"ur {self.host}: cannot connect: {e}", device="ur",
+                                 text=str(e)) from e
+        self._wait_fresh_data("first data from the controller")
+        self._check_safety("open")
+        offset = self._call_watched("getTCPOffset", self._ctl.getTCPOffset, self.timeout_s)
+        if len(offset) == 6:
+            self.flange_from_tcp = pose_from_rotvec(offset)
+        else:
+            log.warning("ur %s: getTCPOffset returned %r; assuming TCP = flange", self.host,
+                        offset)
+        if np.abs(rotvec_pose_from_matrix(self.flange_from_tcp)).max() > 0:
+            log.warning("ur %s: TCP offset %s (m, rad) is not zero; poses are converted to "
+                        "the flange with it", self.host, list(offset))
+        self._identity = self._query_identity()
+        self._identity["tcp_offset_m_rad"] = [float(v) for v in offset] if len(offset) == 6 \
+            else None
+        log.info("ur %s: connected (%s)", self.host, self._identity)
+
+    def _close(self) -> None:
+        for what, iface in (("control", self._ctl), ("receive", self._rx)):
+            if iface is None:
+                continue
+            if what == "control" and self._stuck:
+                log.warning("ur %s: a control call is stuck in ur_rtde; control interface "
+                            "left connected", self.host)
+                continue
+            try:
+                self._call_watched(f"{what} disconnect", iface.disconnect, 5.0, watch=False)
+            except DeviceError as e:
+                log.warning("ur %s: %s disconnect failed: %s", self.host, what, e)
+        self._ctl = None
+        self._rx = None
+
+    def identity(self) -> dict[str, Any]:
+        """Driver, host, controller (PolyScope) version, serial number, model, TCP offset."""
+        return {"driver": self.name, "host": self.host, **self._identity}
+
+    def _query_identity(self) -> dict[str, Any]:
+        """Ask the dashboard server (best effort: a missing answer is recorded as None)."""
+        out: dict[str, Any] = {"controller_version": None, "serial": None, "model": None}
+        try:
+            import dashboard_client
+        except ImportError:  # pragma: no cover - older ur_rtde wheels
+            return out
+        db = dashboard_client.DashboardClient(self.host)
+        try:
+            db.connect()
+            for key, fn in (("controller_version", db.polyscopeVersion),
+                            ("serial", db.getSerialNumber), ("model", db.getRobotModel)):
+                try:
+                    out[key] = str(fn()).strip() or None
+                except RuntimeError as e:
+                    log.debug("ur %s: dashboard %s failed: %s", self.host, key, e)
+        except RuntimeError as e:
+            log.warning("ur %s: dashboard server not reachable for identity: %s", self.host, e)
+        finally:
+            try:
+                db.disconnect()
+            except RuntimeError:
+                pass
+        return out
+
+    # --- robot hooks --------------------------------------------------------------------------
+
+    def _flange_pose(self) -> np.ndarray:
+        self._check_connected("flange_pose")
+        v = self._call("getActualTCPPose", self._rx.getActualTCPPose)
+        if len(v) != 6 or not np.all(np.isfinite(v)):
+            raise ProtocolError(f"ur {self.host}: getActualTCPPose returned {v!r}, expected 6 "
+                                "finite values", device="ur")
+        return base_from_flange_from_tcp(v, self.flange_from_tcp)
+
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
+        self._check_connected("move_to")
+        self._check_safety("move_to")
+        target = tcp_pose_from_base_from_flange(pose, self.flange_from_tcp)
+        speed, accel = speed_mm_s / 1000.0, self.accel_mm_s2 / 1000.0
+        log.debug("ur %s: moveL %s at %.4f m/s, %.4f m/s²", self.host, target, speed, accel)
+        ok = self._call_watched("moveL", lambda: self._ctl.moveL(target, speed, accel, False),
+                                self.timeout_s)
+        if not ok:
+            self._diagnose_failed_move(target)
+        self._wait_fresh_data("controller data after moveL")
+
+    def _stop(self) -> None:
+        if self._ctl is None or self._stuck:
+            return
+        try:
+            self._call_watched("stopL", lambda: self._ctl.stopL(10.0, False), 5.0)
+        except DeviceError as e:
+            log.warning("ur %s: stopL failed: %s", self.host, e)
+
+    # --- helpers ------------------------------------------------------------------------------
+
+    def _call(self, what: str, fn: Any) -> Any:
+        """Run a ur_rtde call; its RuntimeError becomes ConnectionLost or DeviceError."""
+        try:
+            return fn()
+        except RuntimeError as e:
+            connected = self._connected()
+            cls = ConnectionLost if (not connected or "connect" in str(e).lower()) \
+                else DeviceError
+            raise cls(f"ur {self.host}: {what} failed: {e}", device="ur", text=str(e)) from e
+
+    def _call_watched(self, what: str, fn: Callable[[], Any], timeout_s: float,
+                      watch: bool = True) -> Any:
+        """Run a (possibly blocking) ur_rtde call in a worker thread. Raise ``ConnectionLost``
+        when the receive link drops while it runs (``watch``), ``DeviceTimeout`` after
+        ``timeout_s``; the library's RuntimeError becomes a typed error too."""
+        box: dict[str, Any] = {}
+
+        def run() -> None:
+            try:
+                box["value"] = fn()
+            except BaseException as e:  # handed over to the caller's thread
+                box["error"] = e
+
+        worker = threading.Thread(target=run, name=f"ur-{what}", daemon=True)
+        worker.start()
+        deadline = time.monotonic() + timeout_s
+        lost_at: float | None = None
+        while worker.is_alive():
+            worker.join(0.005)
+            if not worker.is_alive():
+                break
+            now = time.monotonic()
+            if watch and lost_at is None and not self._rx_connected():
+                lost_at = now
+            if lost_at is not None and now - lost_at > 0.5:
+                self._stuck = True
+                raise ConnectionLost(f"ur {self.host}: connection lost during {what}",
+                                     device="ur")
+            if now > deadline:
+                self._stuck = True
+                raise DeviceTimeout(f"ur {self.host}: {what} did not return within "
+                                    f"{timeout_s:.1f} s", device="ur")
+        if "error" in box:
+            e = box["error"]
+            if isinstance(e, RuntimeError):
+                connected = self._connected()
+                cls = ConnectionLost if (not connected or "connect" in str(e).lower()) \
+                    else DeviceError
+                raise cls(f"ur {self.host}: {what} failed: {e}", device="ur",
+                          text=str(e)) from e
+            raise e
+        return box.get("value")
+
+    def _rx_connected(self) -> bool:
+        try:
+            return bool(self._rx is not None and self._rx.isConnected())
+        except RuntimeError:
+            return False
+
+    def _connected(self) -> bool:
+        try:
+            return bool(self._rx is not None and self._ctl is not None
+                        and self._rx.isConnected() and self._ctl.isConnected())
+        except RuntimeError:
+            return False
+
+    def _check_connected(self, what: str) -> None:
+        if not self._connected():
+            raise ConnectionLost(f"ur {self.host}: {what}: the RTDE connection is lost",
+                                 device="ur")
+
+    def _safety(self) -> tuple[int, str, bool, bool, int]:
+        rx = self._rx
+        mode = int(rx.getSafetyMode())
+        return (mode, SAFETY_MODES.get(mode, f"safety mode {mode}"),
+                bool(rx.isProtectiveStopped()), bool(rx.isEmergencyStopped()),
+                int(rx.getRuntimeState()))
+
+    def _check_safety(self, what: str) -> None:
+        mode, name, protective, emergency, _ = self._call("safety status", self._safety)
+        if protective or emergency or mode not in _SAFE_MODES:
+            raise RobotFault(f"ur {self.host}: {what} refused: robot in {name}", code=mode,
+                             text=name, device="ur")
+
+    def _diagnose_failed_move(self, target: list[float]) -> None:
+        """moveL returned False: raise the typed error that says why. The receive stream may
+        lag the control stream by a few cycles, so watch it for a short while."""
+        deadline = time.monotonic() + min(1.0, self.timeout_s)
+        while True:
+            if not self._connected():
+                raise ConnectionLost(f"ur {self.host}: connection lost during moveL to "
+                                     f"{target}", device="ur")
+            mode, name, protective, emergency, runtime = self._call("safety status",
+                                                                    self._safety)
+            if protective or emergency or mode not in _SAFE_MODES:
+                raise RobotFault(f"ur {self.host}: moveL to {target} aborted: robot in {name}",
+                                 code=mode, text=name, device="ur")
+            if time.monotonic() > deadline:
+                state = RUNTIME_STATES.get(runtime, str(runtime))
+                raise RobotFault(f"ur {self.host}: moveL to {target} failed (safety {name}, "
+                                 f"program {state}); is the control script running?",
+                                 code=runtime, text=state, device="ur")
+            time.sleep(0.005)
+
+    def _wait_fresh_data(self, what: str) -> None:
+        """Wait until the receive stream has moved on by two packages, so that a pose read next
+        was produced after the event just seen on the control stream."""
+        t0 = float(self._call("getTimestamp", self._rx.getTimestamp))
+        seen = 0
+        last = t0
+        deadline = time.monotonic() + self.timeout_s
+        while seen < 2:
+            self._check_connected(what)
+            t = float(self._rx.getTimestamp())
+            if t != last:
+                seen += 1
+                last = t
+            elif time.monotonic() > deadline:
+                raise DeviceTimeout(f"ur {self.host}: no {what} within {self.timeout_s:.1f} s",
+                                    device="ur")
+            else:
+                time.sleep(0.0005)
