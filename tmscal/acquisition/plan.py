@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..drivers.base import Envelope, SafetyError
 from ..geometry import compose, make_pose, random_rotation, rot_x, rot_y, rot_z
 
 
@@ -45,3 +46,62 @@ def random_poses(n: int, rng: np.random.Generator, r_mm: float = 500.0) -> np.nd
     """n fully random poses (n, 4, 4) mm: Haar-random rotations, translations uniform in
     ±r_mm per axis (seed 000's simulation; its text does not give the translation range)."""
     return make_pose(random_rotation(rng, n), rng.uniform(-r_mm, r_mm, size=(n, 3)))
+
+
+# --- plans from a config, the safety envelope, and the dry-run summary -----------------------
+
+def make_plan(kind: str, p0: np.ndarray, n: int, seed: int, radius_mm: float,
+              rotation_deg: float) -> np.ndarray:
+    """The acquisition plan: n poses (n, 4, 4) base_from_flange in mm around P0, reproducible
+    from (kind, P0, n, seed, ranges) alone so that ``--resume`` regenerates the same plan.
+    The first n of a longer plan with the same seed are the same poses."""
+    gen = {"eq14": eq14_poses, "sphere": sphere_poses}.get(kind)
+    if gen is None:
+        raise ValueError(f"unknown plan kind {kind!r}; expected 'eq14' or 'sphere'")
+    # pose i comes from its own generator seeded by (seed, i): any prefix of a plan is the
+    # plan of that length, and a resumed run regenerates exactly the poses it skipped
+    out = np.empty((n, 4, 4))
+    for i in range(n):
+        out[i] = gen(p0, 1, np.random.default_rng([seed, i]), r_mm=radius_mm,
+                     d_deg=rotation_deg)[0]
+    return out
+
+
+def check_plan(poses: np.ndarray, envelope: Envelope) -> None:
+    """Check every pose of a plan against the envelope before anything moves. Raises
+    SafetyError naming the first offending pose (index, position in mm) and the limits."""
+    for i, P in enumerate(poses):
+        v = envelope.violations(P)
+        if v:
+            pos = np.round(P[:3, 3], 1).tolist()
+            raise SafetyError(f"plan pose {i} (flange at {pos} mm in the base frame) leaves "
+                              f"the safety envelope: {'; '.join(v)}. Nothing was moved.")
+
+
+def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s: float,
+                 samples: int, frame_rate_hz: float, start: np.ndarray | None = None
+                 ) -> dict[str, float]:
+    """Extent of a plan and an estimate of its duration (for ``--dry-run``).
+
+    Offsets are flange positions relative to P0 (mm, base frame), rotations relative to P0
+    (deg). Duration = straight-line travel at ``speed_mm_s`` (from ``start``, default P0,
+    through every pose) + settle + samples / frame rate, per pose (s)."""
+    from ..geometry import angle_between
+
+    d = poses[:, :3, 3] - p0[:3, 3]
+    rot = np.degrees(angle_between(p0, poses))
+    path = np.concatenate([[(p0 if start is None else start)[:3, 3]], poses[:, :3, 3]])
+    travel = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    per_pose = settle_s + samples / frame_rate_hz
+    return {
+        "poses": int(len(poses)),
+        "offset_max_mm": float(np.linalg.norm(d, axis=1).max()) if len(d) else 0.0,
+        "x_range_mm": (float(d[:, 0].min()), float(d[:, 0].max())),
+        "y_range_mm": (float(d[:, 1].min()), float(d[:, 1].max())),
+        "z_range_mm": (float(d[:, 2].min()), float(d[:, 2].max())),
+        "rotation_max_deg": float(rot.max()) if len(rot) else 0.0,
+        "travel_mm": travel,
+        "motion_s": travel / speed_mm_s,
+        "sampling_s": per_pose * len(poses),
+        "duration_s": travel / speed_mm_s + per_pose * len(poses),
+    }

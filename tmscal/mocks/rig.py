@@ -1,0 +1,233 @@
+"""Start every mock device a rig config names, all serving ONE sim rig, so the tracker sees
+exactly where the robot put the coil.
+
+Used by ``tmscal mock CONFIG`` and ``tmscal demo``. The truth of the sim rig is X =
+flange_from_marker, Y = flange_from_probe, Z = base_from_tracker (4×4 mm).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+import select
+import signal
+import subprocess
+import sys
+from typing import Any
+from urllib.parse import urlparse
+
+import numpy as np
+
+from ..config import RigConfig
+from ..errors import ConfigError
+from ..sim import TMS_RIG_P0, Noise, SimRig, Truth, facing_start, tms_rig_truth
+from .clock import FAST, REAL_TIME
+
+log = logging.getLogger(__name__)
+
+__all__ = ["MockRig", "MockProcess", "build_sim_rig", "start_mock_rig", "spawn_mock_rig"]
+
+
+def _dataclass_from(cls: Any, data: dict[str, Any], where: str) -> Any:
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ConfigError(f"{where}: unknown key {unknown[0]!r}; expected one of: "
+                          f"{', '.join(sorted(names))}")
+    try:
+        return cls(**data)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{where}: {e}") from None
+
+
+def build_sim_rig(cfg: RigConfig) -> SimRig:
+    """The sim rig of a config's ``mock`` section: truth ("tms" built-in rig, "random", or
+    explicit X/Y/Z), noise (``sim.Noise`` fields), seed; the flange starts at P0."""
+    m = cfg.mock
+    if m is None:
+        raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig")
+    rng = np.random.default_rng(m.seed)
+    if m.truth == "tms":
+        truth, start = tms_rig_truth(), TMS_RIG_P0
+    elif m.truth == "random":
+        truth = Truth.random(rng)
+        start = facing_start(truth)
+    else:
+        truth = Truth(X=m.truth["X"], Z=m.truth["Z"], Y=m.truth.get("Y"))
+        start = TMS_RIG_P0
+    if not isinstance(cfg.plan.start, str):
+        start = np.asarray(cfg.plan.start, dtype=float)
+    noise = _dataclass_from(Noise, m.noise, f"{cfg.path}: key 'mock.noise'")
+    bodies = list(cfg.tracker.tools) if cfg.tracker else None
+    rig = SimRig(truth, noise=noise, rng=rng, start=start)
+    if bodies is not None:
+        unknown = [b for b in bodies if b not in rig.bodies]
+        if unknown:
+            raise ConfigError(f"{cfg.path}: key 'tracker.tools.{unknown[0]}': the mock rig "
+                              f"has bodies {rig.bodies} only")
+    return rig
+
+
+class MockRig:
+    """Running mock devices: ``endpoints`` ({"tracker": pty path or socket URL, "robot":
+    host or host:port, ...}), ``rig`` (the SimRig with its truth), ``close()``."""
+
+    def __init__(self, rig: SimRig) -> None:
+        self.rig = rig
+        self.endpoints: dict[str, str] = {}
+        self.devices: list[Any] = []
+
+    def close(self) -> None:
+        for d in reversed(self.devices):
+            try:
+                d.close()
+            except Exception:
+                log.warning("closing a mock failed", exc_info=True)
+        self.devices.clear()
+
+    def __enter__(self) -> MockRig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def truth(self) -> dict[str, np.ndarray | None]:
+        t = self.rig.truth
+        return {"X": t.X, "Y": t.Y, "Z": t.Z}
+
+
+def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
+                   robot_host: str | None = None, robot_port: int | None = None) -> MockRig:
+    """Start the mock tracker and robot of ``cfg`` around one sim rig.
+
+    ``tracker_transport``: "pty" (a new /dev/pts), "tcp" (an ephemeral loopback port),
+    or "config" (TCP on the port of a ``socket://`` tracker.port, else a pty).
+    ``robot_host``/``robot_port`` override where the robot mock binds (loopback only)."""
+    m = cfg.mock
+    if m is None:
+        raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig to serve")
+    clock = FAST if m.clock == "fast" else REAL_TIME
+    rig = build_sim_rig(cfg)
+    mr = MockRig(rig)
+    try:
+        if cfg.tracker is not None:
+            from .polaris import MeasurementVolume, PolarisFaults, PolarisMock
+
+            opts = dict(m.tracker)
+            faults = _dataclass_from(PolarisFaults, opts.pop("faults", {}) or {},
+                                     f"{cfg.path}: key 'mock.tracker.faults'")
+            vol = opts.pop("volume", "default")
+            volume = (MeasurementVolume() if vol == "default" else None if vol is None
+                      else _dataclass_from(MeasurementVolume, vol,
+                                           f"{cfg.path}: key 'mock.tracker.volume'"))
+            tools = {k: v for k, v in cfg.tracker.tools.items() if v is not None} or None
+            try:
+                pm = PolarisMock(rig, tools, clock=clock, faults=faults, volume=volume,
+                                 seed=m.seed, **opts)
+            except (TypeError, ValueError) as e:
+                raise ConfigError(f"{cfg.path}: key 'mock.tracker': {e}") from None
+            mr.devices.append(pm)
+            url = urlparse(cfg.tracker.port) if cfg.tracker.port else None
+            if tracker_transport == "pty" or (tracker_transport == "config"
+                                              and (url is None or url.scheme != "socket")):
+                mr.endpoints["tracker"] = pm.start_pty()
+            elif tracker_transport == "tcp":
+                mr.endpoints["tracker"] = pm.start_tcp("127.0.0.1", 0)
+            else:
+                assert url is not None
+                mr.endpoints["tracker"] = pm.start_tcp(url.hostname or "127.0.0.1",
+                                                       url.port or 0)
+        if cfg.robot is not None:
+            opts = dict(m.robot)
+            fault_data = opts.pop("faults", {}) or {}
+            host = robot_host or cfg.robot.host
+            if cfg.robot.driver == "ur":
+                from .ur import URFaults, URMock
+
+                faults = _dataclass_from(URFaults, fault_data,
+                                         f"{cfg.path}: key 'mock.robot.faults'")
+                try:
+                    um = URMock(rig, host=host, clock=clock, faults=faults, **opts)
+                except (TypeError, ValueError) as e:
+                    raise ConfigError(f"{cfg.path}: key 'mock.robot': {e}") from None
+                mr.devices.append(um)
+                mr.endpoints["robot"] = um.start()
+            else:
+                from .denso import DensoFaults, DensoMock
+
+                faults = _dataclass_from(DensoFaults, fault_data,
+                                         f"{cfg.path}: key 'mock.robot.faults'")
+                port = cfg.robot.port if robot_port is None else robot_port
+                try:
+                    dm = DensoMock(rig, host=host, port=5007 if port is None else port,
+                                   clock=clock, faults=faults, **opts)
+                except (TypeError, ValueError) as e:
+                    raise ConfigError(f"{cfg.path}: key 'mock.robot': {e}") from None
+                mr.devices.append(dm)
+                mr.endpoints["robot"] = dm.start()
+    except BaseException:
+        mr.close()
+        raise
+    return mr
+
+
+class MockProcess:
+    """``tmscal mock CONFIG --json`` running in a child process (needed for ur_rtde, whose
+    constructors hold the GIL and so cannot talk to a mock thread of the same process).
+    ``endpoints`` as printed by the child; ``close()`` sends SIGTERM and waits."""
+
+    def __init__(self, config: str | os.PathLike[str], transport: str = "pty",
+                 timeout_s: float = 30.0, extra_args: list[str] | None = None) -> None:
+        cmd = [sys.executable, "-m", "tmscal.cli", "mock", str(config), "--json",
+               "--transport", transport, *(extra_args or [])]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     stdin=subprocess.DEVNULL, text=True)
+        self.endpoints: dict[str, str] = {}
+        line = self._first_line(timeout_s)
+        try:
+            self.endpoints = json.loads(line)
+        except json.JSONDecodeError:
+            err = self._stop_and_stderr()
+            raise ConfigError(f"mock for {config} did not start: "
+                              f"{(err or line).strip().splitlines()[-1:] or ['no output']}")\
+                from None
+
+    def _first_line(self, timeout_s: float) -> str:
+        assert self.proc.stdout is not None
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
+        if not ready:
+            self._stop_and_stderr()
+            raise ConfigError(f"mock did not print its endpoints within {timeout_s:g} s")
+        return self.proc.stdout.readline()
+
+    def _stop_and_stderr(self) -> str:
+        self.close()
+        assert self.proc.stderr is not None
+        try:
+            return self.proc.stderr.read()
+        except ValueError:
+            return ""
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+
+    def __enter__(self) -> MockProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def spawn_mock_rig(config: str | os.PathLike[str], transport: str = "pty",
+                   timeout_s: float = 30.0) -> MockProcess:
+    """Start ``tmscal mock CONFIG`` in a child process and return it once it has printed its
+    endpoints ({"tracker": ..., "robot": ...})."""
+    return MockProcess(config, transport, timeout_s)
