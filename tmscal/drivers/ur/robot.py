@@ -130,7 +130,10 @@ class URRobot(Robot):
             raise ConnectionLost(f"ur {self.host}: cannot connect: {e}", device="ur",
                                  text=str(e)) from e
         self._wait_fresh_data("first data from the controller")
-        self._check_safety("open")
+        try:
+            self._check_safety("open")
+        except RobotFault as e:
+            log.warning("%s (moves will be refused until it is cleared)", e)
         offset = self._call_watched("getTCPOffset", self._ctl.getTCPOffset, self.timeout_s)
         if len(offset) == 6:
             self.flange_from_tcp = pose_from_rotvec(offset)
