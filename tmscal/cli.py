@@ -519,11 +519,15 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
               help="Override sampling.samples.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Keep the session here (default: a temporary file).")
+@click.option("--transport", type=click.Choice(["tcp", "pty"]), default="tcp",
+              show_default=True,
+              help="How the Polaris mock is reached: loopback TCP (socket://, as NDI's network "
+                   "trackers) or a pty (as a serial port).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the solve result (with the mock rig's truth) as one JSON object.")
 @handle_errors
 def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
-         as_json: bool) -> None:
+         transport: str, as_json: bool) -> None:
     """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth."""
     from tqdm import tqdm
@@ -544,7 +548,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
         output = Path(tmp.name) / "demo-session.jsonl"
     try:
         # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
-        with spawn_mock_rig(cfg_path, transport="pty") as mp:
+        with spawn_mock_rig(cfg_path, transport=transport) as mp:
             ep = mp.endpoints
             if not as_json:
                 click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))

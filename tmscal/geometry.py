@@ -217,66 +217,81 @@ def rot_z(a: ArrayLike) -> Array:
 
 # --- quaternions (scalar first, as NDI) -------------------------------------------------
 
+def _quat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Constant tables: R(q) = (q ⊗ q) · _Q2R / |q|² and 4 q qᵀ = _R2Q_C + vec(R) · _R2Q_L."""
+    def rraw(w: float, x: float, y: float, z: float) -> np.ndarray:
+        return np.array([[w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                         [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
+                         [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z]])
+    E = np.eye(4)
+    q2r = np.zeros((16, 9))
+    for k in range(4):
+        for m in range(4):
+            if k == m:
+                q2r[4 * k + m] = rraw(*E[k]).reshape(9)
+            else:  # symmetric split of the cross term
+                q2r[4 * k + m] = ((rraw(*(E[k] + E[m])) - rraw(*E[k]) - rraw(*E[m])) / 2).reshape(9)
+    # 4 q qᵀ in terms of R (rows: w, x, y, z)
+    c = np.zeros((4, 4))
+    c[np.diag_indices(4)] = 1.0
+    L = np.zeros((9, 4, 4))
+
+    def add(i: int, j: int, k: int, m: int, v: float) -> None:
+        L[3 * i + j, k, m] += v
+        if k != m:
+            L[3 * i + j, m, k] += v
+    for i, sgn in ((0, (1, 1, -1, -1)), (1, (1, -1, 1, -1)), (2, (1, -1, -1, 1))):
+        for k in range(4):
+            add(i, i, k, k, sgn[k])
+    add(2, 1, 0, 1, 1)
+    add(1, 2, 0, 1, -1)
+    add(0, 2, 0, 2, 1)
+    add(2, 0, 0, 2, -1)
+    add(1, 0, 0, 3, 1)
+    add(0, 1, 0, 3, -1)
+    add(0, 1, 1, 2, 1)
+    add(1, 0, 1, 2, 1)
+    add(0, 2, 1, 3, 1)
+    add(2, 0, 1, 3, 1)
+    add(1, 2, 2, 3, 1)
+    add(2, 1, 2, 3, 1)
+    return q2r, c.reshape(16), L.reshape(9, 16)
+
+
+_Q2R, _R2Q_C, _R2Q_L = _quat_tables()
+
+
 def matrix_from_quaternion(q: ArrayLike) -> Array:
     """Rotation matrices (…, 3, 3) from quaternions (…, 4) = (q0, qx, qy, qz).
 
     The quaternion is normalised first; a zero quaternion raises ``ValueError``.
     """
     q = np.asarray(q, dtype=np.float64)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    if np.any(n < 1e-12):
+    n2 = (q * q).sum(axis=-1)
+    if np.any(n2 < 1e-24):
         raise ValueError("matrix_from_quaternion: zero-length quaternion")
-    w, x, y, z = np.moveaxis(q / n, -1, 0)
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    qq = (q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,))
+    return ((qq @ _Q2R) / n2[..., None]).reshape(q.shape[:-1] + (3, 3))
 
 
 def quaternion_from_matrix(R: ArrayLike) -> Array:
     """Unit quaternions (…, 4) = (q0, qx, qy, qz), q0 ≥ 0, from rotation matrices (…, 3, 3).
 
-    Accepts 4×4 poses too (the rotation block is used). Robust for all angles (Shepperd).
+    Accepts 4×4 poses too (the rotation block is used). Robust for all angles: 4 q qᵀ is
+    linear in R, and q is read off its column with the largest diagonal entry (Shepperd).
     """
     M = np.asarray(R, dtype=np.float64)
     if M.shape[-2:] == (4, 4):
         M = M[..., :3, :3]
-    m = M.reshape(-1, 3, 3)
-    out = np.empty((m.shape[0], 4))
-    tr = np.trace(m, axis1=1, axis2=2)
-    diag = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    lead = M.shape[:-2]
+    m = M.reshape(-1, 9)
+    Q = (_R2Q_C + m @ _R2Q_L).reshape(-1, 4, 4)
+    diag = np.diagonal(Q, axis1=1, axis2=2)
     k = np.argmax(diag, axis=1)
-    for case in range(4):
-        sel = k == case
-        if not sel.any():
-            continue
-        a = m[sel]
-        if case == 0:
-            s = np.sqrt(1.0 + tr[sel]) * 2
-            out[sel] = np.stack([0.25 * s, (a[:, 2, 1] - a[:, 1, 2]) / s,
-                                 (a[:, 0, 2] - a[:, 2, 0]) / s, (a[:, 1, 0] - a[:, 0, 1]) / s], 1)
-        elif case == 1:
-            s = np.sqrt(1.0 + a[:, 0, 0] - a[:, 1, 1] - a[:, 2, 2]) * 2
-            out[sel] = np.stack([(a[:, 2, 1] - a[:, 1, 2]) / s, 0.25 * s,
-                                 (a[:, 0, 1] + a[:, 1, 0]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s], 1)
-        elif case == 2:
-            s = np.sqrt(1.0 + a[:, 1, 1] - a[:, 0, 0] - a[:, 2, 2]) * 2
-            out[sel] = np.stack([(a[:, 0, 2] - a[:, 2, 0]) / s, (a[:, 0, 1] + a[:, 1, 0]) / s,
-                                 0.25 * s, (a[:, 1, 2] + a[:, 2, 1]) / s], 1)
-        else:
-            s = np.sqrt(1.0 + a[:, 2, 2] - a[:, 0, 0] - a[:, 1, 1]) * 2
-            out[sel] = np.stack([(a[:, 1, 0] - a[:, 0, 1]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s,
-                                 (a[:, 1, 2] + a[:, 2, 1]) / s, 0.25 * s], 1)
-    out /= np.linalg.norm(out, axis=1, keepdims=True)
-    out[out[:, 0] < 0] *= -1
-    return out.reshape(M.shape[:-2] + (4,))
+    col = Q[np.arange(len(k)), :, k]
+    q = col / np.linalg.norm(col, axis=1, keepdims=True)
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+    return q.reshape(lead + (4,))
 
 
 # --- rotation vectors (UR) -------------------------------------------------------------

@@ -162,6 +162,7 @@ class SimRig:
         if self.tools is None:
             names = ["marker"] + (["probe"] if self.truth.Y is not None else [])
             self.tools = {n: TOOL_8700340_MM for n in names}
+        self._tracker_from_base = invert(self.truth.Z)
         p0 = np.eye(4) if self.start is None else np.asarray(self.start, dtype=float)
         self.commanded = p0.copy()
         self.flange = p0.copy()
@@ -196,7 +197,7 @@ class SimRig:
     def true_body(self, body: str) -> np.ndarray:
         """Noise-free tracker_from_<body> = Z⁻¹ · A_true · (X or Y), 4×4 mm."""
         with self._lock:
-            return compose(invert(self.truth.Z), self.flange, self.truth.flange_from(body))
+            return self._tracker_from_base @ self.flange @ self.truth.flange_from(body)
 
     def observe(self, body: str, n: int | None = None) -> np.ndarray:
         """Noisy tracker_from_<body> (4×4 mm), or n independent observations (n, 4, 4):

@@ -39,6 +39,9 @@ _DONE_ON_RETRY: dict[str, tuple[int, ...]] = {"TSTART": (0x0C,), "TSTOP": (0x0C,
                                               "PHF": (0x08, 0x2B)}
 
 
+_MIN_REPLY = 6
+
+
 class NDITracker(Tracker):
     """NDI Polaris tracker driver.
 
@@ -322,7 +325,10 @@ class NDITracker(Tracker):
                 return bytes(buf[:need])
             if time.monotonic() > deadline:
                 return bytes(buf)
-            want = (need - len(buf)) if need is not None else max(1, ser.in_waiting)
+            # every reply is ≥ 6 bytes (BX header; shortest text: "0" + CRC + CR), so ask
+            # for 6 at once, then exactly the rest of a BX, or what is waiting of a text
+            want = (need - len(buf)) if need is not None else \
+                max(_MIN_REPLY - len(buf), ser.in_waiting, 1)
             try:
                 chunk = ser.read(want)
             except (serial.SerialException, OSError) as e:
