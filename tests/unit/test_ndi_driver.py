@@ -407,3 +407,15 @@ def test_faults_are_reproducible(rig: SimRig) -> None:
     assert bad > 0
     with pytest.raises(ValueError):
         PolarisFaults(crc_error_prob=1.5)
+
+
+def test_reconnect_to_a_device_left_tracking(mock: PolarisMock) -> None:
+    """A host that died mid-run leaves the Polaris tracking; no break reaches it over TCP, so
+    INIT answers ERROR0C and the driver must TSTOP first."""
+    ep = mock.start_tcp()
+    first = NDITracker(ep, ROMS, **FAST_OPTS).open()
+    first._ser.close()  # the link drops without TSTOP (as after kill -9)
+    assert mock.state == "tracking"
+    with NDITracker(ep, ROMS, **FAST_OPTS) as tr:
+        assert tr.read().tools["marker"].usable
+    assert "TSTOP:" in mock.commands

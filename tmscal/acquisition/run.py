@@ -109,9 +109,14 @@ class _Devices:
                 log.warning("closing the tracker failed", exc_info=True)
 
 
+_LETTER = {"marker": "B", "probe": "C"}
+
+
 def _record(i: int, P: np.ndarray, s: PoseSample, t: float) -> PoseRecord:
+    """A session line: samples keyed A/B/C as the format says, spreads per body name."""
+    samples = {_LETTER.get(k, k): v for k, v in s.samples.items()}
     return PoseRecord(index=i, A=s.A, B=s.bodies.get("marker"), C=s.bodies.get("probe"),
-                      commanded=P, time=t, samples=s.samples, spread=s.spread,
+                      commanded=P, time=t, samples=samples, spread=s.spread,
                       skipped=s.problem)
 
 

@@ -166,7 +166,26 @@ class NDITracker(Tracker):
             # a device left at the working rate by an earlier session without reset
             log.info("ndi: no answer at 9600 baud; trying INIT at %d", self.baud)
             self._ser.baudrate = self.baud
+            self._init_tracking_aware()
+        except DeviceError as e:
+            if e.code != 0x0C:
+                raise
+            self._stop_then_init()
+
+    def _init_tracking_aware(self) -> None:
+        try:
             self._command("INIT")
+        except DeviceError as e:
+            if isinstance(e, DeviceTimeout) or e.code != 0x0C:
+                raise
+            self._stop_then_init()
+
+    def _stop_then_init(self) -> None:
+        """INIT was refused in tracking mode (ERROR0C): an earlier host died without TSTOP and
+        no break reached the device (pty, TCP). Stop tracking, then initialise."""
+        log.info("ndi: INIT refused in tracking mode; sending TSTOP first")
+        self._command("TSTOP")
+        self._command("INIT")
 
     def _identify(self) -> None:
         ident: dict[str, Any] = {"driver": self.name, "port": self.port}

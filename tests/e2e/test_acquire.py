@@ -1,0 +1,250 @@
+"""End to end: our drivers against the protocol-level mocks (real sockets and ptys; the mock in
+a child process as `tmscal mock`), acquire → solve recovers the sim rig's truth; kill -9 and
+--resume; injected faults; a plan outside the envelope never moves the robot."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from tmscal.acquisition.plan import make_plan
+from tmscal.acquisition.run import AcquisitionStopped, acquire
+from tmscal.config import load_config
+from tmscal.errors import SafetyError
+from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
+from tmscal.report.evaluate import solve_session
+from tmscal.session import read_session
+
+REPO = Path(__file__).resolve().parents[2]
+CONFIGS = REPO / "configs"
+
+
+def write_config(tmp_path: Path, base: str, **changes) -> Path:
+    """A copy of a shipped mock config with sections updated (absolute ROM paths)."""
+    data = yaml.safe_load((CONFIGS / base).read_text())
+    data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
+    for section, values in changes.items():
+        if isinstance(values, dict) and isinstance(data.get(section), dict):
+            data[section].update(values)
+        else:
+            data[section] = values
+    p = tmp_path / f"rig-{base}"
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+def endpoints_kwargs(ep: dict[str, str]) -> dict:
+    host, _, port = ep["robot"].partition(":")
+    return {"tracker_port": ep["tracker"], "robot_host": host,
+            "robot_port": int(port) if port else None}
+
+
+def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
+    cfg = load_config(cfg_path)
+    truth = build_sim_rig(cfg).truth  # the mock child built the same rig from this config
+    s = read_session(session_path)
+    assert [p.index for p in s.poses] == list(range(n))
+    s.header["truth"] = {"X": truth.X.tolist(), "Y": truth.Y.tolist(), "Z": truth.Z.tolist()}
+    _, res = solve_session(s, "qr36")
+    t = res["truth"]
+    # noise: 0.05 mm fiducials, 0.05 mm / 0.05° robot; averaged frames; n poses ±100 mm/±10°
+    assert t["X"]["trans_mm"] < 0.5 and t["Y"]["trans_mm"] < 0.5, t
+    assert t["X"]["rot_deg"] < 0.1 and t["Y"]["rot_deg"] < 0.1, t
+    assert t["coil_placement_mm"]["mean"] < 0.25, t
+    return res
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("base, host", [("mock-ur-polaris.yaml", "127.0.0.41"),
+                                        ("mock-denso-polaris.yaml", "127.0.0.1")])
+def test_acquire_then_solve_recovers_truth(tmp_path, base, host):
+    robot = {"host": host}
+    if "denso" in base:
+        robot["port"] = 0
+    cfg_path = write_config(tmp_path, base, robot=robot, plan={"poses": 30},
+                            sampling={"samples": 10})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg_path, transport="pty") as mp:
+        res = acquire(load_config(cfg_path), out, **endpoints_kwargs(mp.endpoints))
+    assert (res.recorded, res.skipped, res.total, res.stopped) == (30, 0, 30, False)
+    s = read_session(out)
+    assert s.header["devices"]["robot"]["driver"] in ("ur", "denso")
+    assert s.poses[0].samples["B"] == 10 and "marker" in s.poses[0].spread
+    check_truth(cfg_path, out, 30)
+
+
+@pytest.mark.e2e
+def test_kill_9_then_resume_loses_and_duplicates_nothing(tmp_path):
+    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
+                            plan={"poses": 150}, sampling={"samples": 20})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg_path, transport="tcp") as mp:
+        kw = endpoints_kwargs(mp.endpoints)
+        cmd = [sys.executable, "-m", "tmscal.cli", "acquire", str(cfg_path), "-o", str(out),
+               "--tracker-port", kw["tracker_port"], "--robot-host", kw["robot_host"]]
+        env = dict(os.environ)
+        # the robot port is ephemeral: pass it through a config override
+        cfg = yaml.safe_load(cfg_path.read_text())
+        cfg["robot"]["port"] = kw["robot_port"]
+        run_cfg = tmp_path / "run.yaml"
+        run_cfg.write_text(yaml.safe_dump(cfg))
+        cmd[4] = str(run_cfg)
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 60
+        lines = 0
+        while time.monotonic() < deadline and proc.poll() is None:
+            if out.exists():
+                lines = out.read_bytes().count(b"\n")
+                if lines >= 12:
+                    break
+            time.sleep(0.01)
+        assert proc.poll() is None, "the run ended before it could be killed"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        before = read_session(out)
+        n_before = len(before.poses)
+        assert 10 <= n_before < 150
+        res = acquire(load_config(run_cfg), out, resume=True, **kw)
+    assert res.new_poses == 150 - n_before and res.recorded == 150
+    s = read_session(out)
+    assert sorted(p.index for p in s.poses) == list(range(150))
+    assert not s.torn_tail
+    # the completed session is exactly the uninterrupted run's plan (same P0 and seed)
+    plan = make_plan("eq14", np.asarray(s.header["plan"]["p0"]), 150, 1, 100.0, 10.0)
+    got = np.stack([p.commanded for p in sorted(s.poses, key=lambda p: p.index)])
+    np.testing.assert_allclose(got, plan, atol=1e-9)
+    # poses recorded before the kill are untouched
+    for a, b in zip(before.poses, s.poses[:n_before]):
+        np.testing.assert_array_equal(a.B, b.B)
+
+
+@pytest.mark.e2e
+def test_stop_request_leaves_resumable_session(tmp_path):
+    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
+                            plan={"poses": 12}, sampling={"samples": 5})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        calls = []
+        res = acquire(cfg, out, should_stop=lambda: len(calls) >= 5,
+                      on_pose=lambda d, t, r: calls.append(r.index), **kw)
+        assert res.stopped and res.recorded == 5
+        res2 = acquire(cfg, out, resume=True, **kw)
+        assert res2.new_poses == 7 and res2.recorded == 12 and not res2.stopped
+
+
+@pytest.mark.e2e
+def test_tracker_faults_end_in_complete_session(tmp_path):
+    cfg_path = write_config(
+        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 20},
+        sampling={"samples": 10, "min_share": 0.6},
+        tracker={"options": {"timeout_s": 0.3, "retries": 5}},
+        mock={"tracker": {"model": "spectra",
+                          "faults": {"crc_error_prob": 0.05, "drop_reply_prob": 0.02,
+                                     "missing_fraction": 0.15,
+                                     "ir_interference_fraction": 0.05}}})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        res = acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
+    assert res.total == 20 and res.recorded + res.skipped == 20 and res.recorded >= 18
+    s = read_session(out)
+    # missing frames were dropped: fewer than 10 marker samples at some poses
+    assert min(p.samples["B"] for p in s.poses if p.skipped is None) < 10
+
+
+@pytest.mark.e2e
+def test_tool_missing_everywhere_is_skipped_with_reason(tmp_path):
+    cfg_path = write_config(
+        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 3},
+        sampling={"samples": 5},
+        mock={"tracker": {"model": "spectra", "faults": {"missing_fraction": 1.0}}})
+    cfg = load_config(cfg_path)
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        res = acquire(cfg, tmp_path / "s.jsonl", **endpoints_kwargs(mr.endpoints))
+    assert res.skipped == 3 and res.recorded == 0
+    s = read_session(tmp_path / "s.jsonl")
+    assert "marker usable in 0 of 5 frames" in s.poses[0].skipped
+
+
+@pytest.mark.e2e
+def test_dropped_robot_connection_is_reconnected(tmp_path):
+    cfg_path = write_config(
+        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 10},
+        sampling={"samples": 5}, run={"retries": 2, "reconnect_wait_s": 0.05},
+        mock={"robot": {"faults": {"drop_at_request": 60}}})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        res = acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
+        assert mr.devices[-1].stats["dropped"] == 1
+    assert res.faults == 1 and res.recorded == 10
+    assert sorted(p.index for p in read_session(out).poses) == list(range(10))
+
+
+@pytest.mark.e2e
+def test_robot_fault_stops_cleanly_with_cause(tmp_path):
+    cfg_path = write_config(
+        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 10},
+        sampling={"samples": 5}, mock={"robot": {"faults": {"fail_move_at": 4}}})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        with pytest.raises(AcquisitionStopped, match=r"pose 3: robot fault.*--resume"):
+            acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
+        assert sorted(p.index for p in read_session(out).poses) == [0, 1, 2]
+        res = acquire(cfg, out, resume=True, **endpoints_kwargs(mr.endpoints))
+    assert res.recorded == 10
+
+
+@pytest.mark.e2e
+def test_ur_protective_stop_stops_cleanly(tmp_path):
+    cfg_path = write_config(
+        tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.42"}, plan={"poses": 8},
+        sampling={"samples": 5}, mock={"robot": {"faults": {"protective_stop_at_move": 3}}})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg_path, transport="pty") as mp:
+        with pytest.raises(AcquisitionStopped, match=r"pose 2: robot fault.*PROTECTIVE"):
+            acquire(load_config(cfg_path), out, **endpoints_kwargs(mp.endpoints))
+    s = read_session(out)
+    assert sorted(p.index for p in s.poses) == [0, 1]
+
+
+@pytest.mark.e2e
+def test_plan_outside_envelope_never_moves(tmp_path):
+    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
+                            plan={"poses": 50, "radius_mm": 100},
+                            safety={"max_offset_mm": 60})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        with pytest.raises(SafetyError, match=r"plan pose \d+ .* max_offset_mm 60"):
+            acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
+        assert mr.devices[-1].stats["moves"] == 0
+    assert not out.exists()
+
+
+@pytest.mark.e2e
+def test_mock_command_prints_json_endpoints_first(tmp_path):
+    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0})
+    proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "mock", str(cfg_path),
+                             "--json", "--transport", "pty"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        ep = json.loads(line)
+        assert ep["tracker"].startswith("/dev/pts/")
+        assert ep["robot"].startswith("127.0.0.1:")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(10) == 0
