@@ -1,0 +1,81 @@
+"""Config loading: shipped configs load; every error names the file and the key."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from tmscal.config import load_config
+from tmscal.errors import ConfigError
+from tmscal.mocks.rig import build_sim_rig
+from tmscal.sim import TMS_RIG_P0, tms_rig_truth
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+@pytest.mark.parametrize("name", ["mock-ur-polaris.yaml", "mock-denso-polaris.yaml",
+                                  "mock-polaris.yaml", "mock-ur.yaml", "mock-denso.yaml"])
+def test_shipped_mock_configs_load(name):
+    cfg = load_config(CONFIGS / name)
+    assert cfg.mock is not None
+    rig = build_sim_rig(cfg)
+    np.testing.assert_array_equal(rig.truth.Y, tms_rig_truth().Y)
+    np.testing.assert_array_equal(rig.commanded, TMS_RIG_P0)
+
+
+@pytest.mark.parametrize("name", ["ur-polaris.yaml", "denso-polaris.yaml"])
+def test_templates_name_the_rom_to_fix(name):
+    with pytest.raises(ConfigError, match=r"key 'tracker.tools.marker': ROM file not found"):
+        load_config(CONFIGS / name)
+
+
+def _write(tmp_path, data):
+    p = tmp_path / "c.yaml"
+    p.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return p
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"robot": {"driver": "kuka"}}, "robot.driver"),
+    ({"robot": {"driver": "ur", "speed_mm_s": "fast"}}, "robot.speed_mm_s"),
+    ({"robot": {"driver": "ur", "speed_mm_s": 900}}, "robot.speed_mm_s"),
+    ({"robot": {"driver": "ur", "sped": 1}}, "robot.sped"),
+    ({"plan": {"kind": "grid"}}, "plan.kind"),
+    ({"plan": {"poses": 0}}, "plan.poses"),
+    ({"plan": {"start": [[1, 0], [0, 1]]}}, "plan.start"),
+    ({"sampling": {"min_share": 1.5}}, "sampling.min_share"),
+    ({"safety": {"workspace_min_mm": [0, 0, 0]}}, "safety.workspace_min_mm"),
+    ({"safety": {"workspace_min_mm": [0, 0], "workspace_max_mm": [1, 1, 1]}},
+     "safety.workspace_min_mm"),
+    ({"mock": {"clock": "slow"}}, "mock.clock"),
+    ({"trackr": {}}, "trackr"),
+])
+def test_errors_name_file_and_key(tmp_path, data, key):
+    p = _write(tmp_path, data)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(p) in str(e.value) and f"key '{key}'" in str(e.value)
+
+
+def test_bad_yaml_names_line(tmp_path):
+    p = _write(tmp_path, "robot:\n  driver: ur\n   host: x\n")
+    with pytest.raises(ConfigError, match=r"c.yaml, line \d+: invalid YAML"):
+        load_config(p)
+
+
+def test_missing_file():
+    with pytest.raises(ConfigError, match="cannot read config"):
+        load_config("/nonexistent/rig.yaml")
+
+
+def test_rom_paths_resolve_against_config_folder(tmp_path):
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "m.rom").write_bytes(b"NDI")
+    p = _write(tmp_path, {"tracker": {"port": "/dev/null", "tools": {"marker": "t/m.rom"}}})
+    assert load_config(p).tracker.tools["marker"] == str(tmp_path / "t" / "m.rom")
+
+
+def test_start_pose_from_xyz_rpy(tmp_path):
+    p = _write(tmp_path, {"plan": {"start": {"xyz_mm": [500, 0, 400], "rpy_deg": [180, 0, 0]}}})
+    np.testing.assert_allclose(load_config(p).plan.start, TMS_RIG_P0, atol=1e-12)
