@@ -7,7 +7,7 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     tracker:  {driver: ndi, port, baud, frame_rate_hz, reply: bx|tx,
                tools: {marker: file.rom, probe: file.rom}}
     plan:     {kind: eq14|sphere, poses, radius_mm, rotation_deg, seed, start}
-    sampling: {samples, settle_s, min_share, max_frames_factor}
+    sampling: {samples, settle_s, min_share, max_frames_factor, robot_reads}
     safety:   {max_offset_mm, max_rotation_deg, workspace_min_mm, workspace_max_mm,
                max_speed_mm_s, max_accel_mm_s2}
     run:      {retries, reconnect_wait_s}
@@ -78,12 +78,14 @@ class PlanConfig:
 @dataclass
 class SamplingConfig:
     """Samples per pose (distinct tracker frames), settle time after each move (s), the
-    share of frames with every body usable below which a pose is retried then skipped."""
+    share of frames with every body usable below which a pose is retried then skipped, and
+    how many of those frames also read the robot's flange pose (spread evenly)."""
 
     samples: int = 100
     settle_s: float = 1.0
     min_share: float = 0.8
     max_frames_factor: float = 3.0
+    robot_reads: int = 10
 
 
 @dataclass
@@ -275,6 +277,8 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None)
     if sampling.samples < 1:
         raise _err(src, "sampling.samples", f"must be ≥ 1, got {sampling.samples}")
     _positive(src, "sampling.settle_s", sampling.settle_s, allow_zero=True)
+    if sampling.robot_reads < 1:
+        raise _err(src, "sampling.robot_reads", f"must be ≥ 1, got {sampling.robot_reads}")
     if not 0 < sampling.min_share <= 1:
         raise _err(src, "sampling.min_share", f"must be in (0, 1], got {sampling.min_share}")
     safety = _build(SafetyConfig, data.get("safety"), src, "safety")

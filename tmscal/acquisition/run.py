@@ -190,7 +190,8 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
                 devices={"robot": dev.robot.identity(), "tracker": dev.tracker.identity()},
                 plan=pinfo,
                 sampling={"samples": n_samples, "settle_s": cfg.sampling.settle_s,
-                          "min_share": cfg.sampling.min_share})
+                          "min_share": cfg.sampling.min_share,
+                          "robot_reads": cfg.sampling.robot_reads})
             writer = SessionWriter.create(out, header)
         done = writer.session.indices()
         t_offset = max((p.time for p in writer.session.poses), default=0.0)
@@ -256,7 +257,8 @@ def _one_pose(dev: _Devices, cfg: RigConfig, i: int, P: np.ndarray, n_samples: i
     for attempt in range(2):
         dev.robot.move_to(P)
         s = sample_pose(dev.robot, dev.tracker, n_samples, cfg.sampling.settle_s,
-                        cfg.sampling.min_share, cfg.sampling.max_frames_factor, sleep=sleep)
+                        cfg.sampling.min_share, cfg.sampling.max_frames_factor, sleep=sleep,
+                        robot_reads=cfg.sampling.robot_reads)
         if s.problem is None:
             break
         log.info("pose %d attempt %d: %s", i, attempt + 1, s.problem)

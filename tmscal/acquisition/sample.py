@@ -51,12 +51,15 @@ def spread_of(poses: np.ndarray, mean: np.ndarray) -> dict[str, float]:
 
 def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float = 1.0,
                 min_share: float = 0.8, max_frames_factor: float = 3.0,
-                sleep: Any = time.sleep) -> PoseSample:
+                sleep: Any = time.sleep, robot_reads: int = 10) -> PoseSample:
     """Wait ``settle_s`` seconds, then read tracker frames until ``n_samples`` distinct frame
     numbers were seen (bounded: at most ``max_frames_factor``·n reads per distinct frame
     budget and a wall-time limit from the frame rate), reading the robot's flange pose
-    alongside each distinct frame. Each body keeps the frames in which it is usable; a body
-    with fewer than ``min_share``·n usable frames makes the sample a problem (named)."""
+    alongside ``robot_reads`` of those frames, spread evenly (the robot holds still; every
+    read is a round trip on some controllers). Each body keeps the frames in which it is
+    usable; a body with fewer than ``min_share``·n usable frames makes the sample a problem
+    (named)."""
+    every = max(1, n_samples // max(1, robot_reads))
     if settle_s > 0:
         sleep(settle_s)
     names = list(tracker.tools)
@@ -77,7 +80,8 @@ def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float 
             if first < 0:
                 first = fr.frame
             last = fr.frame
-            A_reads.append(robot.flange_pose())
+            if (len(seen) - 1) % every == 0:
+                A_reads.append(robot.flange_pose())
             for b in names:
                 st = fr.tools[b]
                 if st.usable and st.pose is not None:
