@@ -35,20 +35,9 @@ from tmscal.mocks.ur import URFaults, URMock
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
 
 
-class RecordingRig(SimRig):
-    """A SimRig that records every commanded base_from_flange (4×4 mm)."""
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        self.moves: list[np.ndarray] = []
-
-    def move_flange(self, base_from_flange: np.ndarray) -> None:
-        self.moves.append(np.array(base_from_flange, dtype=np.float64))
-        super().move_flange(base_from_flange)
-
-
-def _rig() -> RecordingRig:
-    return RecordingRig(tms_rig_truth(), noise=Noise.none(), start=TMS_RIG_P0)
+def _rig() -> SimRig:
+    """A noise-free TMS rig; ``rig.moves`` records what the mock commanded."""
+    return SimRig(tms_rig_truth(), noise=Noise.none(), start=TMS_RIG_P0)
 
 
 def _run_child(scenario: str, host: str, args: dict[str, Any]) -> dict[str, Any]:

@@ -23,6 +23,7 @@ The rig is thread-safe (one lock) because mock servers run in threads.
 from __future__ import annotations
 
 import threading
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -166,6 +167,9 @@ class SimRig:
         p0 = np.eye(4) if self.start is None else np.asarray(self.start, dtype=float)
         self.commanded = p0.copy()
         self.flange = p0.copy()
+        #: every commanded base_from_flange (4×4 mm) passed to move_flange, oldest first
+        #: (bounded: the last 100,000), so tests can see what a robot mock was told
+        self.moves: deque[np.ndarray] = deque(maxlen=100_000)
 
     @property
     def bodies(self) -> list[str]:
@@ -182,6 +186,7 @@ class SimRig:
                               self.noise.robot_trans_sigma_mm)
             self.commanded = cmd.copy()
             self.flange = cmd @ d
+            self.moves.append(cmd.copy())
 
     def reported_flange(self) -> np.ndarray:
         """What the controller reports: base_from_flange 4×4 mm (commanded pose, plus read
