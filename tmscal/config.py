@@ -20,6 +20,7 @@ Lengths are mm, angles degrees (``_deg``), speeds mm/s, times seconds. Relative 
 
 from __future__ import annotations
 
+import inspect
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
@@ -33,7 +34,7 @@ from .errors import ConfigError
 
 __all__ = ["RigConfig", "RobotConfig", "TrackerConfig", "PlanConfig", "SamplingConfig",
            "SafetyConfig", "RunConfig", "MockConfig", "load_config", "parse_config",
-           "pose_from_config"]
+           "pose_from_config", "construct"]
 
 
 @dataclass
@@ -332,3 +333,20 @@ def load_config(path: str | os.PathLike[str]) -> RigConfig:
     cfg = parse_config(data, str(p), p.parent)
     cfg.path = p
     return cfg
+
+
+def construct(cls: Any, where: str, *args: Any, **options: Any) -> Any:
+    """``cls(*args, **options)`` for options taken from a config: an option the class does
+    not accept, or a value it rejects, raises ConfigError naming ``where`` and the option."""
+    params = inspect.signature(cls).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        unknown = sorted(set(options) - set(params))
+        if unknown:
+            accepted = sorted(k for k, p in params.items()
+                              if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD))
+            raise ConfigError(f"{where}: unknown key {unknown[0]!r} for {cls.__name__}; "
+                              f"expected one of: {', '.join(accepted)}")
+    try:
+        return cls(*args, **options)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{where}: {e}") from None

@@ -5,12 +5,11 @@ Poses and speeds pass through unchanged: mm, mm/s, base_from_flange.
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
 import numpy as np
 
-from ..config import RigConfig
+from ..config import RigConfig, construct
 from ..drivers.base import ConfigError, Envelope, Robot, Tracker, driver_class
 
 __all__ = ["envelope_for", "make_robot", "make_tracker"]
@@ -25,20 +24,6 @@ def envelope_for(cfg: RigConfig, p0: np.ndarray | None) -> Envelope:
                     max_accel_mm_s2=s.max_accel_mm_s2)
 
 
-def _call(cls: Any, where: str, **kwargs: Any) -> Any:
-    """Construct a driver, turning an unknown option into a ConfigError naming it."""
-    params = inspect.signature(cls).parameters
-    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        unknown = sorted(set(kwargs) - set(params))
-        if unknown:
-            raise ConfigError(f"{where}: unknown option {unknown[0]!r} for driver "
-                              f"{cls.__name__}; accepted: {', '.join(sorted(params))}")
-    try:
-        return cls(**kwargs)
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{where}: {e}") from None
-
-
 def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
                host: str | None = None, port: int | None = None) -> Robot:
     """The configured robot driver (not yet opened). ``host``/``port`` override the config."""
@@ -51,7 +36,7 @@ def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
     if r.driver == "denso":
         kw["port"] = port or r.port or 5007
     kw.update(r.options)
-    return _call(cls, f"{cfg.path}: robot", **kw)
+    return construct(cls, f"{cfg.path}: key 'robot.options'", **kw)
 
 
 def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
@@ -67,4 +52,4 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
     kw: dict[str, Any] = dict(port=p, tools=t.tools, baud=t.baud,
                               frame_rate_hz=t.frame_rate_hz, reply=t.reply)
     kw.update(t.options)
-    return _call(cls, f"{cfg.path}: tracker", **kw)
+    return construct(cls, f"{cfg.path}: key 'tracker.options'", **kw)

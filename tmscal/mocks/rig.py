@@ -7,7 +7,6 @@ flange_from_marker, Y = flange_from_probe, Z = base_from_tracker (4×4 mm).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import os
@@ -20,7 +19,7 @@ from urllib.parse import urlparse
 
 import numpy as np
 
-from ..config import RigConfig
+from ..config import RigConfig, construct
 from ..errors import ConfigError
 from ..sim import TMS_RIG_P0, Noise, SimRig, Truth, facing_start, tms_rig_truth
 from .clock import FAST, REAL_TIME
@@ -28,18 +27,6 @@ from .clock import FAST, REAL_TIME
 log = logging.getLogger(__name__)
 
 __all__ = ["MockRig", "MockProcess", "build_sim_rig", "start_mock_rig", "spawn_mock_rig"]
-
-
-def _dataclass_from(cls: Any, data: dict[str, Any], where: str) -> Any:
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key {unknown[0]!r}; expected one of: "
-                          f"{', '.join(sorted(names))}")
-    try:
-        return cls(**data)
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{where}: {e}") from None
 
 
 def build_sim_rig(cfg: RigConfig) -> SimRig:
@@ -59,7 +46,7 @@ def build_sim_rig(cfg: RigConfig) -> SimRig:
         start = TMS_RIG_P0
     if not isinstance(cfg.plan.start, str):
         start = np.asarray(cfg.plan.start, dtype=float)
-    noise = _dataclass_from(Noise, m.noise, f"{cfg.path}: key 'mock.noise'")
+    noise = construct(Noise, f"{cfg.path}: key 'mock.noise'", **m.noise)
     bodies = list(cfg.tracker.tools) if cfg.tracker else None
     rig = SimRig(truth, noise=noise, rng=rng, start=start)
     if bodies is not None:
@@ -116,18 +103,15 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
             from .polaris import MeasurementVolume, PolarisFaults, PolarisMock
 
             opts = dict(m.tracker)
-            faults = _dataclass_from(PolarisFaults, opts.pop("faults", {}) or {},
-                                     f"{cfg.path}: key 'mock.tracker.faults'")
+            faults = construct(PolarisFaults, f"{cfg.path}: key 'mock.tracker.faults'",
+                               **(opts.pop("faults", {}) or {}))
             vol = opts.pop("volume", "default")
             volume = (MeasurementVolume() if vol == "default" else None if vol is None
-                      else _dataclass_from(MeasurementVolume, vol,
-                                           f"{cfg.path}: key 'mock.tracker.volume'"))
+                      else construct(MeasurementVolume, f"{cfg.path}: key 'mock.tracker.volume'",
+                                     **vol))
             tools = {k: v for k, v in cfg.tracker.tools.items() if v is not None} or None
-            try:
-                pm = PolarisMock(rig, tools, clock=clock, faults=faults, volume=volume,
-                                 seed=m.seed, **opts)
-            except (TypeError, ValueError) as e:
-                raise ConfigError(f"{cfg.path}: key 'mock.tracker': {e}") from None
+            pm = construct(PolarisMock, f"{cfg.path}: key 'mock.tracker'", rig, tools,
+                           clock=clock, faults=faults, volume=volume, seed=m.seed, **opts)
             mr.devices.append(pm)
             url = urlparse(cfg.tracker.port) if cfg.tracker.port else None
             if tracker_transport == "pty" or (tracker_transport == "config"
@@ -146,25 +130,21 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
             if cfg.robot.driver == "ur":
                 from .ur import URFaults, URMock
 
-                faults = _dataclass_from(URFaults, fault_data,
-                                         f"{cfg.path}: key 'mock.robot.faults'")
-                try:
-                    um = URMock(rig, host=host, clock=clock, faults=faults, **opts)
-                except (TypeError, ValueError) as e:
-                    raise ConfigError(f"{cfg.path}: key 'mock.robot': {e}") from None
+                faults = construct(URFaults, f"{cfg.path}: key 'mock.robot.faults'",
+                                   **fault_data)
+                um = construct(URMock, f"{cfg.path}: key 'mock.robot'", rig, host=host,
+                               clock=clock, faults=faults, **opts)
                 mr.devices.append(um)
                 mr.endpoints["robot"] = um.start()
             else:
                 from .denso import DensoFaults, DensoMock
 
-                faults = _dataclass_from(DensoFaults, fault_data,
-                                         f"{cfg.path}: key 'mock.robot.faults'")
+                faults = construct(DensoFaults, f"{cfg.path}: key 'mock.robot.faults'",
+                                   **fault_data)
                 port = cfg.robot.port if robot_port is None else robot_port
-                try:
-                    dm = DensoMock(rig, host=host, port=5007 if port is None else port,
-                                   clock=clock, faults=faults, **opts)
-                except (TypeError, ValueError) as e:
-                    raise ConfigError(f"{cfg.path}: key 'mock.robot': {e}") from None
+                dm = construct(DensoMock, f"{cfg.path}: key 'mock.robot'", rig, host=host,
+                               port=5007 if port is None else port, clock=clock,
+                               faults=faults, **opts)
                 mr.devices.append(dm)
                 mr.endpoints["robot"] = dm.start()
     except BaseException:
