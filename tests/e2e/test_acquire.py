@@ -248,3 +248,26 @@ def test_mock_command_prints_json_endpoints_first(tmp_path):
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 0
+
+
+@pytest.mark.e2e
+def test_ur_dropped_connection_stops_cleanly_and_resumable(tmp_path):
+    """The UR mock closes every socket (and refuses reconnects) at the 3rd move: the run
+    (in a child process, as ur_rtde may misbehave on a dropped link) ends with one error line
+    naming the cause and the resume command, and the session keeps the poses before."""
+    cfg = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
+                       plan={"poses": 8}, sampling={"samples": 5},
+                       run={"retries": 2, "reconnect_wait_s": 0.1},
+                       mock={"robot": {"faults": {"drop_connection_at_move": 3}}})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg, transport="pty") as mp:
+        r = subprocess.run([sys.executable, "-m", "tmscal.cli", "acquire", str(cfg), "-o",
+                            str(out), "--tracker-port", mp.endpoints["tracker"],
+                            "--robot-host", mp.endpoints["robot"]],
+                           capture_output=True, text=True, timeout=180)
+    assert r.returncode == 1, r.stderr[-1000:]
+    err = [ln for ln in r.stderr.splitlines() if ln.startswith("error: ")]
+    assert len(err) == 1 and "connection is lost" in err[0] and "--resume" in err[0]
+    assert "Traceback" not in r.stderr
+    s = read_session(out)
+    assert [p.index for p in s.poses] == [0, 1]
