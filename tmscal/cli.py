@@ -167,26 +167,37 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the calibration YAML here.")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write a PNG of the per-pose errors (spot outlier poses).")
 @handle_errors
 def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
-          as_json: bool, output: Path | None) -> None:
+          as_json: bool, output: Path | None, plot: Path | None) -> None:
     """Solve a session for X, Y, Z and report the errors (seed 000's metrics)."""
-    from .report.evaluate import solve_session
-    from .report.text import calibration_yaml, format_result
+    from .errors import CalibrationError
+    from .report.evaluate import pose_residuals, solve_session
+    from .report.text import calibration_yaml, format_result, plot_residuals
     from .session import read_session, sha256_of
 
     session = read_session(session_file)
     if session.torn_tail:
         click.echo(f"warning: {session_file}: torn last line ignored", err=True)
-    _, res = solve_session(session, method=method, train=train, orthonormal=orthonormal)
+    cal, res = solve_session(session, method=method, train=train, orthonormal=orthonormal)
     if output is not None:
         _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
+    if plot is not None:
+        try:
+            plot_residuals(pose_residuals(session, cal), res["n_solve"], str(plot),
+                           f"{session_file.name}: {res['method']} per-pose errors")
+        except ImportError:
+            raise CalibrationError("--plot needs matplotlib: pip install 'tmscal[plot]'") \
+                from None
     if as_json:
         _print_json(res)
     else:
         click.echo(format_result(res))
-        if output is not None:
-            click.echo(f"\nwrote {output}")
+        for f in (output, plot):
+            if f is not None:
+                click.echo(f"\nwrote {f}")
 
 
 # --- study ----------------------------------------------------------------------------------

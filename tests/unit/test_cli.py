@@ -45,7 +45,9 @@ def test_solve_qr24_reports_ez_and_in_sample_label(sim_session):
 
 def test_solve_human_table_and_yaml(sim_session, tmp_path):
     out = tmp_path / "cal.yaml"
-    r = run("solve", sim_session, "--train", 60, "-o", out)
+    png = tmp_path / "res.png"
+    r = run("solve", sim_session, "--train", 60, "-o", out, "--plot", png)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert r.exit_code == 0, r.output
     assert "coil placement" in r.output and "e_t" in r.output
     import yaml

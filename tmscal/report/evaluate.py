@@ -11,11 +11,12 @@ from typing import Any
 import numpy as np
 
 from ..calib import Calibration, coil_placement_errors, solve, truth_errors
+from ..calib.metrics import body_errors
 from ..calib.study import convergence, summarize, threshold_n
 from ..errors import CalibrationError
 from ..session import Session
 
-__all__ = ["solve_session", "study_session", "session_arrays"]
+__all__ = ["solve_session", "study_session", "session_arrays", "pose_residuals"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -116,3 +117,19 @@ def study_session(session: Session, methods: list[str], n_max: int = 250, n_min:
             if "e_t_mm" in c else {}
         table[m] = {"stats": stats, "n_below_mm": thr}
     return {"n": ns, "n_test": curves["n_test"], "curves": curves["methods"], "table": table}
+
+
+def pose_residuals(session: Session, cal: Calibration) -> dict[str, Any]:
+    """Per-pose errors of a calibration on every usable pose of a session (to spot bad poses):
+    {"index": [...], "<body>": {"trans_mm": [...], "rot_deg": [...]}} with E = (A X)⁻¹ Z N for
+    each body, the matrices applied as the calibration says."""
+    A, B, C, idx = session.arrays(need_probe=cal.Y is not None and "probe" in session.bodies)
+    u = cal.used()
+    out: dict[str, Any] = {"index": idx}
+    pairs = [("marker", B, u["X"], u["Z"])]
+    if C is not None and u["Y"] is not None:
+        pairs.append(("probe", C, u["Y"], u["Z_probe"] if u["Z_probe"] is not None else u["Z"]))
+    for name, N, Xb, Zb in pairs:
+        e, th = body_errors(A, N, Xb, Zb)
+        out[name] = {"trans_mm": e.tolist(), "rot_deg": np.abs(th).tolist()}
+    return out

@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-__all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "format_matrix"]
+__all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "plot_residuals",
+           "format_matrix"]
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
@@ -124,6 +125,32 @@ def plot_study(study: dict[str, Any], path: str, title: str | None = None) -> No
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     fig.suptitle(title or f"hold-out error on {study['n_test']} poses")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str) -> None:
+    """Per-pose translation (mm) and rotation (deg) errors of each body against the pose
+    index, the solve set shaded: outliers (a bumped tool, a bad frame) stand out. PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    idx = res["index"]
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    for body in ("marker", "probe"):
+        if body in res:
+            axes[0].plot(idx, res[body]["trans_mm"], ".", ms=3, label=body)
+            axes[1].plot(idx, res[body]["rot_deg"], ".", ms=3, label=body)
+    for ax, unit in zip(axes, ("translation error (mm)", "rotation error (deg)")):
+        if n_solve < len(idx):
+            ax.axvspan(idx[0], idx[n_solve - 1], color="0.9", label="solve set")
+        ax.set_ylabel(unit)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right")
+    axes[1].set_xlabel("pose index")
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
