@@ -70,3 +70,6 @@ def test_speed_option() -> None:
     assert speed_option(12.5, 1000.0) == "SPEED=1.25"
     assert speed_option(5000.0, 1000.0) == "SPEED=100"
     assert speed_option(1e-6, 1000.0) == "SPEED=0.01"
+    # rounded down, never up: 12.3456 mm/s of 1000 is 1.23456 % → 1.23 %
+    assert speed_option(12.3456, 1000.0) == "SPEED=1.23"
+    assert speed_option(12.3499, 1000.0) == "SPEED=1.23"

@@ -16,6 +16,7 @@ is, so the real speed is SPEED × ExtSpeed (never faster than asked).
 from __future__ import annotations
 
 import logging
+import math
 from typing import Any
 
 import numpy as np
@@ -30,8 +31,10 @@ log = logging.getLogger(__name__)
 
 def speed_option(speed_mm_s: float, max_linear_speed_mm_s: float) -> str:
     """The Robot_Move option ``"SPEED=<percent>"`` for a linear speed in mm/s, percent of
-    ``max_linear_speed_mm_s`` rounded to 0.01 and clamped to [0.01, 100]."""
-    pct = min(max(100.0 * speed_mm_s / max_linear_speed_mm_s, 0.01), 100.0)
+    ``max_linear_speed_mm_s`` rounded DOWN to 0.01 (never faster than asked) and clamped to
+    [0.01, 100]."""
+    pct = min(max(math.floor(10000.0 * speed_mm_s / max_linear_speed_mm_s + 1e-9) / 100.0,
+                  0.01), 100.0)
     text = f"{pct:.2f}".rstrip("0").rstrip(".")
     return f"SPEED={text}"
 
