@@ -478,6 +478,8 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         if bar is not None:
             bar.close()
     _acquire_summary(res, config, output)
+    if res.stopped:
+        sys.exit(EXIT_INTERRUPTED)
 
 
 def _acquire_summary(res: Any, config: Path, output: Path) -> None:
