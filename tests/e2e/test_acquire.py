@@ -271,3 +271,32 @@ def test_ur_dropped_connection_stops_cleanly_and_resumable(tmp_path):
     assert "Traceback" not in r.stderr
     s = read_session(out)
     assert [p.index for p in s.poses] == [0, 1]
+
+
+@pytest.mark.e2e
+def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path):
+    cfg = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
+                       plan={"poses": 50}, sampling={"samples": 20, "settle_s": 0.1},
+                       mock={"clock": "real"})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg, transport="pty") as mp:
+        data = yaml.safe_load(cfg.read_text())
+        data["robot"]["port"] = endpoints_kwargs(mp.endpoints)["robot_port"]
+        data["tracker"]["port"] = mp.endpoints["tracker"]
+        run_cfg = tmp_path / "run.yaml"
+        run_cfg.write_text(yaml.safe_dump(data))
+        proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg),
+                                 "-o", str(out)], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            if out.exists() and out.read_bytes().count(b"\n") >= 3:  # header + 2 poses
+                break
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr[-1000:]
+    assert "stopped early (resumable)" in stdout and "--resume" in stdout
+    s = read_session(out)
+    assert not s.torn_tail and 2 <= len(s.poses) < 50
+    assert [p.index for p in s.poses] == list(range(len(s.poses)))
