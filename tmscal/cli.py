@@ -62,6 +62,15 @@ def _write_atomic(path: Path, text: str) -> None:
         raise
 
 
+def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
+    """Call a report plotting function; a missing matplotlib is one clear error."""
+    from .errors import CalibrationError
+    try:
+        fn(*args, **kwargs)
+    except ImportError:
+        raise CalibrationError("--plot needs matplotlib: pip install 'tmscal[plot]'") from None
+
+
 def _json_default(o: Any) -> Any:
     if isinstance(o, np.ndarray):
         return o.tolist()
@@ -173,7 +182,6 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
           as_json: bool, output: Path | None, plot: Path | None) -> None:
     """Solve a session for X, Y, Z and report the errors (seed 000's metrics)."""
-    from .errors import CalibrationError
     from .report.evaluate import pose_residuals, solve_session
     from .report.text import calibration_yaml, format_result, plot_residuals
     from .session import read_session, sha256_of
@@ -185,12 +193,8 @@ def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
     if output is not None:
         _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
     if plot is not None:
-        try:
-            plot_residuals(pose_residuals(session, cal), res["n_solve"], str(plot),
-                           f"{session_file.name}: {res['method']} per-pose errors")
-        except ImportError:
-            raise CalibrationError("--plot needs matplotlib: pip install 'tmscal[plot]'") \
-                from None
+        _plot(plot_residuals, pose_residuals(session, cal), res["n_solve"], str(plot),
+              f"{session_file.name}: {res['method']} per-pose errors")
     if as_json:
         _print_json(res)
     else:
@@ -236,12 +240,8 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
         res = study_session(session, ms, n_max=n_max, orthonormal=orthonormal,
                             progress=bar.update)
     if plot is not None:
-        try:
-            plot_study(res, str(plot), title=f"{session_file.name}: hold-out error on "
-                                             f"{res['n_test']} poses")
-        except ImportError:
-            raise CalibrationError("--plot needs matplotlib: pip install 'tmscal[plot]'") \
-                from None
+        _plot(plot_study, res, str(plot),
+              title=f"{session_file.name}: hold-out error on {res['n_test']} poses")
     if as_json:
         _print_json(res)
     else:
