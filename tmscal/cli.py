@@ -397,7 +397,7 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
         target = matrix_from_denso_p(vals)
         rb.envelope = envelope_for(cfg, here)
         rb.envelope.check_pose(target, "--move-to target")
-        v = speed or cfg.robot.speed_mm_s if cfg.robot else speed
+        v = speed if speed is not None else rb.speed_mm_s
         if not yes and not click.confirm(f"move the flange to {_pose_line(target)} at "
                                          f"{v} mm/s?", default=False):
             click.echo("not moved")

@@ -57,20 +57,22 @@ class AcquireResult:
     new_poses: int
 
 
-def plan_from_header(header: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
-    """Regenerate a session's plan (n, 4, 4) mm from its header's "plan" entry."""
+def plan_from_header(header: dict[str, Any], poses: int | None = None
+                     ) -> tuple[np.ndarray, dict[str, Any]]:
+    """Regenerate a session's plan (n, 4, 4) mm from its header's "plan" entry; ``poses``
+    changes its length (pose i is the same whatever the length)."""
     p = header.get("plan")
     if not isinstance(p, dict):
         raise ConfigError("the session header has no 'plan' (was it made by tmscal acquire?); "
                           "it cannot be resumed")
+    p = dict(p) if poses is None else dict(p, poses=poses)
     try:
-        p0 = np.asarray(p["p0"], dtype=float)
-        poses = make_plan(p["kind"], p0, int(p["poses"]), int(p["seed"]),
-                          float(p["radius_mm"]), float(p["rotation_deg"]))
+        plan = make_plan(p["kind"], np.asarray(p["p0"], dtype=float), int(p["poses"]),
+                         int(p["seed"]), float(p["radius_mm"]), float(p["rotation_deg"]))
     except (KeyError, TypeError, ValueError) as e:
         raise ConfigError(f"the session header's 'plan' is incomplete or invalid ({e})") \
             from None
-    return poses, p
+    return plan, p
 
 
 class _Devices:
@@ -150,30 +152,26 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
     try:
         if resume:
             writer = SessionWriter.resume(out)
-            plan, pinfo = plan_from_header(writer.session.header)
-            if poses is not None and poses != len(plan):
-                pinfo = dict(pinfo, poses=poses)
-                plan = make_plan(pinfo["kind"], np.asarray(pinfo["p0"]), poses,
-                                 int(pinfo["seed"]), float(pinfo["radius_mm"]),
-                                 float(pinfo["rotation_deg"]))
-            p0 = np.asarray(pinfo["p0"], dtype=float)
-            envelope = envelope_for(cfg, p0)
+            # a run extended by --poses earlier keeps its length unless told otherwise
+            last = max((r.index for r in writer.session.poses), default=-1)
+            n0 = writer.session.header.get("plan", {}).get("poses", 0)
+            plan, pinfo = plan_from_header(writer.session.header,
+                                           poses or (last + 1 if last + 1 > n0 else None))
+            envelope = envelope_for(cfg, np.asarray(pinfo["p0"], dtype=float))
             check_plan(plan, envelope)
             dev.open(envelope)
         else:
             if out.exists():
                 raise SessionError(f"{out}: already exists; use --resume to continue it, or "
                                    "choose another file")
-            dev.open(envelope_for(cfg, None))
+            dev.open(envelope_for(cfg, None))  # speed caps only, until P0 is known
             assert dev.robot is not None
             p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
                   else np.asarray(cfg.plan.start, dtype=float))
-            n = poses or cfg.plan.poses
-            pinfo = {"kind": cfg.plan.kind, "poses": n, "seed": cfg.plan.seed,
-                     "radius_mm": cfg.plan.radius_mm, "rotation_deg": cfg.plan.rotation_deg,
-                     "p0": p0.tolist()}
-            plan = make_plan(cfg.plan.kind, p0, n, cfg.plan.seed, cfg.plan.radius_mm,
-                             cfg.plan.rotation_deg)
+            pinfo = {"kind": cfg.plan.kind, "poses": poses or cfg.plan.poses,
+                     "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
+                     "rotation_deg": cfg.plan.rotation_deg, "p0": p0.tolist()}
+            plan, _ = plan_from_header({"plan": pinfo})
             envelope = envelope_for(cfg, p0)
             check_plan(plan, envelope)
             dev.robot.envelope = envelope
