@@ -300,3 +300,21 @@ def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path):
     s = read_session(out)
     assert not s.torn_tail and 2 <= len(s.poses) < 50
     assert [p.index for p in s.poses] == list(range(len(s.poses)))
+
+
+@pytest.mark.e2e
+def test_resume_can_extend_the_plan(tmp_path):
+    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
+                            plan={"poses": 6}, sampling={"samples": 3})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        assert acquire(cfg, out, **kw).recorded == 6
+        res = acquire(cfg, out, resume=True, poses=9, **kw)
+        assert (res.new_poses, res.recorded, res.total) == (3, 9, 9)
+        again = acquire(cfg, out, resume=True, **kw)  # nothing left; the length stays 9
+        assert (again.new_poses, again.recorded, again.total) == (0, 9, 9)
+    s = read_session(out)
+    plan = make_plan("eq14", np.asarray(s.header["plan"]["p0"]), 9, 1, 100.0, 10.0)
+    np.testing.assert_allclose(np.stack([p.commanded for p in s.poses]), plan, atol=1e-9)
