@@ -98,10 +98,15 @@ def main(verbose: int) -> None:
 
     \b
     Typical use:
-      tmscal demo                         the whole job on the built-in mock rig
-      tmscal simulate -o sim.jsonl        a simulated session (seed 000's protocol)
-      tmscal solve sim.jsonl              QR36 calibration with held-out errors
-      tmscal study sim.jsonl --plot f.png seed 000's Tables 1/3 and Figure 3
+      tmscal demo                          the whole job on the built-in mock rig
+      tmscal simulate -o sim.jsonl         a simulated session (seed 000's protocol)
+      tmscal solve sim.jsonl --train 250   QR36 on 250 poses, errors on the rest
+      tmscal study sim.jsonl --plot f.png  seed 000's Tables 1/3 and Figure 3
+    \b
+    At the rig (or against `tmscal mock CONFIG`):
+      tmscal track CONFIG                  live tool poses: are the tools right?
+      tmscal robot CONFIG                  robot identity and flange pose
+      tmscal acquire CONFIG -o s.jsonl     record a session (--dry-run first)
     """
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
