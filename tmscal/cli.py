@@ -261,6 +261,11 @@ def _default_demo_config() -> Path:
     return Path(__file__).resolve().parent.parent / "configs" / "mock-ur-polaris.yaml"
 
 
+def _matrix_text(T: np.ndarray) -> str:
+    from .report.text import format_matrix
+    return format_matrix(T)
+
+
 def _pose_line(T: np.ndarray) -> str:
     from .geometry import denso_p_from_matrix
     p = denso_p_from_matrix(T)
@@ -389,7 +394,7 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
         click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
         here = rb.flange_pose()
         click.echo("flange (base ← flange): " + _pose_line(here))
-        click.echo(format_matrix_text(here))
+        click.echo(_matrix_text(here))
         if move_to is None:
             return
         try:
@@ -409,11 +414,6 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
             return
         rb.move_to(target, v)
         click.echo("arrived: " + _pose_line(rb.flange_pose()))
-
-
-def format_matrix_text(T: np.ndarray) -> str:
-    from .report.text import format_matrix
-    return format_matrix(T)
 
 
 @main.command()
@@ -599,7 +599,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
         for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
                         ("Z", "base_from_tracker")):
             click.echo(f"  {k} = {name}")
-            click.echo(format_matrix_text(np.asarray(getattr(truth, k))))
+            click.echo(_matrix_text(np.asarray(getattr(truth, k))))
     finally:
         if tmp is not None:
             tmp.cleanup()

@@ -140,6 +140,7 @@ class RigConfig:
 
     @property
     def bodies(self) -> list[str]:
+        """The tracker tool names of the config (e.g. ["marker", "probe"])."""
         return list(self.tracker.tools) if self.tracker else []
 
 

@@ -74,6 +74,7 @@ class PoseRecord:
     skipped: str | None = None
 
     def to_json(self) -> dict[str, Any]:
+        """The session line for this pose (matrices as nested lists, mm)."""
         d: dict[str, Any] = {"kind": "pose", "index": int(self.index), "time": float(self.time)}
         for k in _MATRIX_KEYS:
             v = getattr(self, k)
@@ -99,6 +100,7 @@ class Session:
 
     @property
     def bodies(self) -> list[str]:
+        """Tracked body names from the header, e.g. ["marker", "probe"]."""
         return list(self.header.get("bodies", []))
 
     @property
@@ -110,6 +112,7 @@ class Session:
         return {k: np.asarray(v, dtype=float) for k, v in t.items() if v is not None}
 
     def indices(self) -> set[int]:
+        """Pose indices recorded so far (skipped poses included)."""
         return {p.index for p in self.poses}
 
     def arrays(self, need_probe: bool = False) -> tuple[np.ndarray, np.ndarray,
@@ -258,6 +261,7 @@ class SessionWriter:
     @classmethod
     def create(cls, path: str | os.PathLike[str], header: Mapping[str, Any],
                overwrite: bool = False) -> SessionWriter:
+        """Start a new session file with ``header`` (validated); fsynced."""
         p = Path(path)
         if p.exists() and not overwrite:
             raise SessionError(f"{p}: already exists; refusing to overwrite "
@@ -275,6 +279,7 @@ class SessionWriter:
 
     @classmethod
     def resume(cls, path: str | os.PathLike[str]) -> SessionWriter:
+        """Reopen an existing session for appending; a torn last line is cut off first."""
         p = Path(path)
         s = read_session(p)
         try:
@@ -308,6 +313,7 @@ class SessionWriter:
         self.session.poses.append(rec)
 
     def close(self) -> None:
+        """Close the file (safe twice)."""
         if self._fh is not None and not self._fh.closed:
             self._fh.close()
 

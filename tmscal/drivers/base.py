@@ -112,6 +112,7 @@ class _Device(ABC):
 
     @property
     def is_open(self) -> bool:
+        """True between a successful open() and close()."""
         return self._opened
 
     def __enter__(self):

@@ -15,6 +15,7 @@ class Clock:
     fast: bool = False
 
     def now(self) -> float:
+        """Monotonic time in seconds."""
         return time.monotonic()
 
     def sleep(self, seconds: float) -> None:

@@ -67,6 +67,7 @@ class MockRig:
         self.devices: list[Any] = []
 
     def close(self) -> None:
+        """Stop every mock device (safe twice)."""
         for d in reversed(self.devices):
             try:
                 d.close()
@@ -81,6 +82,7 @@ class MockRig:
         self.close()
 
     def truth(self) -> dict[str, np.ndarray | None]:
+        """The rig's truth {"X", "Y", "Z"} (4×4 mm)."""
         t = self.rig.truth
         return {"X": t.X, "Y": t.Y, "Z": t.Z}
 

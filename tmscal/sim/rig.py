@@ -69,6 +69,7 @@ class Truth:
         raise KeyError(f"the rig has no body {body!r}")
 
     def as_dict(self) -> dict[str, list]:
+        """{"X", "Z"[, "Y"]} as nested lists (mm), for session headers."""
         d = {"X": self.X.tolist(), "Z": self.Z.tolist()}
         if self.Y is not None:
             d["Y"] = self.Y.tolist()
@@ -127,6 +128,7 @@ class Noise:
 
     @classmethod
     def none(cls) -> Noise:
+        """No noise at all (exact observations)."""
         return cls(0.0, 0.0, 0.0, 0.0, 0.0)
 
 
