@@ -24,9 +24,13 @@ lint: $(STAMP)
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q
 
+# every benchmark script (figures for the README; ~5 minutes)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/speed.py
+	$(BIN)/python benchmarks/tracker.py
+	$(BIN)/python benchmarks/acquisition.py --robot ur
+	$(BIN)/python benchmarks/acquisition.py --robot denso
 
 clean:
 	rm -rf $(VENV) build *.egg-info
