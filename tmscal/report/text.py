@@ -43,9 +43,9 @@ def format_result(res: dict[str, Any], show_matrices: bool = True) -> str:
                 t = res["truth"][k]
                 lines.append(f"  {k:<26}{t['trans_mm']:>16.4f}{t['rot_deg']:>15.4f}")
         if "coil_placement_mm" in res["truth"]:
-            c = res["truth"]["coil_placement_mm"]
-            lines.append(f"  {'coil placement (mean/max)':<26}{c['mean']:>16.4f}"
-                         f"{c['max']:>15.4f} mm")
+            t = res["truth"]
+            lines.append(f"  {'coil placement (mean/max)':<26}{t['coil_placement_mm']:>16.4f}"
+                         f"{t['coil_placement_max_mm']:>15.4f} mm")
     if show_matrices:
         for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
                         ("Z", "base_from_tracker")):
