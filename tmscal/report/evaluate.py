@@ -66,6 +66,7 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         "n_solve": int(train),
         "n_test": int(n - train) if held_out else int(n),
         "errors_on": "held-out" if held_out else "in-sample",
+        "n_skipped": sum(p.skipped is not None for p in session.poses),
         "X": _mat(cal.X), "Y": _mat(cal.Y), "Z": _mat(cal.Z),
         "raw": {"X": _mat(cal.X_raw), "Y": _mat(cal.Y_raw), "Z": _mat(cal.Z_raw)},
         "errors": _flat_errors(errors),

@@ -25,6 +25,9 @@ def format_result(res: dict[str, Any], show_matrices: bool = True) -> str:
     """The ``tmscal solve`` human output: a short aligned table."""
     lines = [f"method {res['method']} ({res['applied']} matrices applied), solved on "
              f"{res['n_solve']} poses, errors {res['errors_on']} on {res['n_test']} poses"]
+    if res.get("n_skipped"):
+        lines.append(f"({res['n_skipped']} poses of the session were skipped at acquisition "
+                     "and are not used)")
     e = res["errors"]
     lines.append("")
     lines.append(f"  {'error':<26}{'translation mm':>16}{'rotation deg':>15}")
