@@ -15,7 +15,7 @@ import argparse
 
 import numpy as np
 
-from tmscal.calib import holdout_errors
+from tmscal.calib import noise_floor
 from tmscal.calib.study import convergence, summarize, threshold_n
 from tmscal.sim import Noise, simulate
 
@@ -35,9 +35,8 @@ def one_run(seed: int, plan: str) -> dict:
     cur = convergence(A, B, C, ("qr24", "qr36"), n_min=5, n_max=250)
     ns = cur["n"]
     te = slice(250, 500)
-    floor = holdout_errors(A[te], {"marker": B[te], "probe": C[te]},
-                           {"marker": truth.X, "probe": truth.Y},
-                           {"marker": truth.Z, "probe": truth.Z})
+    floor = noise_floor(A[te], {"marker": B[te], "probe": C[te]},
+                        {"marker": truth.X, "probe": truth.Y}, truth.Z)
     out = {"floor": floor["e_t_mm"]}
     for m, c in cur["methods"].items():
         s = summarize(c["e_t_mm"], ns)

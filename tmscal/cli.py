@@ -153,7 +153,7 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
                        with_probe=not marker_only, radius_mm=radius, rotation_deg=rotation)
     bodies = ["marker"] if marker_only else ["marker", "probe"]
     header = make_header(
-        bodies, truth={"X": truth.X, "Y": truth.Y, "Z": truth.Z},
+        bodies, truth=truth.as_dict(),
         config={"simulate": {"poses": poses, "plan": plan, "seed": seed, "samples": samples,
                              "fiducial_sigma_mm": fiducial_sigma,
                              "robot_rot_sigma_deg": robot_rot_sigma,
@@ -585,9 +585,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
             if bar is not None:
                 bar.close()
         session = read_session(output)
-        session.header["truth"] = {k: v.tolist() for k, v in
-                                   (("X", truth.X), ("Y", truth.Y), ("Z", truth.Z))
-                                   if v is not None}
+        session.header["truth"] = truth.as_dict()
         _, result = solve_session(session, "qr36")
         if as_json:
             _print_json(result)

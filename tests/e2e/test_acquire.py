@@ -5,7 +5,6 @@ a child process as `tmscal mock`), acquire → solve recovers the sim rig's trut
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -40,6 +39,19 @@ def write_config(tmp_path: Path, base: str, **changes) -> Path:
     p = tmp_path / f"rig-{base}"
     p.write_text(yaml.safe_dump(data))
     return p
+
+
+def point_config(cfg_path: Path, ep: dict[str, str], name: str = "run.yaml") -> Path:
+    """A copy of a config whose tracker port and robot address are the running mocks'."""
+    data = yaml.safe_load(cfg_path.read_text())
+    data["tracker"]["port"] = ep["tracker"]
+    host, _, port = ep["robot"].partition(":")
+    data["robot"]["host"] = host
+    if port:
+        data["robot"]["port"] = int(port)
+    out = cfg_path.parent / name
+    out.write_text(yaml.safe_dump(data))
+    return out
 
 
 def endpoints_kwargs(ep: dict[str, str]) -> dict:
@@ -89,16 +101,10 @@ def test_kill_9_then_resume_loses_and_duplicates_nothing(tmp_path):
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="tcp") as mp:
         kw = endpoints_kwargs(mp.endpoints)
-        cmd = [sys.executable, "-m", "tmscal.cli", "acquire", str(cfg_path), "-o", str(out),
-               "--tracker-port", kw["tracker_port"], "--robot-host", kw["robot_host"]]
-        env = dict(os.environ)
-        # the robot port is ephemeral: pass it through a config override
-        cfg = yaml.safe_load(cfg_path.read_text())
-        cfg["robot"]["port"] = kw["robot_port"]
-        run_cfg = tmp_path / "run.yaml"
-        run_cfg.write_text(yaml.safe_dump(cfg))
-        cmd[4] = str(run_cfg)
-        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        run_cfg = point_config(cfg_path, mp.endpoints)  # the robot port is ephemeral
+        proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg),
+                                 "-o", str(out)], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE)
         deadline = time.monotonic() + 60
         lines = 0
         while time.monotonic() < deadline and proc.poll() is None:
@@ -280,11 +286,7 @@ def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path):
                        mock={"clock": "real"})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg, transport="pty") as mp:
-        data = yaml.safe_load(cfg.read_text())
-        data["robot"]["port"] = endpoints_kwargs(mp.endpoints)["robot_port"]
-        data["tracker"]["port"] = mp.endpoints["tracker"]
-        run_cfg = tmp_path / "run.yaml"
-        run_cfg.write_text(yaml.safe_dump(data))
+        run_cfg = point_config(cfg, mp.endpoints)
         proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg),
                                  "-o", str(out)], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)

@@ -9,7 +9,6 @@ import subprocess
 import sys
 
 import numpy as np
-import yaml
 from click.testing import CliRunner
 
 from tmscal.cli import main
@@ -17,19 +16,7 @@ from tmscal.config import load_config
 from tmscal.mocks.rig import start_mock_rig
 from tmscal.sim import TMS_RIG_P0
 
-from .test_acquire import write_config
-
-
-def _cfg_with_endpoints(tmp_path, base, mr, **changes):
-    """Rewrite a config so that it points at the running mocks."""
-    p = write_config(tmp_path, base, **changes)
-    data = yaml.safe_load(p.read_text())
-    data["tracker"]["port"] = mr.endpoints["tracker"]
-    host, _, port = mr.endpoints["robot"].partition(":")
-    data["robot"].update(host=host, port=int(port))
-    q = tmp_path / "pointed.yaml"
-    q.write_text(yaml.safe_dump(data))
-    return q
+from .test_acquire import point_config, write_config
 
 
 def test_track_robot_dry_run_and_jog(tmp_path):
@@ -37,7 +24,7 @@ def test_track_robot_dry_run_and_jog(tmp_path):
                             mock={"noise": {"fiducial_sigma_mm": 0.0, "robot_rot_sigma_deg": 0.0,
                                             "robot_trans_sigma_mm": 0.0}})
     with start_mock_rig(load_config(base_cfg), tracker_transport="pty") as mr:
-        cfg = _cfg_with_endpoints(tmp_path, "mock-denso-polaris.yaml", mr)
+        cfg = point_config(base_cfg, mr.endpoints, "pointed.yaml")
         r = CliRunner().invoke(main, ["track", str(cfg), "--frames", "3"])
         assert r.exit_code == 0, r.output
         lines = [ln for ln in r.output.splitlines() if ln.startswith("frame")]

@@ -59,7 +59,7 @@ def build_sim_rig(cfg: RigConfig) -> SimRig:
 
 class MockRig:
     """Running mock devices: ``endpoints`` ({"tracker": pty path or socket URL, "robot":
-    host or host:port, ...}), ``rig`` (the SimRig with its truth), ``close()``."""
+    host or host:port, ...}), ``rig`` (the SimRig; its truth is ``rig.truth``), ``close()``."""
 
     def __init__(self, rig: SimRig) -> None:
         self.rig = rig
@@ -80,11 +80,6 @@ class MockRig:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    def truth(self) -> dict[str, np.ndarray | None]:
-        """The rig's truth {"X", "Y", "Z"} (4×4 mm)."""
-        t = self.rig.truth
-        return {"X": t.X, "Y": t.Y, "Z": t.Z}
 
 
 def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
