@@ -19,15 +19,24 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..config import RigConfig
-from ..drivers.base import ConfigError, DeviceError, Robot, RobotFault, SafetyError, Tracker
+from ..drivers.base import (
+    ConfigError,
+    DeviceError,
+    Envelope,
+    Robot,
+    RobotFault,
+    SafetyError,
+    Tracker,
+)
 from ..errors import SessionError, TmscalError
+from ..geometry import check_pose
 from ..session import PoseRecord, SessionWriter, make_header
 from .devices import envelope_for, make_robot, make_tracker
 from .plan import check_plan, make_plan
@@ -35,7 +44,10 @@ from .sample import PoseSample, sample_pose
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AcquisitionStopped", "AcquireResult", "acquire", "plan_from_header"]
+MAX_PLAN_POSES = 100_000
+
+__all__ = ["AcquisitionStopped", "AcquireResult", "acquire", "plan_from_header",
+           "resume_command"]
 
 
 class AcquisitionStopped(TmscalError):
@@ -45,7 +57,8 @@ class AcquisitionStopped(TmscalError):
 @dataclass
 class AcquireResult:
     """What a run did: the session path, poses recorded / skipped / planned, whether it
-    stopped early (Ctrl-C), device faults recovered, and wall time (s)."""
+    stopped early (Ctrl-C), device faults recovered, wall time (s), poses new in this run,
+    and ``notes`` (settings a resumed run took from the session header)."""
 
     path: Path
     recorded: int
@@ -55,23 +68,33 @@ class AcquireResult:
     faults: int
     elapsed_s: float
     new_poses: int
+    notes: list[str] = field(default_factory=list)
 
 
 def plan_from_header(header: dict[str, Any], poses: int | None = None
                      ) -> tuple[np.ndarray, dict[str, Any]]:
     """Regenerate a session's plan (n, 4, 4) mm from its header's "plan" entry; ``poses``
-    changes its length (pose i is the same whatever the length)."""
+    changes its length (pose i is the same whatever the length). A header whose plan is
+    missing or invalid raises SessionError."""
     p = header.get("plan")
     if not isinstance(p, dict):
-        raise ConfigError("the session header has no 'plan' (was it made by tmscal acquire?); "
-                          "it cannot be resumed")
+        raise SessionError("the session header has no 'plan' (was it made by tmscal "
+                           "acquire?); it cannot be resumed")
     p = dict(p) if poses is None else dict(p, poses=poses)
     try:
-        plan = make_plan(p["kind"], np.asarray(p["p0"], dtype=float), int(p["poses"]),
-                         int(p["seed"]), float(p["radius_mm"]), float(p["rotation_deg"]))
-    except (KeyError, TypeError, ValueError) as e:
-        raise ConfigError(f"the session header's 'plan' is incomplete or invalid ({e})") \
+        n, seed = p["poses"], p["seed"]
+        if (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PLAN_POSES
+                or isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+            raise ValueError(f"poses must be 1..{MAX_PLAN_POSES} and seed ≥ 0, got "
+                             f"{n!r}, {seed!r}")
+        p0 = check_pose(p["p0"], "p0")
+        plan = make_plan(p["kind"], p0, n, seed, float(p["radius_mm"]),
+                         float(p["rotation_deg"]))
+    except (KeyError, TypeError, ValueError, OverflowError) as e:
+        raise SessionError(f"the session header's 'plan' is incomplete or invalid ({e})") \
             from None
+    if not np.isfinite(plan).all():
+        raise SessionError("the session header's 'plan' gives non-finite poses")
     return plan, p
 
 
@@ -122,6 +145,147 @@ def _record(i: int, P: np.ndarray, s: PoseSample, t: float) -> PoseRecord:
                       skipped=s.problem)
 
 
+@dataclass
+class _Settings:
+    """The sampling settings of a run: from the config for a new run; on ``--resume`` from
+    the session header unless overridden on the command line (``notes`` says which)."""
+
+    samples: int
+    settle_s: float
+    min_share: float
+    robot_reads: int
+    max_frames_factor: float
+    notes: list[str]
+
+    def to_header(self) -> dict[str, Any]:
+        return {"samples": self.samples, "settle_s": self.settle_s,
+                "min_share": self.min_share, "robot_reads": self.robot_reads}
+
+
+def _settings(cfg: RigConfig, header: dict[str, Any] | None, samples: int | None
+              ) -> _Settings:
+    """Sampling settings: the config's for a new run (``header`` None); the header's on a
+    resume, so that every pose of a session is sampled alike; ``samples`` overrides both."""
+    c = cfg.sampling
+    vals: dict[str, Any] = {"samples": c.samples, "settle_s": c.settle_s,
+                            "min_share": c.min_share, "robot_reads": c.robot_reads}
+    notes: list[str] = []
+    recorded = (header or {}).get("sampling")
+    if isinstance(recorded, dict):
+        for k, v in recorded.items():
+            if k not in vals or isinstance(v, bool) or not isinstance(v, int | float):
+                continue
+            if k in ("samples", "robot_reads") and (not float(v).is_integer() or v < 1):
+                continue
+            if k in ("settle_s", "min_share") and not (0 <= v < float("inf")):
+                continue
+            if v != vals[k]:
+                notes.append(f"sampling.{k} {v:g} as recorded in the session "
+                             f"(the config says {vals[k]:g})")
+            vals[k] = int(v) if k in ("samples", "robot_reads") else float(v)
+    if samples is not None and samples != vals["samples"]:
+        if header is not None:
+            notes.append(f"samples {samples} from the command line (the session was "
+                         f"recorded with {vals['samples']})")
+        vals["samples"] = int(samples)
+    return _Settings(max_frames_factor=c.max_frames_factor, notes=notes, **vals)
+
+
+_POSE_TOL_MM = 1e-6
+
+
+def _check_resume(cfg: RigConfig, session: Any, plan: np.ndarray, pinfo: dict[str, Any]
+                  ) -> None:
+    """Refuse to resume a session into a different rig or plan: the header's devices and
+    plan must match the config, and the header's plan must reproduce every commanded pose
+    already recorded (an edited or foreign header would not). Raises SessionError."""
+    where = f"{session.path}"
+    hint = "resume with the config the session was recorded with, or start a new session"
+    devs = session.header.get("devices")
+    devs = devs if isinstance(devs, dict) else {}
+    for role, sec in (("robot", cfg.robot), ("tracker", cfg.tracker)):
+        rec = devs.get(role)
+        rec_driver = rec.get("driver") if isinstance(rec, dict) else None
+        if sec is not None and rec_driver != sec.driver:
+            raise SessionError(f"{where}: the session was recorded with {role} driver "
+                               f"{rec_driver!r}; {cfg.path} configures {sec.driver!r}; {hint}")
+    bodies = session.bodies
+    if cfg.tracker is not None and bodies != list(cfg.tracker.tools):
+        raise SessionError(f"{where}: the session's bodies {bodies} differ from the config's "
+                           f"tracker.tools {list(cfg.tracker.tools)}; {hint}")
+    want = {"kind": cfg.plan.kind, "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
+            "rotation_deg": cfg.plan.rotation_deg}
+    for k, v in want.items():
+        got = pinfo.get(k)
+        if got != v:
+            raise SessionError(f"{where}: the session's plan.{k} is {got!r}; {cfg.path} says "
+                               f"{v!r}; {hint}")
+    if not isinstance(cfg.plan.start, str):
+        d = float(np.abs(np.asarray(pinfo["p0"], dtype=float)
+                         - np.asarray(cfg.plan.start, dtype=float)).max())
+        if d > _POSE_TOL_MM:
+            raise SessionError(f"{where}: the session's P0 differs from the config's "
+                               f"plan.start (by up to {d:.3g} mm); {hint}")
+    for rec in session.poses:
+        if rec.commanded is None or rec.index >= len(plan):
+            continue
+        d = float(np.abs(rec.commanded - plan[rec.index]).max())
+        if not d <= _POSE_TOL_MM:
+            raise SessionError(
+                f"{where}: pose {rec.index} was commanded to "
+                f"{np.round(rec.commanded[:3, 3], 1).tolist()} mm but the header's plan "
+                f"puts it at {np.round(plan[rec.index][:3, 3], 1).tolist()} mm: the header "
+                "was edited or belongs to another run; refusing to resume")
+
+
+def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
+                     poses: int | None, samples: int | None
+                     ) -> tuple[SessionWriter | None, np.ndarray, dict[str, Any], Envelope,
+                                _Settings]:
+    """Open the devices and work out the plan. A new run takes P0 from the robot (or the
+    config) and writes nothing yet; a resumed run locks the session, regenerates its plan
+    from the header and checks it against the config. Either way every plan pose is checked
+    against the config's envelope before anything moves."""
+    writer: SessionWriter | None = None
+    if resume:
+        writer = SessionWriter.resume(out)
+        header = writer.session.header
+        # a run extended by --poses earlier keeps its length unless told otherwise
+        last = max((r.index for r in writer.session.poses), default=-1)
+        p_hdr = header.get("plan")
+        n0 = p_hdr.get("poses", 0) if isinstance(p_hdr, dict) else 0
+        plan, pinfo = plan_from_header(header, poses or (last + 1 if last + 1 > n0 else None))
+        _check_resume(cfg, writer.session, plan, pinfo)
+        envelope = envelope_for(cfg, np.asarray(pinfo["p0"], dtype=float))
+        check_plan(plan, envelope)
+        dev.open(envelope)
+        settings = _settings(cfg, header, samples)
+    else:
+        if out.exists():
+            raise SessionError(f"{out}: already exists; use --resume to continue it, or "
+                               "choose another file")
+        dev.open(envelope_for(cfg, None))  # speed caps and the box, until P0 is known
+        assert dev.robot is not None
+        p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
+              else np.asarray(cfg.plan.start, dtype=float))
+        pinfo = {"kind": cfg.plan.kind, "poses": poses or cfg.plan.poses,
+                 "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
+                 "rotation_deg": cfg.plan.rotation_deg, "p0": p0.tolist()}
+        plan, _ = plan_from_header({"plan": pinfo})
+        envelope = envelope_for(cfg, p0)
+        check_plan(plan, envelope)
+        dev.robot.envelope = envelope
+        settings = _settings(cfg, None, samples)
+    assert dev.robot is not None
+    here = dev.robot.flange_pose()
+    v = envelope.violations(here)
+    if v:
+        raise SafetyError(f"the robot is at {np.round(here[:3, 3], 1).tolist()} mm, "
+                          f"outside the safety envelope around P0 ({'; '.join(v)}); "
+                          "move it near P0 first. Nothing was moved.")
+    return writer, plan, pinfo, envelope, settings
+
+
 def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
             poses: int | None = None, samples: int | None = None,
             tracker_port: str | None = None, robot_host: str | None = None,
@@ -132,15 +296,16 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
             sleep: Callable[[float], None] = time.sleep) -> AcquireResult:
     """Run (or resume) an acquisition into session file ``output``.
 
-    ``poses``/``samples`` override the config. ``on_start(done, total)`` is called once the
-    plan is known; ``on_pose(done, total, record)`` after each pose is saved. Raises
-    SafetyError (nothing moved), ConfigError, SessionError, or AcquisitionStopped (session
-    intact, resumable; the message says how)."""
+    ``poses``/``samples`` override the config (on a resume, the session header's settings
+    are used unless overridden; ``AcquireResult.notes`` says so). ``on_start(done, total)`` is
+    called once the plan is known; ``on_pose(done, total, record)`` after each pose is saved.
+    ``run.retries`` bounds the reconnects for one fault: the count starts again after a pose
+    succeeds. Raises SafetyError (nothing moved), ConfigError, SessionError, or
+    AcquisitionStopped (session intact, resumable; the message says how)."""
     out = Path(output)
     if cfg.tracker is None or "marker" not in cfg.tracker.tools:
         raise ConfigError(f"{cfg.path}: key 'tracker.tools': name the marker tool 'marker' "
                           "(and the probe 'probe')")
-    n_samples = samples or cfg.sampling.samples
     t_start = time.monotonic()
     dev = _Devices(cfg, tracker_port, robot_host, robot_port)
     writer: SessionWriter | None = None
@@ -148,48 +313,18 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
     new = 0
     stopped = False
     clean = False
-    resume_hint = (f"resume with: tmscal acquire {cfg.path} -o {out} --resume")
+    hint = "resume with: " + resume_command(cfg.path, out, tracker_port, robot_host)
     try:
-        if resume:
-            writer = SessionWriter.resume(out)
-            # a run extended by --poses earlier keeps its length unless told otherwise
-            last = max((r.index for r in writer.session.poses), default=-1)
-            n0 = writer.session.header.get("plan", {}).get("poses", 0)
-            plan, pinfo = plan_from_header(writer.session.header,
-                                           poses or (last + 1 if last + 1 > n0 else None))
-            envelope = envelope_for(cfg, np.asarray(pinfo["p0"], dtype=float))
-            check_plan(plan, envelope)
-            dev.open(envelope)
-        else:
-            if out.exists():
-                raise SessionError(f"{out}: already exists; use --resume to continue it, or "
-                                   "choose another file")
-            dev.open(envelope_for(cfg, None))  # speed caps only, until P0 is known
-            assert dev.robot is not None
-            p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
-                  else np.asarray(cfg.plan.start, dtype=float))
-            pinfo = {"kind": cfg.plan.kind, "poses": poses or cfg.plan.poses,
-                     "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
-                     "rotation_deg": cfg.plan.rotation_deg, "p0": p0.tolist()}
-            plan, _ = plan_from_header({"plan": pinfo})
-            envelope = envelope_for(cfg, p0)
-            check_plan(plan, envelope)
-            dev.robot.envelope = envelope
+        writer, plan, pinfo, envelope, st = _start_or_resume(cfg, out, dev, resume, poses,
+                                                             samples)
+        for note in st.notes:
+            log.warning("resuming %s with %s", out, note)
         assert dev.robot is not None and dev.tracker is not None
-        here = dev.robot.flange_pose()
-        v = envelope.violations(here)
-        if v:
-            raise SafetyError(f"the robot is at {np.round(here[:3, 3], 1).tolist()} mm, "
-                              f"outside the safety envelope around P0 ({'; '.join(v)}); "
-                              "move it near P0 first. Nothing was moved.")
         if writer is None:
             header = make_header(
                 dev.tracker.tools, config=cfg.raw,
                 devices={"robot": dev.robot.identity(), "tracker": dev.tracker.identity()},
-                plan=pinfo,
-                sampling={"samples": n_samples, "settle_s": cfg.sampling.settle_s,
-                          "min_share": cfg.sampling.min_share,
-                          "robot_reads": cfg.sampling.robot_reads})
+                plan=pinfo, sampling=st.to_header())
             writer = SessionWriter.create(out, header)
         done = writer.session.indices()
         t_offset = max((p.time for p in writer.session.poses), default=0.0)
@@ -202,34 +337,12 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
             if should_stop():
                 stopped = True
                 break
-            while True:
-                try:
-                    rec = _one_pose(dev, cfg, i, plan[i], n_samples, sleep,
-                                    t_offset + time.monotonic() - t_start)
-                    break
-                except RobotFault as e:
-                    raise AcquisitionStopped(
-                        f"pose {i}: robot fault: {e}. The session {out} holds "
-                        f"{len(writer.session.poses)} poses; clear the fault at the robot, "
-                        f"then {resume_hint}") from e
-                except DeviceError as e:
-                    faults += 1
-                    if faults > cfg.run.retries:
-                        raise AcquisitionStopped(
-                            f"pose {i}: {e} (after {cfg.run.retries} reconnects). The "
-                            f"session {out} holds {len(writer.session.poses)} poses; "
-                            f"{resume_hint}") from e
-                    log.warning("pose %d: %s; reconnecting (%d of %d)", i, e, faults,
-                                cfg.run.retries)
-                    dev.close(stop_robot=True)
-                    sleep(cfg.run.reconnect_wait_s)
-                    try:
-                        dev.open(envelope)
-                    except DeviceError as e2:
-                        raise AcquisitionStopped(
-                            f"pose {i}: reconnect failed ({e2}) after: {e}. The session "
-                            f"{out} holds {len(writer.session.poses)} poses; {resume_hint}") \
-                            from e2
+            rec, n_faults = _pose_with_reconnect(
+                dev, cfg, envelope, i, plan[i], st, sleep,
+                lambda: t_offset + time.monotonic() - t_start,
+                lambda: (f"The session {out} holds {len(writer.session.poses)} poses; "
+                         f"{hint}"))
+            faults += n_faults
             writer.append(rec)
             new += 1
             if on_pose:
@@ -239,14 +352,59 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
         return AcquireResult(path=out, recorded=sum(p.skipped is None for p in recs),
                              skipped=sum(p.skipped is not None for p in recs), total=total,
                              stopped=stopped, faults=faults,
-                             elapsed_s=time.monotonic() - t_start, new_poses=new)
+                             elapsed_s=time.monotonic() - t_start, new_poses=new,
+                             notes=st.notes)
     finally:
         dev.close(stop_robot=not clean)
         if writer is not None:
             writer.close()
 
 
-def _one_pose(dev: _Devices, cfg: RigConfig, i: int, P: np.ndarray, n_samples: int,
+def resume_command(config: str | Path | None, out: str | Path,
+                   tracker_port: str | None = None, robot_host: str | None = None) -> str:
+    """The command that resumes a run: device overrides are repeated; the plan and the
+    sampling settings need not be, as a resumed run takes them from the session header."""
+    cmd = f"tmscal acquire {config} -o {out} --resume"
+    if tracker_port:
+        cmd += f" --tracker-port {tracker_port}"
+    if robot_host:
+        cmd += f" --robot-host {robot_host}"
+    return cmd
+
+
+def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: int,
+                         P: np.ndarray, st: _Settings, sleep: Callable[[float], None],
+                         now: Callable[[], float], state: Callable[[], str]
+                         ) -> tuple[PoseRecord, int]:
+    """One plan pose, reconnecting after device faults: at most ``run.retries`` reconnects
+    for this pose (the count is per fault, not per run). Returns the record and the number
+    of faults recovered. A robot fault, a failed reconnect or too many faults raise
+    AcquisitionStopped whose message ends with ``state()`` (what the session holds, how to
+    resume)."""
+    faults = 0
+    while True:
+        try:
+            return _one_pose(dev, i, P, st, sleep, now()), faults
+        except RobotFault as e:
+            raise AcquisitionStopped(f"pose {i}: robot fault: {e}. {state()} (clear the "
+                                     "fault at the robot first)") from e
+        except DeviceError as e:
+            faults += 1
+            if faults > cfg.run.retries:
+                raise AcquisitionStopped(f"pose {i}: {e} (after {cfg.run.retries} "
+                                         f"reconnects). {state()}") from e
+            log.warning("pose %d: %s; reconnecting (%d of %d)", i, e, faults,
+                        cfg.run.retries)
+            dev.close(stop_robot=True)
+            sleep(cfg.run.reconnect_wait_s)
+            try:
+                dev.open(envelope)
+            except DeviceError as e2:
+                raise AcquisitionStopped(f"pose {i}: reconnect failed ({e2}) after: {e}. "
+                                         f"{state()}") from e2
+
+
+def _one_pose(dev: _Devices, i: int, P: np.ndarray, st: _Settings,
               sleep: Callable[[float], None], t: float) -> PoseRecord:
     """Move to plan pose i, settle and sample; a pose whose bodies were not seen well enough
     is sampled once more (moving again), then recorded as skipped with the reason."""
@@ -254,9 +412,8 @@ def _one_pose(dev: _Devices, cfg: RigConfig, i: int, P: np.ndarray, n_samples: i
     s: PoseSample | None = None
     for attempt in range(2):
         dev.robot.move_to(P)
-        s = sample_pose(dev.robot, dev.tracker, n_samples, cfg.sampling.settle_s,
-                        cfg.sampling.min_share, cfg.sampling.max_frames_factor, sleep=sleep,
-                        robot_reads=cfg.sampling.robot_reads)
+        s = sample_pose(dev.robot, dev.tracker, st.samples, st.settle_s, st.min_share,
+                        st.max_frames_factor, sleep=sleep, robot_reads=st.robot_reads)
         if s.problem is None:
             break
         log.info("pose %d attempt %d: %s", i, attempt + 1, s.problem)
