@@ -85,7 +85,130 @@ def _print_json(obj: Any) -> None:
     click.echo(json.dumps(obj, default=_json_default))
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+# --- argument types and the one rule for output files -----------------------------------------
+
+class _Finite(click.ParamType):
+    """A finite float (NaN and ±∞ refused) in [lo, hi]; ``lo_open`` makes the lower bound
+    exclusive (e.g. a speed must be > 0)."""
+
+    name = "number"
+
+    def __init__(self, lo: float | None = None, hi: float | None = None,
+                 lo_open: bool = False) -> None:
+        self.lo, self.hi, self.lo_open = lo, hi, lo_open
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        if isinstance(value, float):
+            v = value
+        else:
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"{value!r} is not a number", param, ctx)
+        if not np.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
+            self.fail(f"{v:g} must be {'>' if self.lo_open else '≥'} {self.lo:g}", param, ctx)
+        if self.hi is not None and v > self.hi:
+            self.fail(f"{v:g} must be ≤ {self.hi:g}", param, ctx)
+        return v
+
+
+class _InputFile(click.ParamType):
+    """An existing regular file to read (a directory, FIFO or device is refused at once, so
+    that a command never hangs reading one)."""
+
+    name = "file"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Path:
+        import stat
+
+        path = Path(value)
+        try:
+            mode = path.stat().st_mode
+        except OSError as e:
+            self.fail(f"{path}: {e.strerror or e}", param, ctx)
+        if not stat.S_ISREG(mode):
+            kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                    else "not a regular file")
+            self.fail(f"{path}: is {kind}; expected a file", param, ctx)
+        return path
+
+
+INPUT_FILE = _InputFile()
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_outputs(outputs: dict[str, Path | None], inputs: list[Path], force: bool) -> None:
+    """The one rule for every file a command writes (``-o``, ``--plot``, ``--report``): an
+    existing file is refused unless ``--force``; an input of the command is never written
+    over, even with ``--force``; two outputs may not be the same file. Raises
+    ``click.BadParameter`` naming the option."""
+    seen: dict[Path, str] = {}
+    for opt, out in outputs.items():
+        if out is None:
+            continue
+        for inp in inputs:
+            if _same_file(out, inp) or out.resolve() == inp.resolve():
+                raise click.BadParameter(f"{out} is an input of this command; it is never "
+                                         "written over (choose another file)", param_hint=opt)
+        key = out.resolve()
+        if key in seen:
+            raise click.BadParameter(f"{out} is also the {seen[key]} file", param_hint=opt)
+        seen[key] = opt
+        if out.is_dir():
+            raise click.BadParameter(f"{out} is a directory", param_hint=opt)
+        if out.exists() and not force:
+            raise click.BadParameter(f"{out} already exists; add --force to overwrite it",
+                                     param_hint=opt)
+
+
+def _warn_damage(session: Any) -> None:
+    """Say on stderr what the reader skipped: a torn last line, damaged middle lines."""
+    if session.torn_tail:
+        click.echo(f"warning: {session.path}: torn last line ignored (an interrupted write)",
+                   err=True)
+    damaged = list(getattr(session, "damaged", []) or [])
+    if damaged:
+        shown = "; ".join(f"line {no} ({why})" for no, why in damaged[:3])
+        more = f"; and {len(damaged) - 3} more" if len(damaged) > 3 else ""
+        click.echo(f"warning: {session.path}: {len(damaged)} damaged line(s) skipped: "
+                   f"{shown}{more}", err=True)
+
+
+FORCE_HELP = "Overwrite existing output files (never an input file)."
+STRICT_HELP = ("Refuse a session with a damaged line (default: skip it with a warning naming "
+               "the line).")
+
+
+class _OneLineErrors(click.Group):
+    """The command group: a usage error (bad option, missing argument, bad value) prints one
+    line ``error: …`` naming the option, then exits 2, as tmscal's own errors print one line
+    and exit 1."""
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:  # type: ignore[override]
+        kwargs["standalone_mode"] = False
+        try:
+            rv = super().main(*args, **kwargs)
+        except click.exceptions.Abort:
+            click.echo("aborted", err=True)
+            sys.exit(EXIT_ERROR)
+        except click.ClickException as e:
+            cmd = getattr(getattr(e, "ctx", None), "command_path", None) or "tmscal"
+            click.echo(f"error: {e.format_message()} (see: {cmd} --help)", err=True)
+            sys.exit(e.exit_code)
+        if isinstance(rv, int) and not isinstance(rv, bool):
+            sys.exit(rv)  # click's Exit (e.g. after --help) returns its code here
+        sys.exit(0)
+
+
+@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="tmscal")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
@@ -123,21 +246,22 @@ def main(verbose: int) -> None:
               show_default=True,
               help="eq14: seed 000's experiment plan (±100 mm, ±10° around P0); random: fully "
                    "random robot poses (seed 000's simulation).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
+              help="Random seed (≥ 0).")
 @click.option("--samples", type=click.IntRange(1, 10000), default=1, show_default=True,
               help="Tracker observations averaged per pose.")
-@click.option("--fiducial-sigma", type=click.FloatRange(0), default=0.05, show_default=True,
+@click.option("--fiducial-sigma", type=_Finite(0, 100), default=0.05, show_default=True,
               help="Tracker fiducial noise σ per coordinate, mm.")
-@click.option("--robot-rot-sigma", type=click.FloatRange(0), default=0.05, show_default=True,
+@click.option("--robot-rot-sigma", type=_Finite(0, 90), default=0.05, show_default=True,
               help="Robot rotation noise σ, degrees.")
-@click.option("--robot-trans-sigma", type=click.FloatRange(0), default=0.05,
+@click.option("--robot-trans-sigma", type=_Finite(0, 100), default=0.05,
               show_default=True, help="Robot translation noise σ per axis, mm.")
-@click.option("--radius", type=click.FloatRange(0), default=None,
+@click.option("--radius", type=_Finite(0, 1e5), default=None,
               help="Translation range ±mm per axis (default 100 for eq14, 500 for random).")
-@click.option("--rotation", type=click.FloatRange(0), default=10.0, show_default=True,
+@click.option("--rotation", type=_Finite(0, 180), default=10.0, show_default=True,
               help="eq14 rotation range ±degrees per axis.")
 @click.option("--marker-only", is_flag=True, help="Simulate the marker only (no probe).")
-@click.option("--force", is_flag=True, help="Overwrite an existing output file.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
 @handle_errors
 def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
              fiducial_sigma: float, robot_rot_sigma: float, robot_trans_sigma: float,
@@ -147,6 +271,9 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
     from .sim import Noise
     from .sim import simulate as run_sim
 
+    check_outputs({"--output": output}, [], force)
+    if force and output.exists():
+        output.unlink()
     rng = np.random.default_rng(seed)
     noise = Noise(fiducial_sigma, robot_rot_sigma, robot_trans_sigma)
     truth, d = run_sim(poses, rng, plan=plan, noise=noise, samples=samples,
@@ -169,7 +296,7 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 # --- solve ----------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("session_file", type=click.Path(path_type=Path))
+@click.argument("session_file", type=INPUT_FILE)
 @click.option("--method", type=click.Choice(["qr36", "qr24"]), default="qr36",
               show_default=True, help="qr36: X, Y, Z jointly; qr24: each body on its own.")
 @click.option("--train", type=int, default=None,
@@ -183,17 +310,20 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
               help="Write the calibration YAML here.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write a PNG of the per-pose errors (spot outlier poses).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
-          as_json: bool, output: Path | None, plot: Path | None) -> None:
+          as_json: bool, output: Path | None, plot: Path | None, force: bool,
+          strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (seed 000's metrics)."""
     from .report.evaluate import pose_residuals, solve_session
     from .report.text import calibration_yaml, format_result, plot_residuals
     from .session import read_session, sha256_of
 
-    session = read_session(session_file)
-    if session.torn_tail:
-        click.echo(f"warning: {session_file}: torn last line ignored", err=True)
+    check_outputs({"--output": output, "--plot": plot}, [session_file], force)
+    session = read_session(session_file, strict=strict)
+    _warn_damage(session)
     cal, res = solve_session(session, method=method, train=train, orthonormal=orthonormal)
     if output is not None:
         _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
@@ -212,7 +342,7 @@ def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
 # --- study ----------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("session_file", type=click.Path(path_type=Path))
+@click.argument("session_file", type=INPUT_FILE)
 @click.option("--methods", default="qr24,qr36", show_default=True,
               help="Comma-separated methods to compare.")
 @click.option("--n-max", type=click.IntRange(5), default=250, show_default=True,
@@ -221,9 +351,11 @@ def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write seed 000's Figure 3 (error against n) as a PNG.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_json: bool,
-          plot: Path | None) -> None:
+          plot: Path | None, force: bool, strict: bool) -> None:
     """Convergence study: seed 000's Tables 1 and 3 and Figure 3 for a session."""
     from tqdm import tqdm
 
@@ -238,7 +370,9 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
     if not ms or bad:
         raise CalibrationError(f"--methods: unknown method {bad[0] if bad else '(none)'}; "
                                f"known: {', '.join(METHODS)}")
-    session = read_session(session_file)
+    check_outputs({"--plot": plot}, [session_file], force)
+    session = read_session(session_file, strict=strict)
+    _warn_damage(session)
     total = len(ms) * max(0, n_max - 4)
     with tqdm(total=total, desc="solving", unit="solve", disable=None, file=sys.stderr,
               leave=False) as bar:
@@ -298,7 +432,7 @@ class _StopFlag:
 
 
 @main.command()
-@click.argument("config", type=click.Path(path_type=Path))
+@click.argument("config", type=INPUT_FILE)
 @click.option("--transport", type=click.Choice(["config", "pty", "tcp"]), default="config",
               show_default=True,
               help="Tracker transport: config = TCP on the config's socket:// port (else a "
@@ -332,7 +466,7 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
 
 
 @main.command()
-@click.argument("config", type=click.Path(path_type=Path))
+@click.argument("config", type=INPUT_FILE)
 @click.option("--port", "port", default=None,
               help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
 @click.option("--frames", type=click.IntRange(1), default=None,
@@ -372,13 +506,14 @@ def track(config: Path, port: str | None, frames: int | None) -> None:
 
 
 @main.command()
-@click.argument("config", type=click.Path(path_type=Path))
+@click.argument("config", type=INPUT_FILE)
 @click.option("--host", default=None, help="Robot address (overrides the config).")
 @click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,RX,RY,RZ",
               help="Jog the flange to this pose (mm, deg; R = Rz·Ry·Rx, base frame) after a "
                    "confirmation. The config's safety envelope applies around the current "
                    "pose.")
-@click.option("--speed", type=float, default=None, help="Jog speed, mm/s.")
+@click.option("--speed", type=_Finite(0, lo_open=True), default=None,
+              help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
 @handle_errors
 def robot(config: Path, host: str | None, move_to: str | None, speed: float | None,
@@ -417,7 +552,7 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
 
 
 @main.command()
-@click.argument("config", type=click.Path(path_type=Path))
+@click.argument("config", type=INPUT_FILE)
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Session file (JSON Lines) to write or, with --resume, to continue.")
 @click.option("--resume", is_flag=True,
@@ -446,6 +581,9 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     from .acquisition.run import acquire as run_acquire
     from .config import load_config
 
+    if _same_file(output, config):  # an existing session is the run's to resume, never this
+        raise click.BadParameter(f"{output} is the config file; it is never written over",
+                                 param_hint="--output")
     cfg = load_config(config)
     if dry_run:
         _dry_run(cfg, poses, samples, robot_host)
@@ -453,6 +591,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     stop = _StopFlag()
     stop.install()
     bar: Any = None
+    skipped = [0]
 
     def on_start(done: int, total: int) -> None:
         nonlocal bar
@@ -466,7 +605,9 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             if sp:
                 post[b] = f"{sp['trans_mm']:.3f}mm/{sp['rot_deg']:.3f}°"
         if rec.skipped:
-            post["skipped"] = rec.index
+            skipped[0] += 1
+        if skipped[0]:
+            post["skipped"] = str(skipped[0])
         bar.set_postfix(post, refresh=False)
         bar.update(1)
 
@@ -482,18 +623,23 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     finally:
         if bar is not None:
             bar.close()
-    _acquire_summary(res, config, output)
+    _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
 
 
-def _acquire_summary(res: Any, config: Path, output: Path) -> None:
+def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | None = None,
+                     robot_host: str | None = None) -> None:
+    from .acquisition.run import resume_command
+
     state = "stopped early (resumable)" if res.stopped else "complete"
+    for note in res.notes:
+        click.echo(f"resumed with {note}")
     click.echo(f"session {output}: {state}; {res.recorded} poses recorded, {res.skipped} "
                f"skipped, of {res.total} planned; {res.new_poses} new in "
                f"{res.elapsed_s:.1f} s; device faults recovered: {res.faults}")
     if res.stopped:
-        click.echo(f"resume with: tmscal acquire {config} -o {output} --resume")
+        click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
     click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")
 
 
@@ -530,7 +676,7 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 
 
 @main.command()
-@click.option("--config", "config", type=click.Path(path_type=Path), default=None,
+@click.option("--config", "config", type=INPUT_FILE, default=None,
               help="Mock rig config (default: configs/mock-ur-polaris.yaml).")
 @click.option("--poses", type=click.IntRange(3), default=None, help="Override plan.poses.")
 @click.option("--samples", type=click.IntRange(1), default=None,
@@ -543,9 +689,10 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
                    "trackers) or a pty (as a serial port).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the solve result (with the mock rig's truth) as one JSON object.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
 @handle_errors
 def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
-         transport: str, as_json: bool) -> None:
+         transport: str, as_json: bool, force: bool) -> None:
     """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth."""
     from tqdm import tqdm
@@ -558,6 +705,9 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
     from .session import read_session
 
     cfg_path = config or _default_demo_config()
+    check_outputs({"--output": output}, [cfg_path], force)
+    if output is not None and force and output.exists():
+        output.unlink()
     cfg = load_config(cfg_path)
     truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
     tmp = None

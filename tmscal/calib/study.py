@@ -39,15 +39,20 @@ def convergence(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
     out: dict[str, Any] = {"n": ns, "n_test": int(N - n_max), "methods": {}}
     for m in methods:
         rows: list[dict[str, float]] = []
+        last_error: CalibrationError | None = None
         for n in ns:
             try:
                 cal = solve(A[:n], B[:n], None if C is None else C[:n], method=m,
                             orthonormal=orthonormal)
                 rows.append(_flatten(cal.errors(At, Bt, Ct)))
-            except CalibrationError:
+            except CalibrationError as e:
                 rows.append({})
+                last_error = e
             if progress is not None:
                 progress(1)
+        if not any(rows):
+            raise CalibrationError(f"{m}: no training size from {n_min} to {n_max} gave a "
+                                   f"solution ({last_error})")
         keys = sorted({k for r in rows for k in r})
         curves = {k: [r.get(k, float("nan")) for r in rows] for k in keys}
         out["methods"][m] = curves
