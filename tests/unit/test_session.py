@@ -1,4 +1,5 @@
 import json
+import re
 
 import numpy as np
 import pytest
@@ -80,6 +81,27 @@ def test_malformed_lines_name_line_and_field(tmp_path, mutate, match):
     mutate(lines)
     p.write_text("\n".join(lines) + "\n")
     with pytest.raises(SessionError, match=match):
+        read_session(p, strict=True)
+    # by default a damaged pose line is skipped, named, and the other poses are kept
+    no = int(re.search(r"line (\d+)", match).group(1))
+    if no == 1:  # a damaged header is always an error
+        with pytest.raises(SessionError, match=match):
+            read_session(p)
+        return
+    s = read_session(p)
+    assert [d[0] for d in s.damaged] == [no]
+    assert len(s.poses) == 4 and s.torn_tail is False
+    assert s.damage_summary().startswith(f"1 damaged line skipped: line {no} (")
+
+
+def test_damaged_header_is_always_an_error(tmp_path):
+    _, d = _sim()
+    p = write_session(tmp_path / "s.jsonl", make_header(["marker", "probe"]),
+                      records_from_arrays(d["A"], d["marker"], d["probe"]))
+    lines = p.read_text().splitlines()
+    lines[0] = lines[0][:-3]
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(SessionError, match=r"line 1: not valid JSON"):
         read_session(p)
 
 
