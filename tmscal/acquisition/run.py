@@ -192,6 +192,35 @@ def _settings(cfg: RigConfig, header: dict[str, Any] | None, samples: int | None
 
 
 _POSE_TOL_MM = 1e-6
+#: on --resume the flange must be this close (mm) to P0 or to the path from the last recorded
+#: pose to the next one: where an interrupted run left it
+RESUME_TOLERANCE_MM = 50.0
+
+
+def _distance_to_segment(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance (mm) from point x to the segment a–b (3-vectors, mm)."""
+    ab = b - a
+    den = float(ab @ ab)
+    u = 0.0 if den == 0 else float(np.clip((x - a) @ ab / den, 0.0, 1.0))
+    return float(np.linalg.norm(x - (a + u * ab)))
+
+
+def _check_robot_where_run_stopped(here: np.ndarray, plan: np.ndarray, p0: np.ndarray,
+                                   done: set[int], path: Any) -> None:
+    """On resume, the flange (base_from_flange, mm) must be near P0, or near the straight
+    path from the last recorded pose to the next planned one, as an interrupted run leaves
+    it; otherwise the header's P0 is not this rig's (or the arm was moved): SessionError."""
+    x = here[:3, 3]
+    last = max((i for i in done if i < len(plan)), default=-1)
+    a = p0[:3, 3] if last < 0 else plan[last][:3, 3]
+    b = plan[min(last + 1, len(plan) - 1)][:3, 3]
+    d = min(float(np.linalg.norm(x - p0[:3, 3])), _distance_to_segment(x, a, b))
+    if not d <= RESUME_TOLERANCE_MM:
+        raise SessionError(
+            f"{path}: the flange is at {np.round(x, 1).tolist()} mm, {d:.1f} mm from both the "
+            f"session's P0 {np.round(p0[:3, 3], 1).tolist()} mm and where the run stopped "
+            f"(tolerance {RESUME_TOLERANCE_MM:g} mm): the session belongs to another set-up, "
+            "or the arm was moved; move it back near P0 to resume. Nothing was moved.")
 
 
 def _check_resume(cfg: RigConfig, session: Any, plan: np.ndarray, pinfo: dict[str, Any]
@@ -278,6 +307,9 @@ def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
         settings = _settings(cfg, None, samples)
     assert dev.robot is not None
     here = dev.robot.flange_pose()
+    if writer is not None:
+        _check_robot_where_run_stopped(here, plan, np.asarray(pinfo["p0"], dtype=float),
+                                       writer.session.indices(), out)
     v = envelope.violations(here)
     if v:
         raise SafetyError(f"the robot is at {np.round(here[:3, 3], 1).tolist()} mm, "

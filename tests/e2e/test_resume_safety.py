@@ -1,0 +1,121 @@
+"""End to end, on the DENSO and Polaris mocks (real sockets and ptys): a resumed run trusts
+nothing in the session header that the config and the recorded poses do not confirm; it keeps
+the header's sampling settings; and ``run.retries`` bounds the reconnects for one fault, not
+for the whole run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tmscal.acquisition.run import acquire
+from tmscal.config import load_config
+from tmscal.errors import SessionError
+from tmscal.mocks.rig import start_mock_rig
+from tmscal.session import read_session
+
+from .test_acquire import endpoints_kwargs, write_config
+
+
+def _edit_header(path: Path, edit) -> None:
+    lines = path.read_bytes().split(b"\n")
+    h = json.loads(lines[0])
+    edit(h)
+    lines[0] = json.dumps(h).encode()
+    path.write_bytes(b"\n".join(lines))
+
+
+def _denso_cfg(tmp_path: Path, **changes) -> Path:
+    changes.setdefault("robot", {"port": 0})
+    changes.setdefault("plan", {"poses": 12})
+    changes.setdefault("sampling", {"samples": 4})
+    return write_config(tmp_path, "mock-denso-polaris.yaml", **changes)
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("recorded", [0, 4])
+def test_resume_refuses_a_header_whose_p0_was_moved(tmp_path, recorded):
+    """P0 shifted by (+120, 0, +90) mm in the header: with poses recorded, the header's plan
+    no longer reproduces their commanded poses; with none, the arm is not where a run around
+    that P0 would have left it. Either way nothing moves."""
+    cfg = load_config(_denso_cfg(tmp_path))
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        done: list[int] = []
+        res = acquire(cfg, out, should_stop=lambda: len(done) >= recorded,
+                      on_pose=lambda d, t, r: done.append(r.index), **kw)
+        assert res.stopped and res.recorded == recorded
+
+        def shift(h):
+            h["plan"]["p0"][0][3] += 120.0
+            h["plan"]["p0"][2][3] += 90.0
+
+        _edit_header(out, shift)
+        moves = mr.devices[-1].stats["moves"]
+        before = out.read_bytes()
+        with pytest.raises(SessionError, match="header|P0"):
+            acquire(cfg, out, resume=True, **kw)
+        assert mr.devices[-1].stats["moves"] == moves
+    assert out.read_bytes() == before
+
+
+@pytest.mark.e2e
+def test_resume_refuses_another_robot_or_plan(tmp_path):
+    cfg = load_config(_denso_cfg(tmp_path))
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        acquire(cfg, out, should_stop=lambda: True, **kw)  # header only
+        _edit_header(out, lambda h: h["devices"]["robot"].update(driver="ur"))
+        with pytest.raises(SessionError, match="robot driver 'ur'.*'denso'"):
+            acquire(cfg, out, resume=True, **kw)
+        _edit_header(out, lambda h: h["devices"]["robot"].update(driver="denso"))
+        other = load_config(_denso_cfg(tmp_path, plan={"poses": 12, "seed": 99}))
+        with pytest.raises(SessionError, match=r"plan\.seed"):
+            acquire(other, out, resume=True, **kw)
+        assert mr.devices[-1].stats["moves"] == 0
+
+
+@pytest.mark.e2e
+def test_resume_keeps_the_sessions_sampling_settings(tmp_path):
+    """A run started with --samples 3 resumes with 3 samples per pose although the config
+    says 4, and says so; an explicit override on resume wins."""
+    cfg = load_config(_denso_cfg(tmp_path, plan={"poses": 6}))
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        done: list[int] = []
+        acquire(cfg, out, samples=3, should_stop=lambda: len(done) >= 2,
+                on_pose=lambda d, t, r: done.append(r.index), **kw)
+        res = acquire(cfg, out, resume=True, should_stop=lambda: len(done) >= 4,
+                      on_pose=lambda d, t, r: done.append(r.index), **kw)
+        assert any("samples 3" in n and "config says 4" in n for n in res.notes), res.notes
+        res = acquire(cfg, out, resume=True, samples=5, **kw)
+        assert any("samples 5" in n for n in res.notes), res.notes
+    s = read_session(out)
+    assert s.header["sampling"]["samples"] == 3
+    assert [p.samples["B"] for p in sorted(s.poses, key=lambda p: p.index)] == \
+        [3, 3, 3, 3, 5, 5]
+
+
+@pytest.mark.e2e
+def test_retries_count_per_fault_not_per_run(tmp_path):
+    """Isolated link drops, more of them than ``run.retries``, each recovered by one
+    reconnect: the run completes (it stopped at the (retries+1)-th drop before)."""
+    cfg = load_config(_denso_cfg(
+        tmp_path, plan={"poses": 24}, run={"retries": 1, "reconnect_wait_s": 0.0},
+        mock={"robot": {"faults": {"drop_rate": 0.02, "seed": 3}}}))
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        res = acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
+        dropped = mr.devices[-1].stats["dropped"]
+    assert dropped >= 2, "the fault seed must give more drops than run.retries"
+    assert res.faults == dropped and res.recorded == 24
+    s = read_session(out)
+    assert sorted(p.index for p in s.poses) == list(range(24))
+    got = np.stack([p.commanded for p in sorted(s.poses, key=lambda p: p.index)])
+    assert np.isfinite(got).all()
