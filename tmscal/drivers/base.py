@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
@@ -152,14 +153,53 @@ class Tracker(_Device):
     def _read(self) -> TrackerFrame: ...
 
 
-@dataclass(frozen=True)
+def _limit(name: str, value: Any) -> float | None:
+    """A positive finite limit (or None); anything else raises ValueError naming it."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ValueError(f"Envelope.{name}: expected a number, got {value!r}")
+    try:
+        v = float(value)
+    except OverflowError:
+        raise ValueError(f"Envelope.{name}: {value!r} is too large") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"Envelope.{name}: expected a finite number > 0, got {value!r}")
+    return v
+
+
+def _points(name: str, value: Any, k: int | None = None) -> np.ndarray:
+    """A (k, 3) finite float array, read-only; anything else raises ValueError naming it."""
+    try:
+        a = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise ValueError(f"Envelope.{name}: expected [x, y, z] points in mm ({e})") from None
+    if a.ndim == 1 and k == 1:
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] != 3 or (k is not None and a.shape[0] != k):
+        raise ValueError(f"Envelope.{name}: expected [x, y, z] points in mm, got shape "
+                         f"{a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"Envelope.{name}: every coordinate must be finite, got "
+                         f"{a.tolist()}")
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
 class Envelope:
     """Safety envelope for robot motion. Poses are base_from_flange, mm.
 
-    ``center`` (P0) with ``max_offset_mm`` (distance of the flange origin from P0) and
-    ``max_rotation_deg`` (rotation away from P0); ``box_min_mm``/``box_max_mm`` a workspace
-    box in the robot base frame; ``max_speed_mm_s`` and ``max_accel_mm_s2`` caps.
-    Any limit left None is not checked.
+    ``center`` (P0, base_from_flange 4×4 mm) with ``max_offset_mm`` (distance of the flange
+    origin from P0) and ``max_rotation_deg`` (rotation angle away from P0, degrees);
+    ``box_min_mm``/``box_max_mm`` a workspace box in the robot base frame (mm) that the flange
+    origin and every one of ``tool_points_mm`` (k×3 points in the FLANGE frame, mm: the coil
+    centre, points on the coil's rim) must stay inside; ``max_speed_mm_s`` and
+    ``max_accel_mm_s2`` caps.
+
+    Any limit left None is not checked. Limits that are given are validated when the envelope
+    is built (ValueError for NaN, ±inf, non-positive caps, a box with min ≥ max on an axis),
+    and ``violations`` fails closed: a comparison that cannot be made counts as a violation.
     """
 
     center: np.ndarray | None = None
@@ -169,32 +209,66 @@ class Envelope:
     box_max_mm: tuple[float, float, float] | None = None
     max_speed_mm_s: float | None = None
     max_accel_mm_s2: float | None = None
+    tool_points_mm: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        for name in ("max_offset_mm", "max_rotation_deg", "max_speed_mm_s", "max_accel_mm_s2"):
+            put(self, name, _limit(name, getattr(self, name)))
+        if self.center is not None:
+            c = np.array(self.center, dtype=np.float64)
+            if c.shape != (4, 4) or not np.isfinite(c).all():
+                raise ValueError(f"Envelope.center: expected a finite 4×4 pose (mm), got shape "
+                                 f"{c.shape}")
+            c.setflags(write=False)
+            put(self, "center", c)
+        if (self.box_min_mm is None) != (self.box_max_mm is None):
+            raise ValueError("Envelope: give both box_min_mm and box_max_mm, or neither")
+        if self.box_min_mm is not None:
+            lo = _points("box_min_mm", self.box_min_mm, 1)[0]
+            hi = _points("box_max_mm", self.box_max_mm, 1)[0]
+            if not (lo < hi).all():
+                raise ValueError(f"Envelope: box_min_mm {lo.tolist()} must be below box_max_mm "
+                                 f"{hi.tolist()} on every axis")
+            put(self, "box_min_mm", tuple(float(x) for x in lo))
+            put(self, "box_max_mm", tuple(float(x) for x in hi))
+        if self.tool_points_mm is not None:
+            put(self, "tool_points_mm", _points("tool_points_mm", self.tool_points_mm))
 
     def violations(self, pose: np.ndarray) -> list[str]:
-        """Every limit this base_from_flange pose (mm) breaks, as readable strings."""
+        """Every limit this base_from_flange pose (mm) breaks, as readable strings. A pose that
+        is not a finite rigid 4×4 is one violation; a NaN comparison is a violation."""
+        from ..geometry import angle_between, check_pose
+
+        try:
+            p = check_pose(pose, "pose")
+        except (ValueError, TypeError) as e:
+            return [f"pose is not a finite rigid 4×4 matrix ({e})"]
         out: list[str] = []
-        p = np.asarray(pose, dtype=np.float64)
-        if p.shape != (4, 4) or not np.isfinite(p).all():
-            return [f"pose is not a finite 4×4 matrix (shape {p.shape})"]
         t = p[:3, 3]
         if self.center is not None:
-            c = np.asarray(self.center, dtype=np.float64)
+            c = self.center
             if self.max_offset_mm is not None:
                 d = float(np.linalg.norm(t - c[:3, 3]))
-                if d > self.max_offset_mm + 1e-9:
+                if not d <= self.max_offset_mm + 1e-9:
                     out.append(f"offset from P0 {d:.1f} mm > max_offset_mm {self.max_offset_mm}")
             if self.max_rotation_deg is not None:
-                R = c[:3, :3].T @ p[:3, :3]
-                ang = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
-                if ang > self.max_rotation_deg + 1e-9:
+                ang = float(np.degrees(angle_between(c, p)))
+                if not ang <= self.max_rotation_deg + 1e-9:
                     out.append(f"rotation from P0 {ang:.2f}° > max_rotation_deg "
                                f"{self.max_rotation_deg}")
         if self.box_min_mm is not None and self.box_max_mm is not None:
-            lo = np.asarray(self.box_min_mm, dtype=float)
-            hi = np.asarray(self.box_max_mm, dtype=float)
-            if np.any(t < lo - 1e-9) or np.any(t > hi + 1e-9):
-                out.append(f"position {np.round(t, 1).tolist()} mm outside workspace box "
-                           f"{lo.tolist()}..{hi.tolist()}")
+            lo = np.asarray(self.box_min_mm, dtype=np.float64)
+            hi = np.asarray(self.box_max_mm, dtype=np.float64)
+            pts = [("flange origin", t)]
+            if self.tool_points_mm is not None:
+                base = self.tool_points_mm @ p[:3, :3].T + t
+                pts += [(f"tool point {i} {np.round(q, 1).tolist()} (flange frame)", b)
+                        for i, (q, b) in enumerate(zip(self.tool_points_mm, base))]
+            for what, b in pts:
+                if not (np.all(b >= lo - 1e-9) and np.all(b <= hi + 1e-9)):
+                    out.append(f"{what} at {np.round(b, 1).tolist()} mm outside workspace box "
+                               f"{lo.tolist()}..{hi.tolist()}")
         return out
 
     def check_pose(self, pose: np.ndarray, what: str = "pose") -> None:
@@ -204,15 +278,30 @@ class Envelope:
             raise SafetyError(f"{what} refused: " + "; ".join(v))
 
     def check_speed(self, speed_mm_s: float, accel_mm_s2: float | None = None) -> None:
-        """Raise ``SafetyError`` if a speed (mm/s) or acceleration (mm/s²) exceeds its cap."""
-        if not (speed_mm_s > 0 and np.isfinite(speed_mm_s)):
-            raise SafetyError(f"speed {speed_mm_s} mm/s is not a positive finite number")
-        if self.max_speed_mm_s is not None and speed_mm_s > self.max_speed_mm_s + 1e-9:
+        """Raise ``SafetyError`` if a speed (mm/s) or acceleration (mm/s²) is not a positive
+        finite number or exceeds its cap."""
+        if not _positive_finite(speed_mm_s):
+            raise SafetyError(f"speed {speed_mm_s!r} mm/s is not a positive finite number")
+        if self.max_speed_mm_s is not None and not speed_mm_s <= self.max_speed_mm_s + 1e-9:
             raise SafetyError(f"speed {speed_mm_s} mm/s > max_speed_mm_s {self.max_speed_mm_s}")
-        if accel_mm_s2 is not None and self.max_accel_mm_s2 is not None \
-                and accel_mm_s2 > self.max_accel_mm_s2 + 1e-9:
+        if accel_mm_s2 is None:
+            return
+        if not _positive_finite(accel_mm_s2):
+            raise SafetyError(f"acceleration {accel_mm_s2!r} mm/s² is not a positive finite "
+                              "number")
+        if self.max_accel_mm_s2 is not None and not accel_mm_s2 <= self.max_accel_mm_s2 + 1e-9:
             raise SafetyError(f"acceleration {accel_mm_s2} mm/s² > max_accel_mm_s2 "
                               f"{self.max_accel_mm_s2}")
+
+
+def _positive_finite(x: Any) -> bool:
+    """True for a real number (not bool) that is finite and > 0."""
+    if isinstance(x, bool) or not isinstance(x, int | float | np.integer | np.floating):
+        return False
+    try:
+        return math.isfinite(float(x)) and float(x) > 0
+    except OverflowError:
+        return False
 
 
 class Robot(_Device):
@@ -240,10 +329,14 @@ class Robot(_Device):
         controller does not report the motion finished."""
         if not self._opened:
             raise DeviceError(f"{self.name}: move_to() on a robot that is not open")
-        speed = self.speed_mm_s if speed_mm_s is None else float(speed_mm_s)
+        speed = self.speed_mm_s if speed_mm_s is None else speed_mm_s
         self.envelope.check_speed(speed, self.accel_mm_s2)
-        self.envelope.check_pose(pose, "move_to target")
-        self._move_to(np.asarray(pose, dtype=np.float64), speed)
+        try:  # the very array that was checked is the one sent (a private copy)
+            target = np.array(pose, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise SafetyError(f"move_to target refused: not a 4×4 pose ({e})") from None
+        self.envelope.check_pose(target, "move_to target")
+        self._move_to(target, float(speed))
 
     def stop(self) -> None:
         """Halt any motion (best effort; never raises on a closed robot)."""
