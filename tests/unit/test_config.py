@@ -30,6 +30,12 @@ def test_templates_name_the_rom_to_fix(name):
         load_config(CONFIGS / name)
 
 
+#: a complete safety section (a config that drives a robot must set every limit)
+SAFE = {"max_offset_mm": 200, "max_rotation_deg": 20, "workspace_min_mm": [100, -400, 0],
+        "workspace_max_mm": [900, 400, 800], "max_speed_mm_s": 250, "max_accel_mm_s2": 1500,
+        "tool_points_mm": [[0, 0, 100]]}
+
+
 def _write(tmp_path, data):
     p = tmp_path / "c.yaml"
     p.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
@@ -39,7 +45,7 @@ def _write(tmp_path, data):
 @pytest.mark.parametrize("data, key", [
     ({"robot": {"driver": "kuka"}}, "robot.driver"),
     ({"robot": {"driver": "ur", "speed_mm_s": "fast"}}, "robot.speed_mm_s"),
-    ({"robot": {"driver": "ur", "speed_mm_s": 900}}, "robot.speed_mm_s"),
+    ({"robot": {"driver": "ur", "speed_mm_s": 900}, "safety": SAFE}, "robot.speed_mm_s"),
     ({"robot": {"driver": "ur", "sped": 1}}, "robot.sped"),
     ({"plan": {"kind": "grid"}}, "plan.kind"),
     ({"plan": {"poses": 0}}, "plan.poses"),

@@ -1,6 +1,9 @@
 """Drivers from a rig config, through the one driver registry (drivers/base.DRIVERS).
 
-Poses and speeds pass through unchanged: mm, mm/s, base_from_flange.
+Poses and speeds pass through unchanged: mm, mm/s, base_from_flange. Every robot built here
+carries the config's safety envelope (caps, workspace box, tool points) and the config's
+speed and acceleration; ``robot.options`` / ``tracker.options`` can never override an
+argument that has its own key or carries a limit.
 """
 
 from __future__ import annotations
@@ -9,38 +12,91 @@ from typing import Any
 
 import numpy as np
 
-from ..config import RigConfig, construct
-from ..drivers.base import ConfigError, Envelope, Robot, Tracker, driver_class
+from ..config import (
+    ROBOT_RESERVED_OPTIONS,
+    TRACKER_RESERVED_OPTIONS,
+    RigConfig,
+    construct,
+    tracker_port_problem,
+)
+from ..drivers.base import ConfigError, Envelope, Robot, SafetyError, Tracker, driver_class
 
 __all__ = ["envelope_for", "make_robot", "make_tracker"]
 
 
 def envelope_for(cfg: RigConfig, p0: np.ndarray | None) -> Envelope:
-    """The safety envelope of the config around P0 (base_from_flange, mm)."""
+    """The safety envelope of the config around P0 (base_from_flange, mm); with ``p0`` None
+    the offset and rotation limits are not checked (P0 unknown), everything else is."""
     s = cfg.safety
     return Envelope(center=p0, max_offset_mm=s.max_offset_mm,
                     max_rotation_deg=s.max_rotation_deg, box_min_mm=s.workspace_min_mm,
                     box_max_mm=s.workspace_max_mm, max_speed_mm_s=s.max_speed_mm_s,
-                    max_accel_mm_s2=s.max_accel_mm_s2)
+                    max_accel_mm_s2=s.max_accel_mm_s2, tool_points_mm=s.tool_points_mm)
+
+
+def _looser(env: Envelope, cfg_env: Envelope) -> str | None:
+    """The first limit of the config's envelope that ``env`` does not enforce at least as
+    strictly, or None."""
+    for k in ("max_offset_mm", "max_rotation_deg", "max_speed_mm_s", "max_accel_mm_s2"):
+        mine, theirs = getattr(env, k), getattr(cfg_env, k)
+        if theirs is not None and (mine is None or not mine <= theirs):
+            if k in ("max_offset_mm", "max_rotation_deg") and env.center is None:
+                continue  # not checked until P0 is known, in either envelope
+            return k
+    if cfg_env.box_min_mm is not None:
+        if env.box_min_mm is None or env.box_max_mm is None or cfg_env.box_max_mm is None:
+            return "workspace box"
+        if not (np.all(np.asarray(env.box_min_mm) >= cfg_env.box_min_mm)
+                and np.all(np.asarray(env.box_max_mm) <= cfg_env.box_max_mm)):
+            return "workspace box"
+    if cfg_env.tool_points_mm is not None and (
+            env.tool_points_mm is None
+            or not np.array_equal(env.tool_points_mm, cfg_env.tool_points_mm)):
+        return "tool_points_mm"
+    return None
 
 
 def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
                host: str | None = None, port: int | None = None) -> Robot:
-    """The configured robot driver (not yet opened). ``host``/``port`` override the config."""
+    """The configured robot driver (not yet opened). ``host``/``port`` override the config.
+
+    ``envelope`` defaults to the config's (``envelope_for(cfg, None)``: caps and box, no P0
+    yet); one that is given must be at least as strict as the config's, else SafetyError.
+    ``robot.options`` naming envelope, speed_mm_s, accel_mm_s2, host or port raise
+    ConfigError (the config parser refuses them first)."""
     if cfg.robot is None:
         raise ConfigError(f"{cfg.path}: key 'robot': this command needs a robot section")
     r = cfg.robot
+    for k in r.options:
+        if k in ROBOT_RESERVED_OPTIONS:
+            raise ConfigError(f"{cfg.path}: key 'robot.options.{k}': '{k}' cannot be set "
+                              "through options")
+    cfg_env = envelope_for(cfg, None)
+    if envelope is None:
+        envelope = cfg_env
+    else:
+        weak = _looser(envelope, cfg_env)
+        if weak is not None:
+            raise SafetyError(f"{cfg.path}: the robot's envelope is looser than the config's "
+                              f"safety section ({weak}); nothing was opened")
     cls = driver_class(r.driver)
-    kw: dict[str, Any] = dict(host=host or r.host, envelope=envelope,
-                              speed_mm_s=r.speed_mm_s, accel_mm_s2=r.accel_mm_s2)
+    kw: dict[str, Any] = dict(r.options)
+    # the safety and motion arguments come last: nothing in options can override them
+    kw.update(host=host or r.host, envelope=envelope, speed_mm_s=r.speed_mm_s,
+              accel_mm_s2=r.accel_mm_s2)
     if r.driver == "denso":
         kw["port"] = port or r.port or 5007
-    kw.update(r.options)
-    return construct(cls, f"{cfg.path}: key 'robot.options'", **kw)
+    robot = construct(cls, f"{cfg.path}: key 'robot.options'", **kw)
+    if (robot.envelope is not envelope or robot.speed_mm_s != r.speed_mm_s
+            or robot.accel_mm_s2 != r.accel_mm_s2):
+        raise SafetyError(f"{cfg.path}: driver {r.driver!r} did not take the config's envelope, "
+                          "speed and acceleration; nothing was opened")
+    return robot
 
 
 def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
-    """The configured tracker driver (not yet opened). ``port`` overrides the config's."""
+    """The configured tracker driver (not yet opened). ``port`` overrides the config's; it
+    must be a device path or socket://host:port like ``tracker.port``."""
     if cfg.tracker is None:
         raise ConfigError(f"{cfg.path}: key 'tracker': this command needs a tracker section")
     t = cfg.tracker
@@ -48,8 +104,14 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
     if not p:
         raise ConfigError(f"{cfg.path}: key 'tracker.port': no port given (a device such as "
                           "/dev/ttyUSB0, a pty path, or socket://host:port)")
+    problem = tracker_port_problem(p)
+    if problem:
+        raise ConfigError(f"{cfg.path}: key 'tracker.port': {p!r}: {problem}")
+    for k in t.options:
+        if k in TRACKER_RESERVED_OPTIONS:
+            raise ConfigError(f"{cfg.path}: key 'tracker.options.{k}': '{k}' cannot be set "
+                              f"through options; set tracker.{k} instead")
     cls = driver_class(t.driver)
-    kw: dict[str, Any] = dict(port=p, tools=t.tools, baud=t.baud,
-                              frame_rate_hz=t.frame_rate_hz, reply=t.reply)
-    kw.update(t.options)
+    kw: dict[str, Any] = dict(t.options)
+    kw.update(port=p, tools=t.tools, baud=t.baud, frame_rate_hz=t.frame_rate_hz, reply=t.reply)
     return construct(cls, f"{cfg.path}: key 'tracker.options'", **kw)

@@ -12,6 +12,8 @@ Every generator takes an explicit ``numpy.random.Generator``; nothing here does 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..drivers.base import Envelope, SafetyError
@@ -79,13 +81,19 @@ def check_plan(poses: np.ndarray, envelope: Envelope) -> None:
 
 
 def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s: float,
-                 samples: int, frame_rate_hz: float, start: np.ndarray | None = None
-                 ) -> dict[str, float]:
+                 samples: int, frame_rate_hz: float, start: np.ndarray | None = None,
+                 envelope: Envelope | None = None) -> dict[str, Any]:
     """Extent of a plan and an estimate of its duration (for ``--dry-run``).
 
     Offsets are flange positions relative to P0 (mm, base frame), rotations relative to P0
     (deg). Duration = straight-line travel at ``speed_mm_s`` (from ``start``, default P0,
-    through every pose) + settle + samples / frame rate, per pose (s)."""
+    through every pose) + settle + samples / frame rate, per pose (s).
+
+    In the robot base frame (mm): ``box_min_mm``/``box_max_mm`` the envelope's workspace box
+    (None without an envelope or box); ``flange_min_mm``/``flange_max_mm`` the extent of the
+    flange origins over the plan; ``tool_min_mm``/``tool_max_mm`` the extent of the
+    envelope's tool points (flange frame, carried by every pose), or None without them.
+    Lists of 3 floats [x, y, z]."""
     from ..geometry import angle_between
 
     d = poses[:, :3, 3] - p0[:3, 3]
@@ -93,6 +101,17 @@ def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s:
     path = np.concatenate([[(p0 if start is None else start)[:3, 3]], poses[:, :3, 3]])
     travel = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     per_pose = settle_s + samples / frame_rate_hz
+    flange = poses[:, :3, 3]
+    box = envelope is not None and envelope.box_min_mm is not None
+    tools = None
+    if envelope is not None and envelope.tool_points_mm is not None and len(poses):
+        q = np.asarray(envelope.tool_points_mm, dtype=np.float64)
+        tools = (np.einsum("nij,kj->nki", poses[:, :3, :3], q)
+                 + poses[:, None, :3, 3]).reshape(-1, 3)
+
+    def extent(a: np.ndarray | None, f: Any) -> list[float] | None:
+        return None if a is None or not len(a) else [float(x) for x in f(a, axis=0)]
+
     return {
         "poses": int(len(poses)),
         "offset_max_mm": float(np.linalg.norm(d, axis=1).max()) if len(d) else 0.0,
@@ -104,4 +123,10 @@ def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s:
         "motion_s": travel / speed_mm_s,
         "sampling_s": per_pose * len(poses),
         "duration_s": travel / speed_mm_s + per_pose * len(poses),
+        "box_min_mm": [float(x) for x in envelope.box_min_mm] if box else None,
+        "box_max_mm": [float(x) for x in envelope.box_max_mm] if box else None,
+        "flange_min_mm": extent(flange, np.min),
+        "flange_max_mm": extent(flange, np.max),
+        "tool_min_mm": extent(tools, np.min),
+        "tool_max_mm": extent(tools, np.max),
     }

@@ -25,6 +25,7 @@ from typing import Any
 
 import serial
 
+from ...config import tracker_port_problem
 from ...errors import ConfigError, ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
 from ..base import ToolState, Tracker, TrackerFrame
 from . import protocol as p
@@ -104,6 +105,11 @@ class NDITracker(Tracker):
                 roms[tool] = path.read_bytes()
             except OSError as e:
                 raise ConfigError(f"tool {tool!r}: cannot read ROM file {path}: {e}") from e
+        # defence in depth (the config refuses these first): pyserial's other URL handlers
+        # (spy://…?file=, loop://, rfc2217:// …) can open or write files named in the URL
+        problem = tracker_port_problem(self.port)
+        if problem:
+            raise ConfigError(f"ndi: port {self.port!r} refused: {problem}")
         try:
             self._ser = serial.serial_for_url(self.port, baudrate=9600, bytesize=8,
                                               parity="N", stopbits=1, timeout=_READ_SLICE_S,
