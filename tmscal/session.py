@@ -299,12 +299,20 @@ def _line_for(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
 
 
 def _header_line(header: Mapping[str, Any], where: str) -> bytes:
+    """The exact bytes of the header line, validated as the reader will validate it."""
     try:
         h = dict(header)
-        text = _dumps(h)
-    except (TypeError, ValueError, OverflowError, RecursionError) as e:
-        raise SessionError(f"{where}: not storable as JSON ({e})") from None
-    try:
+        for k, v in h.items():  # field by field first, so that the message names the field
+            if k == "truth" and isinstance(v, dict):
+                _check_truth(v)  # NaN in a matrix: say which
+            try:
+                _dumps(v)
+            except (TypeError, ValueError, OverflowError, RecursionError) as e:
+                raise _Bad(f"field '{k}' is not storable as JSON ({e})") from None
+        try:
+            text = _dumps(h)
+        except (TypeError, ValueError, OverflowError, RecursionError) as e:
+            raise _Bad(f"not storable as JSON ({e})") from None
         _check_header(_loads(text))
     except _Bad as e:
         raise SessionError(f"{where}: {e}") from None
