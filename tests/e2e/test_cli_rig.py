@@ -40,6 +40,16 @@ def test_track_robot_dry_run_and_jog(tmp_path):
                                       "--dry-run", "--poses", "50"])
         assert r.exit_code == 0, r.output
         assert "50 poses" in r.output and "every pose inside" in r.output
+        # the box from the config, in the base frame, beside the flange's and tool's extent
+        safety = load_config(cfg).safety
+        box = next(ln for ln in r.output.splitlines() if "workspace box" in ln)
+        for lo, hi in zip(safety.workspace_min_mm, safety.workspace_max_mm):
+            assert f"{lo:.1f}…{hi:.1f}" in box.replace(" ", ""), box
+        tool = next(ln for ln in r.output.splitlines() if "tool points over" in ln)
+        flange = next(ln for ln in r.output.splitlines() if "flange over" in ln)
+        z_tool_min = float(tool.split()[-1].split("…")[0])
+        z_flange_min = float(flange.split()[-1].split("…")[0])
+        assert z_tool_min < z_flange_min - 50  # the coil hangs below the flange
         assert not (tmp_path / "s.jsonl").exists()
         assert mr.devices[-1].stats["moves"] == 0
 
