@@ -45,7 +45,7 @@ from tmscal.drivers.denso.bcap import (
 )
 from tmscal.errors import ProtocolError
 
-# golden vectors from shared/protocols/denso-bcap.md
+# golden vectors from DENSO's b-CAP specification, checked against DENSO's own Python client
 SERVICE_STOP = bytes.fromhex("01 10 00 00 00 02 00 00 00 02 00 00 00 00 00 04")
 HANDLE_7_REPLY = bytes.fromhex(
     "01 1e 00 00 00 03 00 00 00 00 00 00 00 01 00 0a 00 00 00 03 00 01 00 00 00 07 00 00 00 04")

@@ -1,6 +1,6 @@
 """DENSO b-CAP over TCP: packet and VARIANT codec, stream framer, HRESULT table, client.
 
-Wire format (little-endian; see ``shared/protocols/denso-bcap.md``)::
+Wire format (little-endian; DENSO WAVE's b-CAP communication specification)::
 
     SOH 0x01 | u32 total length (SOH..EOT) | u16 serial | u16 reserved |
     i32 function ID (request) or HRESULT (reply) | u16 argument count |
@@ -33,6 +33,7 @@ from __future__ import annotations
 import datetime as _dt
 import decimal
 import logging
+import math
 import socket
 import struct
 import threading
@@ -51,8 +52,19 @@ SOH = 0x01
 EOT = 0x04
 HEADER_SIZE = 15
 MIN_PACKET_SIZE = 16
-#: Largest packet the framer accepts (bytes); anything longer is treated as corrupt framing.
+# Decoder caps. b-CAP itself only bounds a packet by its u32 length field and the argument
+# count by u16; tmscal's limits keep a hostile or corrupt peer from making the decoder spend
+# unbounded time or memory. Real traffic is far below them: requests carry at most 4
+# arguments, replies 0 or 1 value, poses 7 numbers. Exceeding one raises ProtocolError.
+#: Largest packet the framer and ``decode_packet`` accept (bytes, 16 MiB).
 MAX_PACKET_SIZE = 16 * 1024 * 1024
+#: Most arguments one packet may carry (the wire field allows 65,535).
+MAX_ARGUMENTS = 16384
+#: Most elements in one typed array (numbers, BOOL, BSTR; UI1 arrays are bounded by the
+#: packet size alone).
+MAX_ARRAY_ELEMENTS = 1 << 20
+#: Most VARIANTs (arguments, VARIANT-array elements and nested VARIANTs) in one packet.
+MAX_VARIANTS = 1 << 18
 #: Deepest nesting of VARIANT arrays the decoder follows.
 MAX_NESTING = 32
 
@@ -310,90 +322,119 @@ def _bad(msg: str) -> ProtocolError:
                          device="denso")
 
 
-def _need(buf: bytes, pos: int, n: int, what: str) -> None:
-    if pos + n > len(buf):
-        raise _bad(f"truncated {what}: need {n} bytes at offset {pos}, "
-                   f"only {len(buf) - pos} left")
+class _Reader:
+    """Decoding state over one buffer: ``end`` bounds every read (no slicing copies), and
+    ``budget`` counts the VARIANTs still allowed (:data:`MAX_VARIANTS`)."""
 
+    __slots__ = ("buf", "end", "budget")
 
-def _decode_bstr(buf: bytes, pos: int) -> tuple[str, int]:
-    _need(buf, pos, 4, "BSTR length")
-    (n,) = struct.unpack_from("<I", buf, pos)
-    pos += 4
-    _need(buf, pos, n, "BSTR text")
-    if n % 2:
-        raise _bad(f"BSTR byte length {n} is odd (UTF-16LE expected)")
-    return buf[pos:pos + n].decode("utf-16-le", errors="surrogatepass"), pos + n
+    def __init__(self, buf: bytes | memoryview, end: int) -> None:
+        self.buf = buf
+        self.end = end
+        self.budget = MAX_VARIANTS
 
+    def need(self, pos: int, n: int, what: str) -> None:
+        if n < 0 or pos + n > self.end:
+            raise _bad(f"truncated {what}: need {n} bytes at offset {pos}, "
+                       f"only {max(self.end - pos, 0)} left")
 
-def _decode_fixed(vt: int, buf: bytes, pos: int) -> tuple[Any, int]:
-    fmt = _FIXED[vt]
-    size = struct.calcsize(fmt)
-    _need(buf, pos, size, vt_name(vt))
-    (raw,) = struct.unpack_from(fmt, buf, pos)
-    if vt == VT_BOOL:
-        raw = raw != 0
-    elif vt == VT_CY:
-        raw = decimal.Decimal(raw).scaleb(-4)
-    return raw, pos + size
+    @staticmethod
+    def cap(vt: int, count: int) -> None:
+        if count > MAX_ARRAY_ELEMENTS:
+            raise _bad(f"{vt_name(vt)} of {count} elements (max {MAX_ARRAY_ELEMENTS})")
+
+    def bstr(self, pos: int) -> tuple[str, int]:
+        self.need(pos, 4, "BSTR length")
+        (n,) = struct.unpack_from("<I", self.buf, pos)
+        pos += 4
+        self.need(pos, n, "BSTR text")
+        if n % 2:
+            raise _bad(f"BSTR byte length {n} is odd (UTF-16LE expected)")
+        return str(self.buf[pos:pos + n], "utf-16-le", "surrogatepass"), pos + n
+
+    def fixed(self, vt: int, pos: int) -> tuple[Any, int]:
+        fmt = _FIXED[vt]
+        size = struct.calcsize(fmt)
+        self.need(pos, size, vt_name(vt))
+        (raw,) = struct.unpack_from(fmt, self.buf, pos)
+        if vt == VT_BOOL:
+            raw = raw != 0
+        elif vt == VT_CY:
+            raw = decimal.Decimal(raw).scaleb(-4)
+        return raw, pos + size
+
+    def variant(self, pos: int, depth: int) -> tuple[Variant, int]:
+        if depth > MAX_NESTING:
+            raise _bad(f"VARIANT nesting deeper than {MAX_NESTING}")
+        self.budget -= 1
+        if self.budget < 0:
+            raise _bad(f"more than {MAX_VARIANTS} VARIANTs in one packet")
+        self.need(pos, 6, "VARIANT header")
+        vt, count = struct.unpack_from("<HI", self.buf, pos)
+        pos += 6
+        if vt in (VT_EMPTY, VT_NULL):
+            if count > 1:
+                raise _bad(f"{vt_name(vt)} with count {count}")
+            return Variant(vt, None), pos
+        if not vt & VT_ARRAY:
+            if count != 1:
+                raise _bad(f"scalar {vt_name(vt)} with count {count} (expected 1)")
+            if vt == VT_BSTR:
+                s, pos = self.bstr(pos)
+                return Variant(vt, s), pos
+            if vt == VT_VARIANT:
+                inner, pos = self.variant(pos, depth + 1)
+                return Variant(vt, inner), pos
+            if vt in _FIXED:
+                val, pos = self.fixed(vt, pos)
+                return Variant(vt, val), pos
+            raise _bad(f"unsupported VARIANT type {vt_name(vt)} (0x{vt:04X})")
+        evt = vt & ~VT_ARRAY
+        if evt == VT_UI1:  # raw bytes: bounded by the packet size alone
+            self.need(pos, count, "UI1 array")
+            return Variant(vt, bytes(self.buf[pos:pos + count])), pos + count
+        if evt not in _ARRAY_ELEMENTS:
+            raise _bad(f"unsupported array type {vt_name(vt)} (0x{vt:04X})")
+        if evt == VT_VARIANT:
+            if count > self.budget:
+                raise _bad(f"VARIANT array of {count} elements: more than {MAX_VARIANTS} "
+                           "VARIANTs in one packet")
+            self.need(pos, 6 * count, "VARIANT array")  # every element is at least 6 bytes
+            items = []
+            for _ in range(count):
+                e, pos = self.variant(pos, depth + 1)
+                items.append(e)
+            return Variant(vt, items), pos
+        if evt == VT_BSTR:
+            self.need(pos, 4 * count, "BSTR array")  # every element is at least 4 bytes
+            self.cap(vt, count)
+            strs = []
+            for _ in range(count):
+                s, pos = self.bstr(pos)
+                strs.append(s)
+            return Variant(vt, strs), pos
+        code = _FIXED[evt][1]
+        size = struct.calcsize("<" + code)
+        self.need(pos, size * count, f"{vt_name(vt)} of {count} elements")
+        self.cap(vt, count)
+        raw = struct.unpack_from(f"<{count}{code}", self.buf, pos)
+        if evt == VT_BOOL:
+            vals: list[Any] = [r != 0 for r in raw]
+        elif evt == VT_CY:
+            vals = [decimal.Decimal(r).scaleb(-4) for r in raw]
+        else:
+            vals = list(raw)
+        return Variant(vt, vals), pos + size * count
 
 
 def decode_variant(buf: bytes, pos: int = 0, depth: int = 0) -> tuple[Variant, int]:
     """Decode one VARIANT at ``buf[pos:]``; returns (Variant, next offset). Raises
-    ``ProtocolError`` (code E_INVALIDPACKET) for truncated or unsupported data."""
-    if depth > MAX_NESTING:
-        raise _bad(f"VARIANT nesting deeper than {MAX_NESTING}")
-    _need(buf, pos, 6, "VARIANT header")
-    vt, count = struct.unpack_from("<HI", buf, pos)
-    pos += 6
-    if vt in (VT_EMPTY, VT_NULL):
-        if count > 1:
-            raise _bad(f"{vt_name(vt)} with count {count}")
-        return Variant(vt, None), pos
-    if not vt & VT_ARRAY:
-        if count != 1:
-            raise _bad(f"scalar {vt_name(vt)} with count {count} (expected 1)")
-        if vt == VT_BSTR:
-            s, pos = _decode_bstr(buf, pos)
-            return Variant(vt, s), pos
-        if vt == VT_VARIANT:
-            inner, pos = decode_variant(buf, pos, depth + 1)
-            return Variant(vt, inner), pos
-        if vt in _FIXED:
-            val, pos = _decode_fixed(vt, buf, pos)
-            return Variant(vt, val), pos
-        raise _bad(f"unsupported VARIANT type {vt_name(vt)} (0x{vt:04X})")
-    evt = vt & ~VT_ARRAY
-    if evt == VT_UI1:
-        _need(buf, pos, count, "UI1 array")
-        return Variant(vt, bytes(buf[pos:pos + count])), pos + count
-    if evt not in _ARRAY_ELEMENTS:
-        raise _bad(f"unsupported array type {vt_name(vt)} (0x{vt:04X})")
-    if evt == VT_BSTR:
-        _need(buf, pos, 4 * count, "BSTR array")  # every element is at least 4 bytes
-        strs = []
-        for _ in range(count):
-            s, pos = _decode_bstr(buf, pos)
-            strs.append(s)
-        return Variant(vt, strs), pos
-    if evt == VT_VARIANT:
-        _need(buf, pos, 6 * count, "VARIANT array")  # every element is at least 6 bytes
-        items = []
-        for _ in range(count):
-            e, pos = decode_variant(buf, pos, depth + 1)
-            items.append(e)
-        return Variant(vt, items), pos
-    fmt = _FIXED[evt]
-    size = struct.calcsize(fmt)
-    _need(buf, pos, size * count, f"{vt_name(vt)} of {count} elements")
-    raw = struct.unpack_from("<" + fmt[1] * count, buf, pos)
-    if evt == VT_BOOL:
-        vals: list[Any] = [r != 0 for r in raw]
-    elif evt == VT_CY:
-        vals = [decimal.Decimal(r).scaleb(-4) for r in raw]
-    else:
-        vals = list(raw)
-    return Variant(vt, vals), pos + size * count
+    ``ProtocolError`` (code E_INVALIDPACKET) for truncated or unsupported data and beyond the
+    decoder's caps (:data:`MAX_NESTING`, :data:`MAX_ARRAY_ELEMENTS`, :data:`MAX_VARIANTS`)."""
+    r = _Reader(buf, len(buf))
+    if pos < 0:
+        raise _bad(f"negative offset {pos}")
+    return r.variant(pos, depth)
 
 
 # --- functions, HRESULTs -----------------------------------------------------------------------
@@ -536,8 +577,12 @@ def encode_packet(serial: int, code: int, args: Sequence[Any] = (), reserved: in
 def decode_packet(data: bytes) -> Packet:
     """Decode exactly one complete packet. Raises ``ProtocolError`` (code E_INVALIDPACKET)
     naming the fault: wrong SOH or EOT, a length field that disagrees with the bytes,
-    truncated arguments, an argument length that disagrees with its VARIANT, or trailing
-    bytes before EOT."""
+    truncated arguments, an argument length that disagrees with its VARIANT, trailing bytes
+    before EOT, or a packet beyond the decoder's caps (:data:`MAX_PACKET_SIZE`,
+    :data:`MAX_ARGUMENTS`, :data:`MAX_ARRAY_ELEMENTS`, :data:`MAX_VARIANTS`,
+    :data:`MAX_NESTING`). Time and memory are linear in the packet size."""
+    if len(data) > MAX_PACKET_SIZE:
+        raise _bad(f"packet of {len(data)} bytes exceeds the {MAX_PACKET_SIZE}-byte limit")
     data = bytes(data)
     if len(data) < MIN_PACKET_SIZE:
         raise _bad(f"truncated packet: {len(data)} bytes, a packet has at least "
@@ -549,19 +594,22 @@ def decode_packet(data: bytes) -> Packet:
         raise _bad(f"length field {total} disagrees with the {len(data)} bytes received")
     if data[-1] != EOT:
         raise _bad(f"wrong EOT 0x{data[-1]:02X} (expected 0x04)")
+    if argc > MAX_ARGUMENTS:
+        raise _bad(f"{argc} arguments (max {MAX_ARGUMENTS})")
     end = len(data) - 1
-    body = data[:end]
+    reader = _Reader(data, end)
     pos = HEADER_SIZE
     args = []
     for i in range(argc):
         if pos + 4 > end:
             raise _bad(f"truncated packet: argument {i + 1} of {argc} missing")
-        (alen,) = struct.unpack_from("<I", body, pos)
+        (alen,) = struct.unpack_from("<I", data, pos)
         pos += 4
         if pos + alen > end:
             raise _bad(f"argument {i + 1} length {alen} runs past the packet end")
+        reader.end = pos + alen  # the VARIANT must lie within its announced length
         try:
-            v, vend = decode_variant(body[:pos + alen], pos)
+            v, vend = reader.variant(pos, 0)
         except ProtocolError as e:
             raise _bad(f"argument {i + 1} of {argc} (length {alen}): "
                        f"{str(e).removeprefix('b-CAP: ')}") from None
@@ -633,6 +681,35 @@ class PacketFramer:
         """Every complete packet buffered so far (stops at the first ``ProtocolError``)."""
         while (p := self.next_packet()) is not None:
             yield p
+
+
+def finite_numbers(v: Variant | None, what: str, min_len: int, max_len: int) -> list[float]:
+    """The values of a reply that must be an array of ``min_len``..``max_len`` finite numbers:
+    a numeric typed array (I2, I4, I8, R4, R8, UI1–UI8) or a VARIANT array whose elements are
+    numeric scalars. Anything else raises ``ProtocolError`` naming ``what`` and the fault."""
+    def bad(msg: str) -> ProtocolError:
+        return ProtocolError(f"b-CAP {what}: {msg}", code=E_INVALIDPACKET,
+                             text="E_INVALIDPACKET", device="denso")
+
+    if v is None:
+        raise bad("the reply carries no value (expected an array of numbers)")
+    if v.vt == VT_VARIANT | VT_ARRAY:
+        for i, e in enumerate(v.value):
+            if e.vt not in _NUMERIC:
+                raise bad(f"element {i} is {e!r}, not a number")
+        raw = [e.value for e in v.value]
+    elif v.vt & VT_ARRAY and (v.vt & ~VT_ARRAY) in _NUMERIC:
+        raw = list(v.value)
+    else:
+        raise bad(f"expected an array of numbers, got {vt_name(v.vt)}")
+    if not min_len <= len(raw) <= max_len:
+        want = f"{min_len}" if min_len == max_len else f"{min_len} to {max_len}"
+        raise bad(f"{len(raw)} values, expected {want}")
+    vals = [float(x) for x in raw]
+    bad_idx = [i for i, x in enumerate(vals) if not math.isfinite(x)]
+    if bad_idx:
+        raise bad(f"non-finite value {vals[bad_idx[0]]} at index {bad_idx[0]} in {vals}")
+    return vals
 
 
 # --- client ------------------------------------------------------------------------------------
@@ -855,12 +932,18 @@ class BCAPClient:
         self.robot_execute(handle, "ExtSpeed", [float(speed), float(accel), float(decel)])
 
     def cur_pos(self, handle: int) -> list[float]:
-        """CurPos: P-type [x, y, z (mm), rx, ry, rz (deg), fig]."""
-        return [float(x) for x in self.robot_execute(handle, "CurPos", None)]
+        """CurPos: P-type [x, y, z (mm), rx, ry, rz (deg)] plus fig when the controller sends
+        it (6 or 7 finite numbers). A reply that is not an array of numbers (a numeric typed
+        array such as VT_R8|VT_ARRAY, or a VARIANT array of numbers), has another length, or
+        holds NaN/±inf raises ``ProtocolError`` naming CurPos and the fault."""
+        v = self.call(Fn.ROBOT_EXECUTE, Variant(VT_I4, handle), "CurPos", None)
+        return finite_numbers(v, "Robot_Execute CurPos", 6, 7)
 
     def cur_jnt(self, handle: int) -> list[float]:
-        """CurJnt: joint angles in degrees."""
-        return [float(x) for x in self.robot_execute(handle, "CurJnt", None)]
+        """CurJnt: joint angles in degrees (1 to 32 finite numbers; otherwise
+        ``ProtocolError`` as for :meth:`cur_pos`)."""
+        v = self.call(Fn.ROBOT_EXECUTE, Variant(VT_I4, handle), "CurJnt", None)
+        return finite_numbers(v, "Robot_Execute CurJnt", 1, 32)
 
     def robot_move(self, handle: int, comp: int, pose: Any, option: str = "",
                    timeout_s: float | None = None) -> None:
@@ -903,6 +986,8 @@ class BCAPClient:
 __all__ = [
     "BCAPClient", "Packet", "PacketFramer", "Variant", "EMPTY", "Fn", "to_variant",
     "encode_variant", "decode_variant", "encode_packet", "decode_packet", "hresult_name",
-    "function_name", "vt_name", "next_serial", "is_failure", "date_from_datetime",
-    "datetime_from_date", "HRESULT_NAMES", "FUNCTION_NAMES", "VT_NAMES", "DEFAULT_PORT",
+    "function_name", "vt_name", "next_serial", "MAX_PACKET_SIZE", "MAX_ARGUMENTS",
+    "MAX_ARRAY_ELEMENTS", "MAX_VARIANTS", "MAX_NESTING", "is_failure", "date_from_datetime",
+    "datetime_from_date", "finite_numbers", "HRESULT_NAMES", "FUNCTION_NAMES", "VT_NAMES",
+    "DEFAULT_PORT",
 ]
