@@ -2,15 +2,26 @@
 
 Frames and units: poses are base_from_flange 4×4 in mm (the controller's P-type "work"
 coordinates with no tool and work offset selected: x, y, z in mm, rx, ry, rz in degrees,
-converted only through ``tmscal.geometry``); speeds in mm/s.
+converted only through ``tmscal.geometry``); speeds in mm/s, accelerations in mm/s².
 
 Session: Service_Start (``,WDT=<ms>`` if a watchdog is set) → Controller_Connect →
-Controller_GetRobot → TakeArm → Motor on. Moves are blocking ``Robot_Move`` comp 2 (MOVE L)
-with the pose as a VARIANT array ``[[x, y, z, rx, ry, rz, fig], "P", "@P"]`` (fig −1: the
-controller chooses the arm configuration) and the option ``SPEED=<percent>`` where
-percent = speed_mm_s / max_linear_speed_mm_s × 100. Close (best effort): Motor off, GiveArm,
-Robot_Release, Controller_Disconnect, Service_Stop. The controller's ExtSpeed is left as it
-is, so the real speed is SPEED × ExtSpeed (never faster than asked).
+Controller_GetRobot → TakeArm → ExtSpeed → Motor on. Moves are blocking ``Robot_Move``
+comp 2 (MOVE L) with the pose as a VARIANT array ``[[x, y, z, rx, ry, rz, fig], "P", "@P"]``
+(fig −1: the controller chooses the arm configuration) and the option ``SPEED=<percent>``.
+Close (best effort): Motor off, GiveArm, Robot_Release, Controller_Disconnect, Service_Stop.
+
+Speed and acceleration (DENSO's RC8 manuals: the controller scales motion by percentages).
+The real speed is SPEED × ExtSpeed of the arm's maximum, the real acceleration (and
+deceleration) internal ACCEL × external accel. TakeArm (keep 0) resets the internal values to
+100 %, and ``open`` sends ``ExtSpeed [ext_speed_percent, accel %, decel %]`` with
+
+* SPEED % = ``speed_mm_s / max_linear_speed_mm_s × 100`` per move (:func:`speed_option`),
+* accel % = decel % = ``accel_mm_s2 / max_linear_accel_mm_s2 × 100`` (:func:`accel_percent`,
+  the smaller of the configured acceleration and the envelope's cap),
+
+each rounded DOWN to 0.01 %, so the arm is never commanded faster or harder than configured
+as long as ``max_linear_speed_mm_s`` / ``max_linear_accel_mm_s2`` are not below what the arm
+reaches at 100 %. Overestimating them only makes the motion gentler.
 """
 
 from __future__ import annotations
@@ -21,22 +32,58 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import DeviceError
+from ...errors import DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
 from .bcap import DEFAULT_PORT, BCAPClient, to_variant
 
 log = logging.getLogger(__name__)
 
+#: Default ``max_linear_accel_mm_s2``: an assumed upper bound (≈ 2 g) on the linear
+#: acceleration DENSO's 6-axis arms reach at 100 %; deliberately high so that the percentage
+#: derived from it errs on the gentle side. Set the arm's own figure (CHECK at the rig).
+DEFAULT_MAX_LINEAR_ACCEL_MM_S2 = 20000.0
+
+
+def _positive(name: str, value: float) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _percent_down(value: float, full_scale: float) -> float:
+    """``value / full_scale × 100`` rounded DOWN to 0.01 and capped at 100."""
+    return min(math.floor(10000.0 * value / full_scale + 1e-9) / 100.0, 100.0)
+
+
+def _pct_text(pct: float) -> str:
+    return f"{pct:.2f}".rstrip("0").rstrip(".")
+
 
 def speed_option(speed_mm_s: float, max_linear_speed_mm_s: float) -> str:
     """The Robot_Move option ``"SPEED=<percent>"`` for a linear speed in mm/s, percent of
     ``max_linear_speed_mm_s`` rounded DOWN to 0.01 (never faster than asked) and clamped to
-    [0.01, 100]."""
-    pct = min(max(math.floor(10000.0 * speed_mm_s / max_linear_speed_mm_s + 1e-9) / 100.0,
-                  0.01), 100.0)
-    text = f"{pct:.2f}".rstrip("0").rstrip(".")
-    return f"SPEED={text}"
+    [0.01, 100]. Raises ``ValueError`` for a non-finite or non-positive argument."""
+    speed = _positive("speed_mm_s", speed_mm_s)
+    full = _positive("max_linear_speed_mm_s", max_linear_speed_mm_s)
+    pct = max(_percent_down(speed, full), 0.01)
+    return f"SPEED={_pct_text(pct)}"
+
+
+def accel_percent(accel_mm_s2: float, max_linear_accel_mm_s2: float) -> float:
+    """The controller's acceleration percentage for a linear acceleration in mm/s²: percent of
+    ``max_linear_accel_mm_s2`` rounded DOWN to 0.01 and capped at 100, so the arm is never
+    commanded above ``accel_mm_s2``. Raises ``ValueError`` for a non-finite or non-positive
+    argument, or an acceleration below 0.01 % (which no percentage can express without
+    exceeding it)."""
+    accel = _positive("accel_mm_s2", accel_mm_s2)
+    full = _positive("max_linear_accel_mm_s2", max_linear_accel_mm_s2)
+    pct = _percent_down(accel, full)
+    if pct < 0.01:
+        raise ValueError(f"accel_mm_s2 {accel:g} is below 0.01 % of max_linear_accel_mm_s2 "
+                         f"{full:g}: the controller cannot be commanded that gently")
+    return pct
 
 
 class DensoRobot(Robot):
@@ -44,7 +91,11 @@ class DensoRobot(Robot):
 
     ``host``/``port``: the controller (RC8 default port 5007). ``envelope``, ``speed_mm_s``,
     ``accel_mm_s2``: as in :class:`~tmscal.drivers.base.Robot`. ``max_linear_speed_mm_s``:
-    the linear speed (mm/s) that SPEED=100 means on this arm. ``provider``/``machine``: the
+    the linear speed (mm/s) that SPEED=100 means on this arm. ``max_linear_accel_mm_s2``: the
+    linear acceleration (mm/s²) that 100 % acceleration means (default
+    :data:`DEFAULT_MAX_LINEAR_ACCEL_MM_S2`). ``ext_speed_percent``: the speed part of the
+    ExtSpeed sent at open (default 100: the SPEED option alone sets the speed; lower it to slow
+    every move further). ``provider``/``machine``: the
     CAO provider (``"CaoProv.DENSO.VRC9"`` for RC9) and its machine argument.
     ``robot_name``: the robot object ("Arm"). ``timeout_s``: the longest wait for any reply,
     including a move (re-armed by each S_EXECUTING keep-alive). ``watchdog_ms``: WDT for
@@ -56,15 +107,23 @@ class DensoRobot(Robot):
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  envelope: Envelope | None = None, speed_mm_s: float = 100.0,
                  accel_mm_s2: float = 500.0, max_linear_speed_mm_s: float = 1000.0,
+                 max_linear_accel_mm_s2: float = DEFAULT_MAX_LINEAR_ACCEL_MM_S2,
+                 ext_speed_percent: float = 100.0,
                  provider: str = "CaoProv.DENSO.VRC", machine: str = "localhost",
                  robot_name: str = "Arm", timeout_s: float = 30.0,
                  watchdog_ms: int | None = 400, fig: int = -1) -> None:
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
-        if max_linear_speed_mm_s <= 0:
-            raise ValueError(f"max_linear_speed_mm_s must be > 0, got {max_linear_speed_mm_s}")
+        _positive("speed_mm_s", speed_mm_s)
+        self.max_linear_speed_mm_s = _positive("max_linear_speed_mm_s", max_linear_speed_mm_s)
+        self.max_linear_accel_mm_s2 = _positive("max_linear_accel_mm_s2",
+                                                max_linear_accel_mm_s2)
+        accel_percent(accel_mm_s2, self.max_linear_accel_mm_s2)  # refuses bad values now
+        ext = float(ext_speed_percent)
+        if not 0.01 <= ext <= 100.0:  # also refuses NaN
+            raise ValueError(f"ext_speed_percent must be in [0.01, 100], got {ext_speed_percent!r}")
+        self.ext_speed_percent = ext
         self.host = host
         self.port = int(port)
-        self.max_linear_speed_mm_s = float(max_linear_speed_mm_s)
         self.provider = provider
         self.machine = machine
         self.robot_name = robot_name
@@ -95,10 +154,25 @@ class DensoRobot(Robot):
         self._controller_info = self._read_controller_info()
         c.take_arm(self._robot)
         self._arm = True
+        accel = self.accel_percent()
+        c.ext_speed(self._robot, self.ext_speed_percent, accel, accel)
+        log.info("DENSO ExtSpeed %s %%, accel = decel = %s %% of %g mm/s²",
+                 _pct_text(self.ext_speed_percent), _pct_text(accel),
+                 self.max_linear_accel_mm_s2)
         c.motor(self._robot, True)
         self._motor = True
         log.info("DENSO robot %r on %s:%d ready (motor on)", self.robot_name, self.host,
                  self.port)
+
+    def accel_percent(self) -> float:
+        """The acceleration (= deceleration) percentage sent with ExtSpeed: the smaller of
+        ``accel_mm_s2`` and the envelope's ``max_accel_mm_s2`` (mm/s²) as a percentage of
+        ``max_linear_accel_mm_s2``, rounded down (:func:`accel_percent`)."""
+        a = self.accel_mm_s2
+        cap = self.envelope.max_accel_mm_s2
+        if cap is not None and cap < a:
+            a = cap
+        return accel_percent(a, self.max_linear_accel_mm_s2)
 
     def _read_controller_info(self) -> dict[str, Any]:
         """Controller variables that identify it (best effort: missing ones are skipped)."""
@@ -151,13 +225,14 @@ class DensoRobot(Robot):
                 "robot_name": self.robot_name, "controller": dict(self._controller_info)}
 
     def _flange_pose(self) -> np.ndarray:
-        """base_from_flange 4×4 mm from CurPos (P-type)."""
+        """base_from_flange 4×4 mm from CurPos (P-type). A CurPos reply that is not 6 or 7
+        finite numbers raises ``ProtocolError`` (see :meth:`BCAPClient.cur_pos`)."""
         assert self._robot is not None
-        p = self.client.cur_pos(self._robot)
-        if len(p) < 6:
-            raise DeviceError(f"denso: CurPos returned {len(p)} values, expected 7",
-                              device="denso")
-        return matrix_from_denso_p(p[:6])
+        p = self.client.cur_pos(self._robot)  # type, length and finiteness checked there
+        T = matrix_from_denso_p(p[:6])
+        if not np.isfinite(T).all():  # pragma: no cover - finite P-type gives a finite pose
+            raise ProtocolError(f"denso: CurPos {p} gives a non-finite pose", device="denso")
+        return T
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
         """Blocking MOVE L to base_from_flange ``pose`` (4×4 mm) at ``speed_mm_s``."""
@@ -181,4 +256,4 @@ class DensoRobot(Robot):
             log.warning("DENSO Robot_Halt failed: %s", e)
 
 
-__all__ = ["DensoRobot", "speed_option"]
+__all__ = ["DensoRobot", "speed_option", "accel_percent", "DEFAULT_MAX_LINEAR_ACCEL_MM_S2"]
