@@ -4,6 +4,7 @@ client's handling of keep-alives and foreign serials against a scripted server."
 
 from __future__ import annotations
 
+import ipaddress
 import socket
 import threading
 from collections.abc import Callable, Iterator
@@ -35,7 +36,15 @@ from tmscal.drivers.denso.bcap import (
     encode_packet,
 )
 from tmscal.drivers.denso.robot import DensoRobot
-from tmscal.errors import ConnectionLost, DeviceError, DeviceTimeout, RobotFault, SafetyError
+from tmscal.errors import (
+    ConfigError,
+    ConnectionLost,
+    DeviceError,
+    DeviceTimeout,
+    ProtocolError,
+    RobotFault,
+    SafetyError,
+)
 from tmscal.geometry import make_pose, rot_x, rot_y, rot_z
 from tmscal.mocks.clock import FAST, REAL_TIME
 from tmscal.mocks.denso import DensoFaults, DensoMock
@@ -305,9 +314,25 @@ def test_denso_robot_open_fails_cleanly_on_unknown_robot(rig: SimRig, mock: Dens
     assert not robot.is_open
 
 
-def test_mock_refuses_non_loopback(rig: SimRig) -> None:
-    with pytest.raises(ValueError, match="loopback"):
-        DensoMock(rig, host="0.0.0.0")
+@pytest.mark.parametrize("host", ["0.0.0.0", "::", "8.8.8.8", "192.168.0.1"])
+def test_mock_refuses_non_loopback(rig: SimRig, host: str) -> None:
+    with pytest.raises(ConfigError, match="loopback") as ei:
+        DensoMock(rig, host=host)
+    assert repr(host) in str(ei.value)
+
+
+@pytest.mark.parametrize("host", ["localhost", "127.0.0.1", "::1"])
+def test_mock_serves_on_every_loopback_spelling(rig: SimRig, host: str) -> None:
+    try:
+        m = DensoMock(rig, host=host, clock=FAST)
+        endpoint = m.start()
+    except OSError as e:  # pragma: no cover - a host without IPv6 loopback
+        pytest.skip(f"cannot bind {host}: {e}")
+    with m:
+        port = int(endpoint.rpartition(":")[2])
+        assert ipaddress.ip_address(m._listener.getsockname()[0]).is_loopback
+        with BCAPClient(host, port, timeout_s=5.0) as c:
+            c.service_start("")
 
 
 def test_denso_robot_stop_halts_a_blocking_move(rig: SimRig) -> None:
@@ -332,3 +357,66 @@ def test_denso_robot_stop_halts_a_blocking_move(rig: SimRig) -> None:
         assert len(errors) == 1 and isinstance(errors[0], RobotFault)
         assert errors[0].code == 0x80004005  # the mock answers a halted move with E_FAIL
         assert np.allclose(robot.flange_pose(), TMS_RIG_P0)
+
+
+# --- CurPos integrity (issue 8) and acceleration (issue 2) ------------------------------------
+
+@pytest.mark.parametrize("fault, why", [
+    ("nan", "non-finite value nan"), ("inf", "non-finite value inf"),
+    ("short", "5 values, expected 6 to 7"), ("long", "9 values, expected 6 to 7"),
+    ("bstr", "expected an array of numbers, got BSTR"),
+    ("bool_array", "expected an array of numbers, got BOOL|ARRAY"),
+    ("empty", "expected an array of numbers, got EMPTY"),
+    ("nested_bstr", "element 6 is Variant(BSTR"),
+])
+def test_bad_curpos_raises_protocol_error_naming_curpos(rig: SimRig, fault: str,
+                                                         why: str) -> None:
+    with DensoMock(rig, clock=FAST) as m, \
+            DensoRobot(port=port_of(m.start()), watchdog_ms=None) as robot:
+        m.faults.bad_curpos = fault
+        with pytest.raises(ProtocolError) as ei:
+            robot.flange_pose()
+        assert "CurPos" in str(ei.value) and why in str(ei.value)
+        assert ei.value.device == "denso"
+        m.faults.bad_curpos = None  # the link is still usable: the next read is good
+        assert np.allclose(robot.flange_pose(), TMS_RIG_P0, atol=1e-9)
+
+
+def test_curpos_accepts_a_variant_array_of_numbers() -> None:
+    nums = [500.0, 0.0, 400.0, 180.0, 0.0, 0.0]
+    port, t, srv = scripted_server(lambda s: encode_packet(s, S_OK, [Variant(
+        VT_VARIANT | VT_ARRAY, [Variant(VT_R4, x) for x in nums] + [Variant(VT_I4, -1)])]))
+    with srv, BCAPClient("127.0.0.1", port, timeout_s=5.0) as c:
+        assert c.cur_pos(1) == [*nums, -1.0]
+    t.join(5)
+
+
+@pytest.mark.parametrize("accel, cap, max_accel, expected", [
+    (1234.0, 1500.0, 20000.0, 6.17),    # 6.17 % of 20 m/s² = 1234 mm/s²
+    (1200.0, 1500.0, 7000.0, 17.14),    # 17.142… rounded down, never up
+    (1200.0, 900.0, 7000.0, 12.85),     # the envelope's cap is smaller: it wins
+    (5000.0, 9000.0, 3000.0, 100.0),    # more than the arm can: 100 %
+])
+def test_denso_robot_sends_accel_never_above_cap(rig: SimRig, accel: float, cap: float,
+                                                 max_accel: float, expected: float) -> None:
+    env = Envelope(max_accel_mm_s2=cap)
+    with DensoMock(rig, clock=FAST) as m, \
+            DensoRobot(port=port_of(m.start()), envelope=env, accel_mm_s2=accel,
+                       max_linear_accel_mm_s2=max_accel) as robot:
+        assert m.ext_speed_log == [(100.0, expected, expected)]
+        assert (m.ext_speed, m.ext_accel, m.ext_decel) == (100.0, expected, expected)
+        assert m.ext_accel / 100.0 * max_accel <= min(accel, cap) + 1e-9
+        target = TMS_RIG_P0 @ make_pose(t=[10, 0, 0])
+        if accel > cap:  # the envelope refuses the move itself; the arm was capped anyway
+            with pytest.raises(SafetyError):
+                robot.move_to(target, speed_mm_s=50.0)
+        else:
+            robot.move_to(target, speed_mm_s=50.0)
+            assert np.allclose(rig.flange, target)
+
+
+def test_denso_robot_ext_speed_percent_option(rig: SimRig) -> None:
+    with DensoMock(rig, clock=FAST) as m, \
+            DensoRobot(port=port_of(m.start()), accel_mm_s2=500.0,
+                       max_linear_accel_mm_s2=10000.0, ext_speed_percent=25.0):
+        assert m.ext_speed_log == [(25.0, 5.0, 5.0)]

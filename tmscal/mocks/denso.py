@@ -2,12 +2,14 @@
 
 What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
 
-* Service_Start / Service_Stop (``WDT=<ms>`` in the option turns on S_EXECUTING keep-alives),
+* Service_Start / Service_Stop (``WDT=<ms>`` in the option turns on S_EXECUTING keep-alives;
+  0 turns them off, other values outside 10..3,600,000 ms get E_INVALIDARG),
   Controller_Connect / Disconnect / GetRobot / GetRobotNames / GetVariable / Execute
   (``GetErrorDescription``, ``ClearError``), Robot_Execute (TakeArm, GiveArm, Motor, ExtSpeed,
   CurPos, CurJnt), Robot_Move (comp 1 = MOVE P, 2 = MOVE L; pose as text
   ``"@P P(x, y, z, rx, ry, rz, fig)"`` or VARIANT array ``[[x, …, fig], "P", "@P"]``; options
-  ``SPEED=<percent>`` and ``NEXT``), Robot_Halt, Robot_Speed, Robot_GetVariable
+  ``SPEED=<percent>``, ``ACCEL=<percent>``, ``DECEL=<percent>`` and ``NEXT``), Robot_Halt,
+  Robot_Speed, Robot_GetVariable
   (``@CURRENT_POSITION``, ``@CURRENT_ANGLE``), Robot_Release, Variable_GetValue / PutValue /
   Release (controller ``@VERSION``, ``@MODE`` and user variables ``I1``, ``F2``, ``D3``,
   ``S4``, ``P5`` …).
@@ -18,13 +20,18 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
 * Motion takes ``distance / speed`` seconds on the real-time clock (``motion_time_s``
   overrides it), none on the fast clock; ``rig.move_flange(target)`` is called when the
   motion ends. Speed = ``SPEED`` option (percent, default 100) × ExtSpeed (percent) ×
-  ``max_linear_speed_mm_s``. The mock has no kinematics: CurJnt returns zeros, and a halted
+  ``max_linear_speed_mm_s``. ExtSpeed ``[speed, accel, decel]`` (percent; accel and decel
+  default to speed² / 100 as on the RC8) and the ACCEL/DECEL move options are recorded
+  (``ext_accel``, ``ext_decel``, ``ext_speed_log``, ``move_accel``, ``move_decel``) but do
+  not change the timing. Every percentage must be finite and in [0.01, 100] (else
+  E_INVALIDARG). The mock has no kinematics: CurJnt returns zeros, and a halted
   motion leaves the rig where it was (the blocking move then answers E_FAIL).
 * While a motion runs, any request but Robot_Halt gets E_BUSY_PROC (0x809100AA); with NEXT
   the move answers at once but the connection stays busy until the motion ends. With a
   watchdog, a blocking move sends one S_EXECUTING packet per WDT period it lasts.
 * One reply per request, in one ``sendall``, with the request's serial; malformed requests
-  get E_INVALIDPACKET, bad arguments E_INVALIDARG, unknown handles E_HANDLE; the socket is
+  get E_INVALIDPACKET, bad arguments E_INVALIDARG (NaN, ±inf and out-of-range numbers
+  included), unknown handles E_HANDLE, anything the mock cannot handle E_FAIL; the socket is
   never closed mid-request except by the ``drop_at_request`` fault.
 
 Poses: the rig's ``base_from_flange`` 4×4 mm ↔ P-type via ``tmscal.geometry``.
@@ -58,6 +65,7 @@ from ..drivers.denso.bcap import (
     S_EXECUTING,
     S_OK,
     VT_ARRAY,
+    VT_BOOL,
     VT_BSTR,
     VT_EMPTY,
     VT_I2,
@@ -83,11 +91,18 @@ from ..errors import ProtocolError
 from ..geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..sim.rig import SimRig
 from .clock import REAL_TIME, Clock
+from .net import loopback_family
 
 log = logging.getLogger(__name__)
 
 _NUM_VTS = {VT_I2, VT_I4, VT_UI4, VT_R4, VT_R8, VT_UI1, VT_UI2, VT_I8, VT_UI8}
 _POLL_S = 0.05
+#: Watchdog periods (ms) Service_Start accepts (0 = off).
+WDT_MIN_MS, WDT_MAX_MS = 10, 3_600_000
+#: Range of every speed / acceleration percentage (SPEED, ACCEL, DECEL, ExtSpeed).
+PCT_MIN, PCT_MAX = 0.01, 100.0
+#: Values of ``DensoFaults.bad_curpos``.
+BAD_CURPOS = ("nan", "inf", "short", "long", "bstr", "bool_array", "empty", "nested_bstr")
 
 
 @dataclass
@@ -99,6 +114,10 @@ class DensoFaults:
     any move is refused the same way. ``drop_at_request``: at the k-th request the mock
     closes that connection instead of answering; ``drop_rate``: probability per request.
     Random faults draw from ``numpy.random.default_rng(seed)``.
+    ``bad_curpos``: every CurPos (and ``@CURRENT_POSITION``) reply is corrupted the named way:
+    "nan" / "inf" (x is NaN / +inf), "short" (5 values), "long" (9 values), "bstr" (a BSTR),
+    "bool_array" (a BOOL array), "empty" (EMPTY), "nested_bstr" (a VARIANT array with a BSTR
+    in it). None (default): correct replies.
     """
 
     fail_move_at: int | None = None
@@ -107,6 +126,12 @@ class DensoFaults:
     drop_at_request: int | None = None
     drop_rate: float = 0.0
     seed: int = 0
+    bad_curpos: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.bad_curpos is not None and self.bad_curpos not in BAD_CURPOS:
+            raise ValueError(f"bad_curpos must be one of {', '.join(BAD_CURPOS)} or None, got "
+                             f"{self.bad_curpos!r}")
 
 
 class _Reply(Exception):
@@ -152,6 +177,26 @@ def _num(v: Variant, what: str) -> float:
     if v.vt not in _NUM_VTS:
         raise _Reply(E_INVALIDARG, f"{what}: expected a number, got {v!r}")
     return float(v.value)
+
+
+def _pct(x: float, what: str) -> float:
+    """A speed / acceleration percentage: finite and in [PCT_MIN, PCT_MAX]."""
+    if not (math.isfinite(x) and PCT_MIN <= x <= PCT_MAX):
+        raise _Reply(E_INVALIDARG, f"{what} {x!r} outside [{PCT_MIN}, {PCT_MAX}] %")
+    return x
+
+
+def _opt_pct(opts: dict[str, str], keys: tuple[str, ...], what: str,
+             option: str) -> float | None:
+    """The percentage of the first of ``keys`` present in a move option, else None."""
+    for k in keys:
+        if k in opts:
+            try:
+                x = float(opts[k])
+            except ValueError:
+                raise _Reply(E_INVALIDARG, f"bad {what} in option {option!r}") from None
+            return _pct(x, what)
+    return None
 
 
 def _numbers(v: Variant, what: str) -> list[float]:
@@ -227,10 +272,10 @@ class DensoMock:
                  clock: Clock = REAL_TIME, max_linear_speed_mm_s: float = 1000.0,
                  faults: DensoFaults | None = None, motion_time_s: float | None = None,
                  robot_names: tuple[str, ...] = ("Arm",)) -> None:
-        if not (host.startswith("127.") or host == "localhost"):
-            raise ValueError(f"DensoMock binds to loopback only, got host {host!r}")
-        if max_linear_speed_mm_s <= 0:
-            raise ValueError(f"max_linear_speed_mm_s must be > 0, got {max_linear_speed_mm_s}")
+        self._family = loopback_family(host, "DensoMock host")
+        if not (math.isfinite(max_linear_speed_mm_s) and max_linear_speed_mm_s > 0):
+            raise ValueError(f"max_linear_speed_mm_s must be finite and > 0, got "
+                             f"{max_linear_speed_mm_s}")
         self.rig = rig
         self.host = host
         self.port = int(port)
@@ -248,6 +293,12 @@ class DensoMock:
         self._handles = itertools.count(1)
         self.motor_on = False
         self.ext_speed = 100.0
+        self.ext_accel = 100.0
+        self.ext_decel = 100.0
+        #: every accepted ExtSpeed as (speed, accel, decel) percent, oldest first (bounded)
+        self.ext_speed_log: list[tuple[float, float, float]] = []
+        self.move_accel: float | None = None   # ACCEL / DECEL of the last move (percent)
+        self.move_decel: float | None = None
         self.robot_speed = 100.0
         self.fig = -1
         self.variables: dict[str, Any] = {}
@@ -259,7 +310,7 @@ class DensoMock:
         """Bind, listen and serve in daemon threads; returns ``"host:port"``."""
         if self._listener is not None:
             return f"{self.host}:{self.port}"
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        s = socket.socket(self._family, socket.SOCK_STREAM)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.bind((self.host, self.port))
         s.listen(8)
@@ -426,9 +477,15 @@ class DensoMock:
                          hresult_name(r.code), r)
                 self._send(sess, serial, r.code)
                 continue
-            except (ValueError, OverflowError, TypeError) as e:  # a value the mock cannot use
+            except (ValueError, ArithmeticError, TypeError) as e:  # a value it cannot use
                 log.warning("DENSO mock: %s rejected: %s", function_name(pkt.code), e)
                 self._send(sess, serial, E_INVALIDARG)
+                continue
+            except OSError:
+                raise
+            except Exception:  # a mock bug must not end the connection without a reply
+                log.exception("DENSO mock: %s failed", function_name(pkt.code))
+                self._send(sess, serial, E_FAIL)
                 continue
             if result is not _DEFERRED:
                 self._send(sess, serial, S_OK, result)
@@ -467,9 +524,13 @@ class DensoMock:
             opts = _options(_text(a[0], "option"))
             wdt = opts.get("WDT")
             try:
-                sess.wdt_s = int(wdt) / 1000.0 if wdt else None
+                ms = int(wdt) if wdt else 0
             except ValueError:
                 raise _Reply(E_INVALIDARG, f"WDT={wdt!r} is not a number of ms") from None
+            if ms != 0 and not WDT_MIN_MS <= ms <= WDT_MAX_MS:
+                raise _Reply(E_INVALIDARG, f"WDT={ms} ms outside {WDT_MIN_MS}..{WDT_MAX_MS} "
+                                           "(0 = off)")
+            sess.wdt_s = ms / 1000.0 if ms else None
             return None
         if fid == Fn.SERVICE_STOP:
             return None
@@ -528,7 +589,9 @@ class DensoMock:
         if fid == Fn.ROBOT_SPEED:
             self._get(sess, a[0], "robot")
             speed = _num(a[2], "speed")
-            if speed >= 0:
+            if not math.isfinite(speed) or 0 <= speed < PCT_MIN:
+                raise _Reply(E_INVALIDARG, f"Robot_Speed {speed!r} is not a usable percentage")
+            if speed > 0:  # negative: keep the current speed
                 self.robot_speed = min(speed, 100.0)
             return None
         if fid == Fn.ROBOT_RELEASE:
@@ -550,9 +613,31 @@ class DensoMock:
         p = denso_p_from_matrix(self.rig.reported_flange())
         return [float(x) for x in p] + [float(self.fig)]
 
+    def _cur_pos(self) -> Variant:
+        """The CurPos reply: R8 array [x, y, z, rx, ry, rz, fig], or the configured fault."""
+        p = self._p_now()
+        bad = self.faults.bad_curpos
+        if bad is None:
+            return Variant(VT_R8 | VT_ARRAY, p)
+        log.info("DENSO mock: fault: CurPos reply %s", bad)
+        if bad in ("nan", "inf"):
+            return Variant(VT_R8 | VT_ARRAY, [float(bad)] + p[1:])
+        if bad == "short":
+            return Variant(VT_R8 | VT_ARRAY, p[:5])
+        if bad == "long":
+            return Variant(VT_R8 | VT_ARRAY, p + [0.0, 0.0])
+        if bad == "bstr":
+            return Variant(VT_BSTR, "P(" + ", ".join(f"{x:g}" for x in p) + ")")
+        if bad == "bool_array":
+            return Variant(VT_BOOL | VT_ARRAY, [True] * 7)
+        if bad == "empty":
+            return Variant(VT_EMPTY)
+        return Variant(VT_VARIANT | VT_ARRAY,
+                       [Variant(VT_R8, x) for x in p[:6]] + [Variant(VT_BSTR, "-1")])
+
     def _var_value(self, name: str) -> Variant:
         if name == "@CURRENT_POSITION":
-            return Variant(VT_R8 | VT_ARRAY, self._p_now())
+            return self._cur_pos()
         if name == "@CURRENT_ANGLE":
             return Variant(VT_R8 | VT_ARRAY, [0.0] * 8)
         if name == "@VERSION":
@@ -589,12 +674,19 @@ class DensoMock:
             return Variant(VT_EMPTY)
         if c == "extspeed":
             vals = _numbers(param, "ExtSpeed")
-            if not vals or not 0 < vals[0] <= 100:
-                raise _Reply(E_INVALIDARG, f"ExtSpeed {vals} outside (0, 100]")
-            self.ext_speed = vals[0]
+            if not 1 <= len(vals) <= 3:
+                raise _Reply(E_INVALIDARG, f"ExtSpeed needs [speed, accel, decel], got {vals}")
+            speed = _pct(vals[0], "ExtSpeed speed")
+            # omitted accel / decel: speed² / 100, as the RC8 does
+            accel = _pct(vals[1], "ExtSpeed accel") if len(vals) > 1 else max(
+                speed * speed / 100.0, PCT_MIN)
+            decel = _pct(vals[2], "ExtSpeed decel") if len(vals) > 2 else accel
+            with self._lock:
+                self.ext_speed, self.ext_accel, self.ext_decel = speed, accel, decel
+                self.ext_speed_log = [*self.ext_speed_log[-999:], (speed, accel, decel)]
             return Variant(VT_EMPTY)
         if c == "curpos":
-            return Variant(VT_R8 | VT_ARRAY, self._p_now())
+            return self._cur_pos()
         if c == "curjnt":
             return Variant(VT_R8 | VT_ARRAY, [0.0] * 8)
         raise _Reply(E_NOTIMPL, f"Robot_Execute {cmd!r} not implemented by the mock")
@@ -612,14 +704,11 @@ class DensoMock:
                          f"Robot_Move comp {comp} (mock supports 1 = MOVE P, 2 = MOVE L)")
         p = _parse_pose(pose)
         opts = _options(option)
-        pct = self.robot_speed
-        if "SPEED" in opts or "S" in opts:
-            try:
-                pct = float(opts.get("SPEED", opts.get("S", "")))
-            except ValueError:
-                raise _Reply(E_INVALIDARG, f"bad SPEED in option {option!r}") from None
-        if not 0 < pct <= 100:
-            raise _Reply(E_INVALIDARG, f"SPEED={pct} outside (0, 100]")
+        pct = _opt_pct(opts, ("SPEED", "S"), "SPEED", option)
+        if pct is None:
+            pct = _pct(self.robot_speed, "Robot_Speed")
+        accel = _opt_pct(opts, ("ACCEL", "A"), "ACCEL", option)
+        decel = _opt_pct(opts, ("DECEL", "D"), "DECEL", option)
         if not sess.arm:
             raise _Reply(E_ACCESSDENIED, "Robot_Move without TakeArm")
         if not self.motor_on:
@@ -627,8 +716,8 @@ class DensoMock:
         if fail:
             raise _Reply(self.faults.fail_move_hresult, f"fault injected at move {k}")
         target = matrix_from_denso_p(p[:6])
-        if p[6] >= 0:
-            self.fig = int(p[6])
+        if not np.isfinite(target).all():
+            raise _Reply(E_INVALIDARG, f"pose {p} gives a non-finite target")
         speed = self.max_linear_speed_mm_s * pct / 100.0 * self.ext_speed / 100.0
         dist = float(np.linalg.norm(target[:3, 3] - self.rig.reported_flange()[:3, 3]))
         if self.clock.fast:
@@ -636,7 +725,12 @@ class DensoMock:
         elif self.motion_time_s is not None:
             duration = float(self.motion_time_s)
         else:
-            duration = dist / speed
+            duration = dist / speed if speed > 0 else math.inf
+        if not math.isfinite(duration):
+            raise _Reply(E_INVALIDARG, f"a move of {dist:g} mm at {speed:g} mm/s never ends")
+        self.move_accel, self.move_decel = accel, decel
+        if p[6] >= 0:
+            self.fig = int(p[6])
         if duration <= 0:
             self.rig.move_flange(target)
             return None

@@ -1,6 +1,6 @@
 """A protocol-level NDI Polaris (Spectra / Vicra) mock serving a :class:`~tmscal.sim.rig.SimRig`.
 
-It speaks the NDI Combined API (``shared/protocols/ndi-combined-api.md``) over a Linux pty
+It speaks the NDI Combined API (NDI's Polaris API Guide) over a Linux pty
 (:meth:`PolarisMock.start_pty`, returns the ``/dev/pts/N`` path that ndicapi,
 scikit-surgerynditracker or our driver open as a serial port) or TCP on loopback
 (:meth:`PolarisMock.start_tcp`, returns ``socket://127.0.0.1:PORT`` for pyserial's

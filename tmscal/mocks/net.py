@@ -1,0 +1,57 @@
+"""Loopback-only binding for the mock devices.
+
+The mocks answer anything they are sent and move a simulated rig on request: they must never
+be reachable from another machine. Hosts are compared as addresses, not by spelling: an IP
+literal must be a loopback address (127.0.0.0/8 or ::1), and a name (``localhost``) must
+resolve to loopback addresses only.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import socket
+
+from ..errors import ConfigError
+
+__all__ = ["loopback_family", "url_host"]
+
+
+def _addresses(host: str, what: str) -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
+    try:
+        return [ipaddress.ip_address(host)]
+    except ValueError:
+        pass
+    try:
+        infos = socket.getaddrinfo(host, None, socket.AF_UNSPEC, socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as e:
+        raise ConfigError(f"{what}: cannot resolve {host!r} ({e}); the mocks bind to "
+                          "loopback only (127.0.0.0/8, ::1, localhost)") from None
+    out = []
+    for info in infos:
+        addr = str(info[4][0]).split("%", 1)[0]  # drop an IPv6 scope id
+        out.append(ipaddress.ip_address(addr))
+    return out
+
+
+def loopback_family(host: str, what: str) -> socket.AddressFamily:
+    """The socket family to bind ``host`` with (AF_INET, or AF_INET6 for an IPv6-only name
+    such as ``::1``). Raises ``ConfigError`` naming ``what`` and ``host`` unless every
+    address ``host`` stands for is a loopback address (``0.0.0.0``, ``::`` and public
+    addresses are refused)."""
+    if not isinstance(host, str) or not host:
+        raise ConfigError(f"{what}: no host given; the mocks bind to loopback only "
+                          "(127.0.0.0/8, ::1, localhost)")
+    addrs = _addresses(host, what)
+    bad = [a for a in addrs if not a.is_loopback]
+    if not addrs or bad:
+        shown = f" (resolves to {bad[0]})" if bad and str(bad[0]) != host else ""
+        raise ConfigError(f"{what}: {host!r}{shown} is not a loopback address; the mocks "
+                          "bind to loopback only (127.0.0.0/8, ::1, localhost)")
+    if any(a.version == 4 for a in addrs):
+        return socket.AF_INET
+    return socket.AF_INET6
+
+
+def url_host(host: str) -> str:
+    """``host`` as written in a URL (an IPv6 literal in brackets)."""
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
