@@ -12,6 +12,11 @@ import pytest
 from tmscal.drivers.denso.bcap import (
     E_BUSY_PROC,
     E_INVALIDPACKET,
+    MAX_ARGUMENTS,
+    MAX_ARRAY_ELEMENTS,
+    MAX_NESTING,
+    MAX_PACKET_SIZE,
+    MAX_VARIANTS,
     S_OK,
     VT_ARRAY,
     VT_BOOL,
@@ -298,3 +303,79 @@ def test_hresult_names() -> None:
     assert hresult_name(0x84204048) == "J8 acceleration limit"
     assert hresult_name(0x8ABC1234) == "0x8ABC1234"
     assert hresult_name(-0x7EAFEFFD) == "motor off"  # the same code as a signed i32
+
+
+# --- decoder caps (hostile sizes) -------------------------------------------------------------
+
+def _raw_packet(argc: int, body: bytes, serial: int = 1, code: int = 64) -> bytes:
+    """A packet with a hand-set argument count (encode_packet refuses what we need here)."""
+    total = 15 + len(body) + 1
+    return struct.pack("<BIHHIH", 1, total, serial, 0, code, argc) + body + b"\x04"
+
+
+def _arg(v: bytes) -> bytes:
+    return struct.pack("<I", len(v)) + v
+
+
+def test_ten_thousand_argument_packet_decodes() -> None:
+    args = [Variant(VT_I4, i) if i % 2 else Variant(VT_R8, i / 4) for i in range(10_000)]
+    p = decode_packet(encode_packet(7, Fn.ROBOT_EXECUTE, args))
+    assert p.serial == 7 and list(p.args) == args
+
+
+def test_argument_count_cap() -> None:
+    body = _arg(encode_variant(Variant(VT_I4, 3))) * (MAX_ARGUMENTS + 1)
+    with pytest.raises(ProtocolError, match=f"{MAX_ARGUMENTS + 1} arguments \\(max "):
+        decode_packet(_raw_packet(MAX_ARGUMENTS + 1, body))
+    assert len(decode_packet(_raw_packet(MAX_ARGUMENTS, body[:-14])).args) == MAX_ARGUMENTS
+
+
+def test_packet_size_cap() -> None:
+    big = _raw_packet(1, _arg(struct.pack("<HI", VT_UI1 | VT_ARRAY, MAX_PACKET_SIZE - 26)
+                              + bytes(MAX_PACKET_SIZE - 26)))
+    assert len(big) == MAX_PACKET_SIZE
+    assert len(decode_packet(big).args[0].value) == MAX_PACKET_SIZE - 26
+    bigger = _raw_packet(1, _arg(struct.pack("<HI", VT_UI1 | VT_ARRAY, MAX_PACKET_SIZE - 25)
+                                 + bytes(MAX_PACKET_SIZE - 25)))
+    with pytest.raises(ProtocolError, match="exceeds the 16777216-byte limit"):
+        decode_packet(bigger)
+    f = PacketFramer()
+    f.feed(bigger[:64])
+    with pytest.raises(ProtocolError, match="length field"):
+        f.next_frame()
+
+
+def test_typed_array_element_cap() -> None:
+    n = MAX_ARRAY_ELEMENTS + 1
+    with pytest.raises(ProtocolError, match=f"UI2\\|ARRAY of {n} elements \\(max"):
+        decode_variant(struct.pack("<HI", VT_UI2 | VT_ARRAY, n) + bytes(2 * n))
+    n = MAX_ARRAY_ELEMENTS
+    v, end = decode_variant(struct.pack("<HI", VT_UI2 | VT_ARRAY, n) + bytes(2 * n))
+    assert len(v.value) == n and end == 6 + 2 * n
+
+
+def test_variant_count_cap() -> None:
+    n = MAX_VARIANTS + 1
+    empty = encode_variant(Variant(VT_EMPTY))
+    data = struct.pack("<HI", VT_VARIANT | VT_ARRAY, n) + empty * n
+    with pytest.raises(ProtocolError, match=f"more than {MAX_VARIANTS} VARIANTs"):
+        decode_variant(data)
+    with pytest.raises(ProtocolError, match=f"more than {MAX_VARIANTS} VARIANTs"):
+        decode_packet(_raw_packet(1, _arg(data)))
+    # the budget is per packet: many arguments of arrays add up
+    half = struct.pack("<HI", VT_VARIANT | VT_ARRAY, MAX_VARIANTS // 2) \
+        + empty * (MAX_VARIANTS // 2)
+    with pytest.raises(ProtocolError, match="VARIANTs in one packet"):
+        decode_packet(_raw_packet(2, _arg(half) * 2))
+
+
+def test_nesting_cap() -> None:
+    v = Variant(VT_I4, 1)
+    for _ in range(MAX_NESTING):
+        v = Variant(VT_VARIANT | VT_ARRAY, [v])
+    assert decode_variant(encode_variant(v))[0] == v
+    deeper = encode_variant(Variant(VT_VARIANT | VT_ARRAY, [v]))
+    with pytest.raises(ProtocolError, match=f"nesting deeper than {MAX_NESTING}"):
+        decode_variant(deeper)
+    with pytest.raises(ProtocolError, match="nesting deeper"):
+        decode_packet(_raw_packet(1, _arg(deeper)))
