@@ -1,10 +1,11 @@
-"""Damaged session files: the reader raises SessionError or returns a valid prefix, never
-anything else."""
+"""Damaged session files: the reader raises SessionError or returns the intact poses, never
+anything else (more in ``test_session_fuzz.py``)."""
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given
 from hypothesis import strategies as st
 
+from tests.fuzz import fuzz_settings
 from tmscal.errors import SessionError
 from tmscal.session import make_header, read_session, records_from_arrays, write_session
 from tmscal.sim import Noise, simulate
@@ -21,7 +22,7 @@ def _good(tmp_path):
     return p.read_bytes()
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=_SLOW_OK)
+@fuzz_settings(200, suppress_health_check=_SLOW_OK)
 @given(data=st.data())
 def test_mutated_sessions(tmp_path, data):
     raw = bytearray(_good(tmp_path))
@@ -43,9 +44,14 @@ def test_mutated_sessions(tmp_path, data):
         return
     for rec in s.poses:
         assert rec.A is None or rec.A.shape == (4, 4)
+    # nothing is lost before the first changed byte
+    k = next((j for j, (a, b) in enumerate(zip(raw, _good(tmp_path), strict=False)) if a != b),
+             len(raw))
+    intact = raw[:k].count(b"\n") - 1  # whole pose lines before the change
+    assert {r.index for r in s.poses} >= set(range(max(0, intact)))
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=_SLOW_OK)
+@fuzz_settings(100, suppress_health_check=_SLOW_OK)
 @given(blob=st.binary(max_size=300))
 def test_random_bytes(tmp_path, blob):
     p = tmp_path / "r.jsonl"
