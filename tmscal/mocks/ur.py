@@ -30,6 +30,14 @@ is zero, so TCP = flange. Joint values are fixed placeholders (the mock has no k
 Because ur_rtde's ports are fixed, each mock binds its own loopback address (127.0.0.2,
 127.0.0.3, …), so several mocks (and tests) can run side by side.
 
+Hostile input: an output recipe frequency that is not finite or outside
+[``MIN_FREQUENCY_HZ``, ``MAX_FREQUENCY_HZ``] is refused (``O`` reply with recipe id 0 and no
+types; a later ``S`` answers 0, not started, and nothing streams). A move whose pose, speed or
+acceleration is not finite, or whose speed or acceleration is not positive, is a runtime error
+of the control script, as on a real controller: the program stops (runtime_state 1), the
+flange stays where it was, and nothing non-finite reaches the rig; ``play`` (dashboard) or a
+new script upload starts it again. Joint targets must be finite too.
+
 Faults (``URFaults``): a protective stop during the k-th move (safety mode 3,
 ``safety_status_bits`` bit 2, the flange stops half-way, the program pauses as on a real
 robot; cleared with the dashboard's ``unlock protective stop``, resumed with ``play`` or a new
@@ -41,6 +49,7 @@ moveL_FK, moveJ_IK).
 from __future__ import annotations
 
 import logging
+import math
 import re
 import socket
 import struct
@@ -60,6 +69,7 @@ from ..geometry import (
 )
 from ..sim.rig import SimRig
 from .clock import REAL_TIME, Clock
+from .net import loopback_family
 
 log = logging.getLogger(__name__)
 
@@ -90,6 +100,9 @@ _MOVE_CMDS = {CMD_MOVEJ: "moveJ", CMD_MOVEJ_IK: "moveJ_IK", CMD_MOVEL: "moveL",
 HOME_Q = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
 
 _N_REGS = 48
+
+#: Output recipe frequencies (Hz) the mock accepts (e-Series controllers stream at ≤ 500 Hz).
+MIN_FREQUENCY_HZ, MAX_FREQUENCY_HZ = 1.0, 500.0
 
 # --- RTDE variable types ----------------------------------------------------------------------
 
@@ -184,8 +197,9 @@ class _Motion:
         return out
 
 
-def _listen(host: str, port: int) -> socket.socket:
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+def _listen(host: str, port: int, family: socket.AddressFamily = socket.AF_INET
+            ) -> socket.socket:
+    s = socket.socket(family, socket.SOCK_STREAM)
     s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     s.bind((host, port))
     s.listen(8)
@@ -220,7 +234,8 @@ class URMock:
         The simulated rig; moves call ``rig.move_flange`` (base_from_flange 4×4 mm) and the
         reported TCP pose is ``rig.reported_flange()`` (TCP offset zero: TCP = flange).
     host:
-        Loopback address to bind (127.x.x.x only); ports are UR's fixed ones.
+        Loopback address to bind (127.0.0.0/8, ::1 or localhost; anything else raises
+        ``ConfigError``); ports are UR's fixed ones.
     clock:
         ``REAL_TIME``: moves take distance/speed seconds; ``FAST``: moves complete at once.
         Data streaming runs at the client's requested rate on both.
@@ -245,8 +260,7 @@ class URMock:
                      5, 11, 0, 108249),
                  serial: str = "20185500001", model: str = "UR5",
                  program_running: bool = True) -> None:
-        if not host.startswith("127."):
-            raise ValueError(f"URMock binds loopback only (127.x.x.x), got host {host!r}")
+        self._family = loopback_family(host, "URMock host")
         if len(version) != 4:
             raise ValueError(f"version must be (major, minor, bugfix, build), got {version!r}")
         self.rig = rig
@@ -300,7 +314,7 @@ class URMock:
             for port, handler in ((RTDE_PORT, self._serve_rtde),
                                   (DASHBOARD_PORT, self._serve_dashboard),
                                   (SCRIPT_PORT, self._serve_script)):
-                ls = _listen(self.host, port)
+                ls = _listen(self.host, port, self._family)
                 self._listeners.append(ls)
                 self._spawn(self._accept_loop, ls, handler, name=f"ur-accept-{port}")
         except OSError:
@@ -552,8 +566,33 @@ class URMock:
                 self._drop_after_command = self.faults.drop_connection_at_move == self.move_count
             self._execute(cmd, now)
 
+    def _runtime_error(self, why: str) -> None:
+        """A runtime error of the control script: the program stops where the flange is."""
+        log.error("UR mock: runtime error in the control script: %s; program stopped", why)
+        self._stop_program(f"runtime error: {why}")
+
+    def _bad_move(self, cmd: int) -> str | None:
+        """Why the move registers of ``cmd`` cannot be executed (None when they can): the
+        pose (or joints), speed and acceleration must be finite, speed and acceleration > 0."""
+        d = self.in_double
+        vals = [float(x) for x in d[0:8]]
+        if not all(math.isfinite(x) for x in vals):
+            what = "joint target" if cmd in (CMD_MOVEJ, CMD_MOVEL_FK) else "pose"
+            return f"{_MOVE_CMDS[cmd]}: non-finite {what}, speed or acceleration {vals}"
+        if cmd in (CMD_MOVEL, CMD_MOVEJ_IK) and not all(math.isfinite(x * 1000.0)
+                                                        for x in vals[:3]):
+            return f"{_MOVE_CMDS[cmd]}: position {vals[:3]} m is not finite in millimetres"
+        if vals[6] <= 0 or vals[7] <= 0:
+            return f"{_MOVE_CMDS[cmd]}: speed {vals[6]} and acceleration {vals[7]} must be > 0"
+        return None
+
     def _execute(self, cmd: int, now: float) -> None:
         d = self.in_double
+        if cmd in _MOVE_CMDS:
+            why = self._bad_move(cmd)
+            if why is not None:
+                self._runtime_error(why)
+                return
         if cmd == CMD_MOVEL:
             pose = pose_from_rotvec(d[0:6])
             speed, asynchronous = d[6], bool(self.in_int[1])
@@ -588,11 +627,14 @@ class URMock:
         """Start a linear move of the flange to ``target`` (base_from_flange 4×4 mm) at
         ``speed`` m/s. A synchronous move signals done when it ends (see ``_advance``)."""
         start = self._flange_now(now)
-        self._abort_motion(now)
         dist_m = float(np.linalg.norm(target[:3, 3] - start[:3, 3])) / 1000.0
         angle = float(np.linalg.norm(rotvec_from_matrix(start[:3, :3].T @ target[:3, :3])))
         speed = speed if speed > 0 else 0.25
         duration = 0.0 if self.clock.fast else max(dist_m, angle) / speed
+        if not (np.isfinite(target).all() and math.isfinite(duration)):
+            self._runtime_error(f"{what}: target or duration not finite ({duration} s)")
+            return
+        self._abort_motion(now)
         stop_at = (0.5 if not resumed and self.faults.protective_stop_at_move == self.move_count
                    else None)
         self._motion = _Motion(start, np.asarray(target, dtype=np.float64).copy(), now,
@@ -834,6 +876,7 @@ class _RTDEConnection:
         self.output_struct: struct.Struct | None = None
         self.output_getters: list[tuple[Callable[[float], Any], bool]] = []
         self.frequency = 125.0
+        self.output_refused = False   # an output recipe was refused (bad frequency)
         self.inputs: dict[int, tuple[list[str], struct.Struct]] = {}
         self.streaming = threading.Event()
         self.closed = threading.Event()
@@ -875,7 +918,14 @@ class _RTDEConnection:
             if len(payload) < 8:
                 self.send(_O, b"\x00")
                 return
-            self.frequency = struct.unpack(">d", payload[:8])[0]
+            freq = struct.unpack(">d", payload[:8])[0]
+            if not (math.isfinite(freq) and MIN_FREQUENCY_HZ <= freq <= MAX_FREQUENCY_HZ):
+                log.warning("UR mock RTDE: output frequency %r Hz outside [%g, %g]: recipe "
+                            "refused", freq, MIN_FREQUENCY_HZ, MAX_FREQUENCY_HZ)
+                self.output_refused = True
+                self.send(_O, b"\x00")
+                return
+            self.frequency = freq
             names = [n for n in payload[8:].decode("ascii", "replace").split(",") if n]
             types = [rtde_type(n) for n in names]
             self.output_names = names
@@ -893,6 +943,9 @@ class _RTDEConnection:
             log.debug("UR mock RTDE: input recipe %d: %s", rid, ",".join(names))
             self.send(_I, bytes([rid & 0xFF]) + ",".join(types).encode())
         elif ptype == _S:
+            if self.output_refused and self.output_struct is None:
+                self.send(_S, b"\x00")  # the output recipe was refused: nothing to stream
+                return
             self.send(_S, b"\x01")
             self.streaming.set()
             if self.stream_thread is None and self.output_struct is not None:
@@ -942,7 +995,7 @@ class _RTDEConnection:
     def stream(self) -> None:
         """Send the output recipe at the requested frequency (wall-clock on every clock)."""
         assert self.output_struct is not None
-        period = 1.0 / self.frequency if self.frequency > 0 else 0.008
+        period = 1.0 / min(max(self.frequency, MIN_FREQUENCY_HZ), MAX_FREQUENCY_HZ)
         nxt = time.monotonic()
         mock = self.mock
         try:
