@@ -13,7 +13,12 @@ import socket
 
 from ..errors import ConfigError
 
-__all__ = ["loopback_family", "url_host"]
+__all__ = ["NotLoopbackError", "loopback_family", "url_host"]
+
+
+class NotLoopbackError(ConfigError, ValueError):
+    """A mock endpoint that is not a loopback address. A ``ConfigError`` (one ``error:`` line
+    from the CLI); also a ``ValueError``, as an invalid constructor argument of a mock."""
 
 
 def _addresses(host: str, what: str) -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
@@ -24,7 +29,7 @@ def _addresses(host: str, what: str) -> list[ipaddress.IPv4Address | ipaddress.I
     try:
         infos = socket.getaddrinfo(host, None, socket.AF_UNSPEC, socket.SOCK_STREAM)
     except (OSError, UnicodeError) as e:
-        raise ConfigError(f"{what}: cannot resolve {host!r} ({e}); the mocks bind to "
+        raise NotLoopbackError(f"{what}: cannot resolve {host!r} ({e}); the mocks bind to "
                           "loopback only (127.0.0.0/8, ::1, localhost)") from None
     out = []
     for info in infos:
@@ -35,17 +40,17 @@ def _addresses(host: str, what: str) -> list[ipaddress.IPv4Address | ipaddress.I
 
 def loopback_family(host: str, what: str) -> socket.AddressFamily:
     """The socket family to bind ``host`` with (AF_INET, or AF_INET6 for an IPv6-only name
-    such as ``::1``). Raises ``ConfigError`` naming ``what`` and ``host`` unless every
-    address ``host`` stands for is a loopback address (``0.0.0.0``, ``::`` and public
-    addresses are refused)."""
+    such as ``::1``). Raises ``NotLoopbackError`` (a ``ConfigError``) naming ``what`` and
+    ``host`` unless every address ``host`` stands for is a loopback address (``0.0.0.0``,
+    ``::`` and public addresses are refused)."""
     if not isinstance(host, str) or not host:
-        raise ConfigError(f"{what}: no host given; the mocks bind to loopback only "
+        raise NotLoopbackError(f"{what}: no host given; the mocks bind to loopback only "
                           "(127.0.0.0/8, ::1, localhost)")
     addrs = _addresses(host, what)
     bad = [a for a in addrs if not a.is_loopback]
     if not addrs or bad:
         shown = f" (resolves to {bad[0]})" if bad and str(bad[0]) != host else ""
-        raise ConfigError(f"{what}: {host!r}{shown} is not a loopback address; the mocks "
+        raise NotLoopbackError(f"{what}: {host!r}{shown} is not a loopback address; the mocks "
                           "bind to loopback only (127.0.0.0/8, ::1, localhost)")
     if any(a.version == 4 for a in addrs):
         return socket.AF_INET

@@ -52,6 +52,7 @@ from ..drivers.ndi import protocol as p
 from ..errors import ProtocolError
 from ..sim.rig import SimRig
 from .clock import REAL_TIME, Clock
+from .net import loopback_family, url_host
 
 log = logging.getLogger(__name__)
 
@@ -260,11 +261,11 @@ class PolarisMock:
         return path
 
     def start_tcp(self, host: str = "127.0.0.1", port: int = 0) -> str:
-        """Serve on TCP ``host:port`` (loopback only; port 0 picks a free one); returns
-        ``socket://HOST:PORT`` for ``serial.serial_for_url``."""
-        if not (host.startswith("127.") or host == "localhost"):
-            raise ValueError(f"the Polaris mock binds to loopback only, not {host!r}")
-        srv = socket.create_server((host, port))
+        """Serve on TCP ``host:port`` (loopback only: 127.0.0.0/8, ::1 or localhost, else
+        ``ConfigError``; port 0 picks a free one); returns ``socket://HOST:PORT`` for
+        ``serial.serial_for_url``."""
+        family = loopback_family(host, "Polaris mock TCP host")
+        srv = socket.create_server((host, port), family=family)
         srv.settimeout(0.1)
         self._sockets.append(srv)
         real_port = srv.getsockname()[1]
@@ -272,7 +273,7 @@ class PolarisMock:
                              name=f"polaris-mock-tcp{real_port}")
         self._threads.append(t)
         t.start()
-        url = f"socket://{host}:{real_port}"
+        url = f"socket://{url_host(host)}:{real_port}"
         self.endpoints["tcp"] = url
         log.info("Polaris mock (%s) on %s", self.model, url)
         return url

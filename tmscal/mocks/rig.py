@@ -23,6 +23,7 @@ from ..config import RigConfig, construct
 from ..errors import ConfigError
 from ..sim import TMS_RIG_P0, Noise, SimRig, Truth, facing_start, tms_rig_truth
 from .clock import FAST, REAL_TIME
+from .net import loopback_family
 
 log = logging.getLogger(__name__)
 
@@ -82,16 +83,45 @@ class MockRig:
         self.close()
 
 
+def _check_endpoints(cfg: RigConfig, tracker_transport: str,
+                     robot_host: str | None) -> tuple[str, int] | None:
+    """Refuse (``ConfigError``) a mock endpoint that is not on loopback, before anything
+    binds. Returns the tracker's (host, port) when it is served on a ``socket://`` URL."""
+    url: tuple[str, int] | None = None
+    if cfg.tracker is not None and tracker_transport == "config" and cfg.tracker.port:
+        where = f"{cfg.path}: key 'tracker.port' ({cfg.tracker.port})"
+        u = urlparse(cfg.tracker.port)
+        if u.scheme == "socket":
+            try:
+                port = u.port or 0
+            except ValueError:
+                raise ConfigError(f"{where}: not a valid port number") from None
+            host = u.hostname or "127.0.0.1"
+            loopback_family(host, where)
+            url = (host, port)
+    if cfg.robot is not None:
+        host = robot_host or cfg.robot.host
+        where = (f"{cfg.path}: key 'robot.host' ({host})" if robot_host is None
+                 else f"robot host override ({host})")
+        loopback_family(host, where)
+    return url
+
+
 def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
                    robot_host: str | None = None, robot_port: int | None = None) -> MockRig:
     """Start the mock tracker and robot of ``cfg`` around one sim rig.
 
     ``tracker_transport``: "pty" (a new /dev/pts), "tcp" (an ephemeral loopback port),
     or "config" (TCP on the port of a ``socket://`` tracker.port, else a pty).
-    ``robot_host``/``robot_port`` override where the robot mock binds (loopback only)."""
+    ``robot_host``/``robot_port`` override where the robot mock binds (loopback only).
+
+    Every endpoint is checked before anything starts: a host that is not a loopback address
+    (``socket://0.0.0.0:…``, a public address, a name that resolves elsewhere) raises
+    ``ConfigError`` naming the config key and the endpoint, and nothing is bound."""
     m = cfg.mock
     if m is None:
         raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig to serve")
+    tracker_url = _check_endpoints(cfg, tracker_transport, robot_host)
     clock = FAST if m.clock == "fast" else REAL_TIME
     rig = build_sim_rig(cfg)
     mr = MockRig(rig)
@@ -110,16 +140,14 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
             pm = construct(PolarisMock, f"{cfg.path}: key 'mock.tracker'", rig, tools,
                            clock=clock, faults=faults, volume=volume, seed=m.seed, **opts)
             mr.devices.append(pm)
-            url = urlparse(cfg.tracker.port) if cfg.tracker.port else None
             if tracker_transport == "pty" or (tracker_transport == "config"
-                                              and (url is None or url.scheme != "socket")):
+                                              and tracker_url is None):
                 mr.endpoints["tracker"] = pm.start_pty()
             elif tracker_transport == "tcp":
                 mr.endpoints["tracker"] = pm.start_tcp("127.0.0.1", 0)
             else:
-                assert url is not None
-                mr.endpoints["tracker"] = pm.start_tcp(url.hostname or "127.0.0.1",
-                                                       url.port or 0)
+                assert tracker_url is not None
+                mr.endpoints["tracker"] = pm.start_tcp(*tracker_url)
         if cfg.robot is not None:
             opts = dict(m.robot)
             fault_data = opts.pop("faults", {}) or {}
