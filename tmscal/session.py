@@ -80,10 +80,13 @@ def _finite_float(text: str) -> float:
     return x
 
 
-def _loads(text: str) -> Any:
-    """json.loads that refuses NaN, Infinity and numbers that overflow float64."""
+def _loads(text: str, finite: bool = True) -> Any:
+    """json.loads that refuses NaN and Infinity literals and, with ``finite``, numbers that
+    overflow float64 anywhere (pose lines skip that slower check: every number the reader
+    keeps from them is checked for finiteness field by field)."""
     try:
-        obj = json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
+        obj = json.loads(text, parse_constant=_reject_constant,
+                         parse_float=_finite_float if finite else None)
     except RecursionError:
         raise _Bad("not valid JSON (nested too deeply)") from None
     except json.JSONDecodeError as e:
@@ -112,18 +115,22 @@ def _dumps(obj: Any) -> str:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_json_default)
 
 
+_NUMBER_TYPES = frozenset((int, float))
+_EYE3 = np.eye(3)
+
+
 def _is_number(x: Any) -> bool:
-    return type(x) is int or type(x) is float
+    return type(x) in _NUMBER_TYPES  # not bool, not str
 
 
 def _matrix(value: Any, name: str) -> np.ndarray | None:
     """A 4×4 rigid transform (mm) from a JSON value, or None for null."""
     if value is None:
         return None
-    if not (isinstance(value, list) and len(value) == 4
-            and all(isinstance(r, list) and len(r) == 4 for r in value)):
+    if not (type(value) is list and len(value) == 4
+            and all(type(r) is list and len(r) == 4 for r in value)):
         raise _Bad(f"field '{name}': expected a 4×4 matrix (4 rows of 4 numbers)")
-    if not all(_is_number(x) for r in value for x in r):
+    if not all(_NUMBER_TYPES.issuperset(map(type, r)) for r in value):
         raise _Bad(f"field '{name}': entries must be numbers")
     try:
         M = np.array(value, dtype=np.float64)
@@ -131,15 +138,19 @@ def _matrix(value: Any, name: str) -> np.ndarray | None:
         raise _Bad(f"field '{name}': a number is out of range") from None
     if not np.isfinite(M).all():
         raise _Bad(f"field '{name}': contains NaN or infinity")
-    if np.abs(M[3] - (0, 0, 0, 1)).max() > 1e-9:
-        raise _Bad(f"field '{name}': last row {M[3].tolist()} is not [0, 0, 0, 1]")
-    if np.abs(M[:3, 3]).max() > _MAX_TRANS_MM:
+    r3 = M[3]
+    if abs(r3[0]) > 1e-9 or abs(r3[1]) > 1e-9 or abs(r3[2]) > 1e-9 or abs(r3[3] - 1) > 1e-9:
+        raise _Bad(f"field '{name}': last row {r3.tolist()} is not [0, 0, 0, 1]")
+    A = np.abs(M[:3])
+    if A[:, 3].max() > _MAX_TRANS_MM:
         raise _Bad(f"field '{name}': translation beyond {_MAX_TRANS_MM:.0e} mm")
     R = M[:3, :3]
     # entries of a rotation are within [-1, 1]; checking first keeps the products finite
-    if (np.abs(R).max() > 1 + 1e-3 or np.abs(R @ R.T - np.eye(3)).max() > _RIGID_TOL
-            or abs(np.linalg.det(R) - 1) > _RIGID_TOL):
+    if A[:, :3].max() > 1 + 1e-3 or np.abs(R @ R.T - _EYE3).max() > _RIGID_TOL:
         raise _Bad(f"field '{name}': not a rigid transform (rotation block not orthonormal)")
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    if abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) - 1) > _RIGID_TOL:
+        raise _Bad(f"field '{name}': not a rigid transform (a reflection, det ≠ 1)")
     return M
 
 
@@ -488,7 +499,7 @@ def _parse(data: bytes, p: Path, strict: bool) -> Session:
                 raise _Bad(f"not valid UTF-8 ({e.reason} at byte {e.start})") from None
             if "\x00" in text:
                 raise _Bad("not valid JSON (holds a NUL byte)")
-            obj = _loads(text)
+            obj = _loads(text, finite=header is None)
             if header is None:
                 header = _check_header(obj)
             else:

@@ -264,6 +264,7 @@ _BAD_VALUES = {
                       b'["0","0","1","0"],["0","0","0","1"]]}',
     "bool entries": b'{"kind":"pose","index":0,"A":[[true,0,0,0],[0,true,0,0],'
                     b'[0,0,true,0],[0,0,0,true]]}',
+    "reflection": b'{"kind":"pose","index":0,"A":[[1,0,0,0],[0,1,0,0],[0,0,-1,0],[0,0,0,1]]}',
     "ragged matrix": b'{"kind":"pose","index":0,"A":[[1,0,0,0],[0,1,0],[0,0,1,0],[0,0,0,1]]}',
     "huge index": b'{"kind":"pose","index":100000000000000000000,"A":null,"skipped":"x"}',
     "bool index": b'{"kind":"pose","index":true,"A":null,"skipped":"x"}',
@@ -334,6 +335,14 @@ def test_bad_header_lines_are_errors(tmp_path, bad):
     p = tmp_path / "h.jsonl"
     p.write_bytes(bad + b"\n" + json.dumps(_rec(0).to_json()).encode() + b"\n")
     with pytest.raises(SessionError, match=rf"^{p}(, line 1)?: "):
+        read_session(p)
+
+
+def test_overflowing_number_in_the_header_is_an_error(tmp_path):
+    p = tmp_path / "h.jsonl"
+    text = json.dumps(dict(_HEADER, config={"gain": "X"})).replace('"X"', "1e400")
+    p.write_text(text + "\n" + json.dumps(_rec(0).to_json()) + "\n")
+    with pytest.raises(SessionError, match=rf"^{p}, line 1: not valid JSON \(number 1e400"):
         read_session(p)
 
 
