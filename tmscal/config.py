@@ -201,7 +201,9 @@ _SECTIONS = {"robot", "tracker", "plan", "sampling", "safety", "run", "mock", "n
 
 
 def _err(src: str, key: str, msg: str) -> ConfigError:
-    return ConfigError(f"{src}: key '{key}': {msg}")
+    if not key.isprintable():  # one line, whatever the key holds
+        key = key.encode("unicode_escape").decode("ascii")
+    return ConfigError(f"{src}: key '{key}': {' '.join(msg.splitlines())}")
 
 
 def _show(v: Any, limit: int = 60) -> str:
