@@ -174,12 +174,9 @@ def _warn_damage(session: Any) -> None:
     if session.torn_tail:
         click.echo(f"warning: {session.path}: torn last line ignored (an interrupted write)",
                    err=True)
-    damaged = list(getattr(session, "damaged", []) or [])
-    if damaged:
-        shown = "; ".join(f"line {no} ({why})" for no, why in damaged[:3])
-        more = f"; and {len(damaged) - 3} more" if len(damaged) > 3 else ""
-        click.echo(f"warning: {session.path}: {len(damaged)} damaged line(s) skipped: "
-                   f"{shown}{more}", err=True)
+    summary = session.damage_summary(limit=3)
+    if summary:
+        click.echo(f"warning: {session.path}: {summary}", err=True)
 
 
 FORCE_HELP = "Overwrite existing output files (never an input file)."
@@ -233,6 +230,8 @@ def main(verbose: int) -> None:
     """
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    if verbose == 0:  # the commands say what the session reader skipped, in one line
+        logging.getLogger("tmscal.session").setLevel(logging.ERROR)
 
 
 # --- simulate -------------------------------------------------------------------------------
@@ -634,7 +633,7 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
 
     state = "stopped early (resumable)" if res.stopped else "complete"
     for note in res.notes:
-        click.echo(f"resumed with {note}")
+        click.echo(f"note: {note}")
     click.echo(f"session {output}: {state}; {res.recorded} poses recorded, {res.skipped} "
                f"skipped, of {res.total} planned; {res.new_poses} new in "
                f"{res.elapsed_s:.1f} s; device faults recovered: {res.faults}")

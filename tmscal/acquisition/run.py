@@ -37,7 +37,7 @@ from ..drivers.base import (
 )
 from ..errors import SessionError, TmscalError
 from ..geometry import check_pose
-from ..session import PoseRecord, SessionWriter, make_header
+from ..session import PoseRecord, SessionWriter, make_header, validate_record
 from .devices import envelope_for, make_robot, make_tracker
 from .plan import check_plan, make_plan
 from .sample import PoseSample, sample_pose
@@ -289,6 +289,9 @@ def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
         check_plan(plan, envelope)
         dev.open(envelope)
         settings = _settings(cfg, header, samples)
+        summary = writer.session.damage_summary()
+        if summary:
+            settings.notes.append(f"{out}: {summary} (their poses are acquired again)")
     else:
         if out.exists():
             raise SessionError(f"{out}: already exists; use --resume to continue it, or "
@@ -375,7 +378,7 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
                 lambda: (f"The session {out} holds {len(writer.session.poses)} poses; "
                          f"{hint}"))
             faults += n_faults
-            writer.append(rec)
+            writer.append(_valid_or_skipped(rec))
             new += 1
             if on_pose:
                 on_pose(len(writer.session.indices() & set(range(total))), total, rec)
@@ -390,6 +393,19 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
         dev.close(stop_robot=not clean)
         if writer is not None:
             writer.close()
+
+
+def _valid_or_skipped(rec: PoseRecord) -> PoseRecord:
+    """The record if the session reader will accept it, else the same pose recorded as
+    skipped with the reason (e.g. a non-finite or non-rigid pose from a device), so that one
+    bad measurement neither ends the run nor reaches the file."""
+    try:
+        return validate_record(rec)
+    except SessionError as e:
+        log.warning("pose %d: invalid measurement, recorded as skipped: %s", rec.index, e)
+        return PoseRecord(index=rec.index, A=None, B=None, C=None, commanded=rec.commanded,
+                          time=rec.time, samples={}, spread={},
+                          skipped=f"invalid measurement ({e})")
 
 
 def resume_command(config: str | Path | None, out: str | Path,
