@@ -5,9 +5,10 @@ from __future__ import annotations
 
 from decimal import Decimal
 
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
+from tests.fuzz import fuzz_settings
 from tmscal.drivers.denso import bcap as b
 from tmscal.drivers.denso.bcap import (
     PacketFramer,
@@ -19,7 +20,7 @@ from tmscal.drivers.denso.bcap import (
 )
 from tmscal.errors import ProtocolError
 
-SETTINGS = settings(max_examples=200, deadline=None)
+SETTINGS = fuzz_settings(200)
 
 _ints = {vt: st.integers(lo, hi) for vt, (lo, hi) in b._INT_RANGES.items()}
 _elem = {

@@ -1,19 +1,20 @@
-"""Property tests: random and mutated byte streams into every NDI parser raise only our typed
-errors (ProtocolError / DeviceError), never anything else, and return quickly."""
+"""Property tests: random and mutated byte streams into every NDI parser raise only
+ProtocolError (``raise_for_error`` alone raises a plain DeviceError, for an ERRORxx reply),
+never anything else, and return quickly. Budgets: ``tests.fuzz.fuzz_settings``."""
 
 from __future__ import annotations
 
 import struct
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
+from tests.fuzz import fuzz_settings
 from tmscal.drivers.ndi import protocol as p
-from tmscal.errors import DeviceError
+from tmscal.errors import DeviceError, ProtocolError
 
-SETTINGS = settings(max_examples=200, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = fuzz_settings(200)
 
 
 def _valid_replies() -> list[bytes]:
@@ -51,33 +52,39 @@ def mutated(draw: st.DrawFn) -> bytes:
 
 
 def _all_parsers(data: bytes) -> None:
-    """Feed ``data`` to every parser; only typed errors may escape."""
-    for fn in (p.parse_reply, p.decode_bx, p.reply_length, p.parse_command, p.check_bx):
+    """Feed ``data`` to every parser; only ProtocolError may escape (anything else, another
+    DeviceError subclass included, fails the test)."""
+    for fn in (p.parse_reply, p.decode_bx, p.reply_length, p.parse_command, p.check_bx,
+               p.split_reply):
         try:
             fn(data)
-        except DeviceError:
+        except ProtocolError:
             pass
     text = data.decode("latin-1")
     for fn2 in (p.decode_tx, p.decode_phsr, p.decode_phrq, p.classify_reply, p.parse_ver):
         try:
             fn2(text)
-        except DeviceError:
+        except ProtocolError:
             pass
     try:
-        p.raise_for_error(p.parse_reply(data), "X")
-    except DeviceError:
-        pass
+        reply = p.parse_reply(data)
+    except ProtocolError:
+        return
+    try:
+        p.raise_for_error(reply, "X")
+    except DeviceError as e:  # an ERRORxx reply: exactly DeviceError, with its code
+        assert type(e) is DeviceError and reply.kind == "error" and e.code == reply.code
 
 
 @SETTINGS
 @given(st.binary(max_size=300))
-def test_random_bytes_raise_only_typed_errors(data: bytes) -> None:
+def test_random_bytes_raise_only_protocol_errors(data: bytes) -> None:
     _all_parsers(data)
 
 
 @SETTINGS
 @given(mutated())
-def test_mutated_replies_raise_only_typed_errors(data: bytes) -> None:
+def test_mutated_replies_raise_only_protocol_errors(data: bytes) -> None:
     _all_parsers(data)
 
 
@@ -86,7 +93,7 @@ def test_mutated_replies_raise_only_typed_errors(data: bytes) -> None:
 def test_tx_like_text_raises_only_protocol_errors(text: str) -> None:
     try:
         p.decode_tx(text)
-    except DeviceError:
+    except ProtocolError:
         pass
 
 
@@ -111,7 +118,7 @@ def test_bx_with_valid_crcs_and_any_floats(items, sys_status: int) -> None:
                                                                               p.crc16(body))
     try:
         bx = p.decode_bx(raw)
-    except DeviceError:
+    except ProtocolError:
         return
     assert bx.system_status == sys_status
     for r in bx.records:
@@ -125,7 +132,7 @@ def test_bx_with_valid_crcs_and_any_floats(items, sys_status: int) -> None:
 def test_reply_length_never_overshoots_text(data: bytes) -> None:
     try:
         n = p.reply_length(data)
-    except DeviceError:
+    except ProtocolError:
         return
     if n is not None and data[:1] != b"\xc4":
         assert data[n - 1:n] == b"\r" and b"\r" not in data[:n - 1]
