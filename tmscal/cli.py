@@ -556,7 +556,7 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
               help="Session file (JSON Lines) to write or, with --resume, to continue.")
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted session: same plan, same P0, done poses skipped.")
-@click.option("--poses", type=click.IntRange(1), default=None,
+@click.option("--poses", type=click.IntRange(1, 100000), default=None,
               help="Number of poses (overrides plan.poses).")
 @click.option("--samples", type=click.IntRange(1), default=None,
               help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
@@ -692,7 +692,8 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 @main.command()
 @click.option("--config", "config", type=INPUT_FILE, default=None,
               help="Mock rig config (default: configs/mock-ur-polaris.yaml).")
-@click.option("--poses", type=click.IntRange(3), default=None, help="Override plan.poses.")
+@click.option("--poses", type=click.IntRange(3, 100000), default=None,
+              help="Override plan.poses.")
 @click.option("--samples", type=click.IntRange(1), default=None,
               help="Override sampling.samples.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,

@@ -118,6 +118,8 @@ CASES = [
     ("acquire-yaml-cycle", "acquire {d}/cycle.yaml -o {d}/s.jsonl", "cycle.yaml"),
     ("acquire-resume-missing", "acquire {d}/good.yaml -o {d}/none.jsonl --resume",
      "none.jsonl"),
+    ("acquire-poses-huge", "acquire {d}/good.yaml -o {d}/s.jsonl --poses 1000000000",
+     "--poses"),
     ("acquire-samples-zero", "acquire {d}/good.yaml -o {d}/s.jsonl --samples 0", "--samples"),
     ("track-spy-port", "track {d}/spy.yaml --frames 1", "tracker.port"),
     ("track-fifo", "track {d}/fifo", "FIFO"),
