@@ -84,6 +84,8 @@ def test_speed_option_never_above_the_configured_speed(speed: float, full: float
     ({"ext_speed_percent": 0.0}, "ext_speed_percent"),
     ({"ext_speed_percent": float("nan")}, "ext_speed_percent"),
     ({"ext_speed_percent": 101.0}, "ext_speed_percent"),
+    ({"watchdog_ms": -1}, "watchdog_ms"),
+    ({"watchdog_ms": float("nan")}, "watchdog_ms"),
 ])
 def test_denso_robot_refuses_unusable_motion_settings(kw: dict, key: str) -> None:
     with pytest.raises(ValueError, match=key):

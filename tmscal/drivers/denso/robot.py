@@ -122,6 +122,9 @@ class DensoRobot(Robot):
         if not 0.01 <= ext <= 100.0:  # also refuses NaN
             raise ValueError(f"ext_speed_percent must be in [0.01, 100], got {ext_speed_percent!r}")
         self.ext_speed_percent = ext
+        if watchdog_ms is not None and not (isinstance(watchdog_ms, int | float)
+                                            and 0 <= watchdog_ms <= 3_600_000):
+            raise ValueError(f"watchdog_ms must be None or 0..3600000 ms, got {watchdog_ms!r}")
         self.host = host
         self.port = int(port)
         self.provider = provider
