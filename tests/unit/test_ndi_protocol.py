@@ -1,5 +1,5 @@
-"""NDI Combined API codec against the golden vectors of shared/protocols/ndi-combined-api.md
-and hand-built replies."""
+"""NDI Combined API codec against golden vectors (from NDI's Polaris API Guide and replies
+captured from real devices) and hand-built replies."""
 
 from __future__ import annotations
 

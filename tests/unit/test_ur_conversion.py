@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tmscal.drivers.ur.robot import base_from_flange_from_tcp, tcp_pose_from_base_from_flange
+from tmscal.errors import ConfigError
 from tmscal.geometry import pose_from_rotvec, rotvec_pose_from_matrix
 from tmscal.mocks.ur import URMock, rtde_type
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
@@ -106,5 +107,5 @@ def test_async_progress_register_layout() -> None:
 
 
 def test_mock_refuses_non_loopback() -> None:
-    with pytest.raises(ValueError, match="loopback"):
+    with pytest.raises(ConfigError, match="loopback"):
         URMock(SimRig(tms_rig_truth()), host="0.0.0.0")

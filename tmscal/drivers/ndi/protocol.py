@@ -2,7 +2,8 @@
 
 Used by the driver (:mod:`tmscal.drivers.ndi.tracker`) to encode commands and decode replies,
 and by the mock (:mod:`tmscal.mocks.polaris`) to decode commands and encode replies, so the
-two can never disagree on a layout. Facts: ``shared/protocols/ndi-combined-api.md``.
+two can never disagree on a layout. Facts: NDI's Polaris Application Program Interface Guide
+(Combined API).
 
 * CRC: CRC-16/ARC (poly 0x8005 reflected, init 0, no final XOR), :func:`crc16`.
 * Commands: ``CMD:params`` + 4 uppercase hex CRC + ``\\r`` (colon form) or ``CMD params\\r``
