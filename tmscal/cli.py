@@ -169,6 +169,23 @@ def check_outputs(outputs: dict[str, Path | None], inputs: list[Path], force: bo
                                      param_hint=opt)
 
 
+def _read_session(path: Path, strict: bool) -> Any:
+    """Read a session for a command; what the reader skipped is said in one warning line
+    (``_warn_damage``) instead of one log line per damaged line (unless -v)."""
+    from .session import read_session
+
+    logger = logging.getLogger("tmscal.session")
+    level = logger.level
+    if not log.isEnabledFor(logging.INFO):
+        logger.setLevel(logging.ERROR)
+    try:
+        session = read_session(path, strict=strict)
+    finally:
+        logger.setLevel(level)
+    _warn_damage(session)
+    return session
+
+
 def _warn_damage(session: Any) -> None:
     """Say on stderr what the reader skipped: a torn last line, damaged middle lines."""
     if session.torn_tail:
@@ -230,8 +247,6 @@ def main(verbose: int) -> None:
     """
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
-    if verbose == 0:  # the commands say what the session reader skipped, in one line
-        logging.getLogger("tmscal.session").setLevel(logging.ERROR)
 
 
 # --- simulate -------------------------------------------------------------------------------
@@ -318,11 +333,10 @@ def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
     """Solve a session for X, Y, Z and report the errors (seed 000's metrics)."""
     from .report.evaluate import pose_residuals, solve_session
     from .report.text import calibration_yaml, format_result, plot_residuals
-    from .session import read_session, sha256_of
+    from .session import sha256_of
 
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)
-    session = read_session(session_file, strict=strict)
-    _warn_damage(session)
+    session = _read_session(session_file, strict)
     cal, res = solve_session(session, method=method, train=train, orthonormal=orthonormal)
     if output is not None:
         _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
@@ -362,7 +376,6 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
     from .errors import CalibrationError
     from .report.evaluate import study_session
     from .report.text import format_study, plot_study
-    from .session import read_session
 
     ms = [m.strip().lower() for m in methods.split(",") if m.strip()]
     bad = [m for m in ms if m not in METHODS]
@@ -370,8 +383,7 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
         raise CalibrationError(f"--methods: unknown method {bad[0] if bad else '(none)'}; "
                                f"known: {', '.join(METHODS)}")
     check_outputs({"--plot": plot}, [session_file], force)
-    session = read_session(session_file, strict=strict)
-    _warn_damage(session)
+    session = _read_session(session_file, strict)
     total = len(ms) * max(0, n_max - 4)
     with tqdm(total=total, desc="solving", unit="solve", disable=None, file=sys.stderr,
               leave=False) as bar:

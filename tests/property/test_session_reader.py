@@ -45,8 +45,9 @@ def test_mutated_sessions(tmp_path, data):
     for rec in s.poses:
         assert rec.A is None or rec.A.shape == (4, 4)
     # nothing is lost before the first changed byte
-    k = next((j for j, (a, b) in enumerate(zip(raw, _good(tmp_path), strict=False)) if a != b),
-             len(raw))
+    good = _good(tmp_path)
+    k = next((j for j, (a, b) in enumerate(zip(raw, good, strict=False)) if a != b),
+             min(len(raw), len(good)))  # a longer file equal up to the end changed after it
     intact = raw[:k].count(b"\n") - 1  # whole pose lines before the change
     assert {r.index for r in s.poses} >= set(range(max(0, intact)))
 
