@@ -104,6 +104,13 @@ class TCPListener:
             except OSError:  # pragma: no cover
                 pass
 
+    def getsockname(self) -> Any:
+        """The bound address of the listening socket (as ``socket.getsockname()``), so tests
+        can check what a mock listens on. Raises ``OSError`` before ``start()``."""
+        if self._sock is None:
+            raise OSError(f"{self.what}: not listening")
+        return self._sock.getsockname()
+
     @property
     def connections(self) -> int:
         """How many connections are open now."""
