@@ -655,49 +655,33 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
 
 
 def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str | None) -> None:
-    from .acquisition.devices import envelope_for, make_robot
-    from .acquisition.plan import check_plan, make_plan, plan_summary
+    from .acquisition.dryrun import dry_run
+    from .errors import SafetyError
 
-    if isinstance(cfg.plan.start, str):
-        with make_robot(cfg, envelope_for(cfg, None), robot_host) as rb:
-            p0 = rb.flange_pose()
-        src = "current flange pose"
-    else:
-        p0 = np.asarray(cfg.plan.start)
-        src = "plan.start"
-    n = poses or cfg.plan.poses
-    plan = make_plan(cfg.plan.kind, p0, n, cfg.plan.seed, cfg.plan.radius_mm,
-                     cfg.plan.rotation_deg)
-    rate = cfg.tracker.frame_rate_hz if cfg.tracker else 60.0
-    envelope = envelope_for(cfg, p0)
-    s = plan_summary(plan, p0, cfg.robot.speed_mm_s if cfg.robot else 100.0,
-                     cfg.sampling.settle_s, samples or cfg.sampling.samples, rate,
-                     envelope=envelope)
-    click.echo(f"plan {cfg.plan.kind}: {n} poses, seed {cfg.plan.seed}, around P0 ({src}):")
-    click.echo("  P0 " + _pose_line(p0))
+    d = dry_run(cfg, poses, samples, robot_host)
+    s = d.summary
+    click.echo(f"plan {d.spec.kind}: {d.spec.n} poses, seed {d.spec.seed}, around P0 "
+               f"({d.p0_source}):")
+    click.echo("  P0 " + _pose_line(d.spec.p0))
     click.echo(f"  offsets from P0: x {s['x_range_mm'][0]:.1f}…{s['x_range_mm'][1]:.1f}, "
                f"y {s['y_range_mm'][0]:.1f}…{s['y_range_mm'][1]:.1f}, "
                f"z {s['z_range_mm'][0]:.1f}…{s['z_range_mm'][1]:.1f} mm; "
                f"max {s['offset_max_mm']:.1f} mm")
     click.echo(f"  rotation from P0: max {s['rotation_max_deg']:.2f} deg")
     click.echo(f"  {'in the robot base frame (mm)':<32} {'x':^16}{'y':^16}{'z':^16}")
-
-    def row(label: str, lo: Any, hi: Any) -> None:
-        if lo is None:
-            return
-        cells = "".join(f"{a:8.1f}…{b:<7.1f}" for a, b in zip(lo, hi))
-        click.echo(f"    {label:<30} {cells}")
-
-    row("workspace box (safety)", s["box_min_mm"], s["box_max_mm"])
-    row("flange over the plan", s["flange_min_mm"], s["flange_max_mm"])
-    row("tool points over the plan", s["tool_min_mm"], s["tool_max_mm"])
+    for label, key in (("workspace box (safety)", "box"), ("flange over the plan", "flange"),
+                       ("tool points over the plan", "tool")):
+        lo, hi = s[f"{key}_min_mm"], s[f"{key}_max_mm"]
+        if lo is not None:
+            cells = "".join(f"{a:8.1f}…{b:<7.1f}" for a, b in zip(lo, hi))
+            click.echo(f"    {label:<30} {cells}")
     if s["tool_min_mm"] is None:
         click.echo("    (no safety.tool_points_mm: the box bounds the flange only)")
     click.echo(f"  estimated duration: {s['duration_s'] / 60:.1f} min (travel "
                f"{s['travel_mm'] / 1000:.1f} m = {s['motion_s']:.0f} s at "
-               f"{cfg.robot.speed_mm_s if cfg.robot else 100.0:g} mm/s, sampling "
-               f"{s['sampling_s']:.0f} s)")
-    check_plan(plan, envelope)
+               f"{d.speed_mm_s:g} mm/s, sampling {s['sampling_s']:.0f} s)")
+    if d.refusal is not None:
+        raise SafetyError(d.refusal)
     click.echo("  safety envelope: every pose inside")
 
 

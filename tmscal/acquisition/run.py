@@ -36,18 +36,14 @@ from ..drivers.base import (
     Tracker,
 )
 from ..errors import SessionError, TmscalError
-from ..geometry import check_pose
 from ..session import PoseRecord, SessionWriter, make_header, validate_record
 from .devices import envelope_for, make_robot, make_tracker
-from .plan import check_plan, make_plan
+from .plan import PlanSpec, check_plan
 from .sample import PoseSample, sample_pose
 
 log = logging.getLogger(__name__)
 
-MAX_PLAN_POSES = 100_000
-
-__all__ = ["AcquisitionStopped", "AcquireResult", "acquire", "plan_from_header",
-           "resume_command"]
+__all__ = ["AcquisitionStopped", "AcquireResult", "acquire", "resume_command"]
 
 
 class AcquisitionStopped(TmscalError):
@@ -69,33 +65,6 @@ class AcquireResult:
     elapsed_s: float
     new_poses: int
     notes: list[str] = field(default_factory=list)
-
-
-def plan_from_header(header: dict[str, Any], poses: int | None = None
-                     ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Regenerate a session's plan (n, 4, 4) mm from its header's "plan" entry; ``poses``
-    changes its length (pose i is the same whatever the length). A header whose plan is
-    missing or invalid raises SessionError."""
-    p = header.get("plan")
-    if not isinstance(p, dict):
-        raise SessionError("the session header has no 'plan' (was it made by tmscal "
-                           "acquire?); it cannot be resumed")
-    p = dict(p) if poses is None else dict(p, poses=poses)
-    try:
-        n, seed = p["poses"], p["seed"]
-        if (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PLAN_POSES
-                or isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
-            raise ValueError(f"poses must be 1..{MAX_PLAN_POSES} and seed ≥ 0, got "
-                             f"{n!r}, {seed!r}")
-        p0 = check_pose(p["p0"], "p0")
-        plan = make_plan(p["kind"], p0, n, seed, float(p["radius_mm"]),
-                         float(p["rotation_deg"]))
-    except (KeyError, TypeError, ValueError, OverflowError) as e:
-        raise SessionError(f"the session header's 'plan' is incomplete or invalid ({e})") \
-            from None
-    if not np.isfinite(plan).all():
-        raise SessionError("the session header's 'plan' gives non-finite poses")
-    return plan, p
 
 
 class _Devices:
@@ -223,8 +192,7 @@ def _check_robot_where_run_stopped(here: np.ndarray, plan: np.ndarray, p0: np.nd
             "or the arm was moved; move it back near P0 to resume. Nothing was moved.")
 
 
-def _check_resume(cfg: RigConfig, session: Any, plan: np.ndarray, pinfo: dict[str, Any]
-                  ) -> None:
+def _check_resume(cfg: RigConfig, session: Any, spec: PlanSpec, plan: np.ndarray) -> None:
     """Refuse to resume a session into a different rig or plan: the header's devices and
     plan must match the config, and the header's plan must reproduce every commanded pose
     already recorded (an edited or foreign header would not). Raises SessionError."""
@@ -245,12 +213,12 @@ def _check_resume(cfg: RigConfig, session: Any, plan: np.ndarray, pinfo: dict[st
     want = {"kind": cfg.plan.kind, "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
             "rotation_deg": cfg.plan.rotation_deg}
     for k, v in want.items():
-        got = pinfo.get(k)
+        got = getattr(spec, k)
         if got != v:
             raise SessionError(f"{where}: the session's plan.{k} is {got!r}; {cfg.path} says "
                                f"{v!r}; {hint}")
     if not isinstance(cfg.plan.start, str):
-        d = float(np.abs(np.asarray(pinfo["p0"], dtype=float)
+        d = float(np.abs(spec.p0
                          - np.asarray(cfg.plan.start, dtype=float)).max())
         if d > _POSE_TOL_MM:
             raise SessionError(f"{where}: the session's P0 differs from the config's "
@@ -269,7 +237,7 @@ def _check_resume(cfg: RigConfig, session: Any, plan: np.ndarray, pinfo: dict[st
 
 def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
                      poses: int | None, samples: int | None
-                     ) -> tuple[SessionWriter | None, np.ndarray, dict[str, Any], Envelope,
+                     ) -> tuple[SessionWriter | None, PlanSpec, np.ndarray, Envelope,
                                 _Settings]:
     """Open the devices and work out the plan. A new run takes P0 from the robot (or the
     config) and writes nothing yet; a resumed run locks the session, regenerates its plan
@@ -283,9 +251,13 @@ def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
         last = max((r.index for r in writer.session.poses), default=-1)
         p_hdr = header.get("plan")
         n0 = p_hdr.get("poses", 0) if isinstance(p_hdr, dict) else 0
-        plan, pinfo = plan_from_header(header, poses or (last + 1 if last + 1 > n0 else None))
-        _check_resume(cfg, writer.session, plan, pinfo)
-        envelope = envelope_for(cfg, np.asarray(pinfo["p0"], dtype=float))
+        spec = PlanSpec.from_header(header)
+        n = poses or (last + 1 if last + 1 > n0 else None)
+        if n is not None:
+            spec = spec.with_n(n)
+        plan = spec.poses()
+        _check_resume(cfg, writer.session, spec, plan)
+        envelope = envelope_for(cfg, spec.p0)
         check_plan(plan, envelope)
         dev.open(envelope)
         settings = _settings(cfg, header, samples)
@@ -300,10 +272,8 @@ def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
         assert dev.robot is not None
         p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
               else np.asarray(cfg.plan.start, dtype=float))
-        pinfo = {"kind": cfg.plan.kind, "poses": poses or cfg.plan.poses,
-                 "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
-                 "rotation_deg": cfg.plan.rotation_deg, "p0": p0.tolist()}
-        plan, _ = plan_from_header({"plan": pinfo})
+        spec = PlanSpec.from_config(cfg.plan, p0, poses)
+        plan = spec.poses()
         envelope = envelope_for(cfg, p0)
         check_plan(plan, envelope)
         dev.robot.envelope = envelope
@@ -311,14 +281,14 @@ def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
     assert dev.robot is not None
     here = dev.robot.flange_pose()
     if writer is not None:
-        _check_robot_where_run_stopped(here, plan, np.asarray(pinfo["p0"], dtype=float),
+        _check_robot_where_run_stopped(here, plan, spec.p0,
                                        writer.session.indices(), out)
     v = envelope.violations(here)
     if v:
         raise SafetyError(f"the robot is at {np.round(here[:3, 3], 1).tolist()} mm, "
                           f"outside the safety envelope around P0 ({'; '.join(v)}); "
                           "move it near P0 first. Nothing was moved.")
-    return writer, plan, pinfo, envelope, settings
+    return writer, spec, plan, envelope, settings
 
 
 def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
@@ -350,7 +320,7 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
     clean = False
     hint = "resume with: " + resume_command(cfg.path, out, tracker_port, robot_host)
     try:
-        writer, plan, pinfo, envelope, st = _start_or_resume(cfg, out, dev, resume, poses,
+        writer, spec, plan, envelope, st = _start_or_resume(cfg, out, dev, resume, poses,
                                                              samples)
         for note in st.notes:
             log.warning("resuming %s with %s", out, note)
@@ -359,7 +329,7 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
             header = make_header(
                 dev.tracker.tools, config=cfg.raw,
                 devices={"robot": dev.robot.identity(), "tracker": dev.tracker.identity()},
-                plan=pinfo, sampling=st.to_header())
+                plan=spec.to_header(), sampling=st.to_header())
             writer = SessionWriter.create(out, header)
         done = writer.session.indices()
         t_offset = max((p.time for p in writer.session.poses), default=0.0)

@@ -242,8 +242,8 @@ def simulate(n: int, rng: np.random.Generator, plan: str = "eq14", noise: Noise 
 
     Returns (truth, {"A", "commanded", "marker", ["probe"]}) with (n, 4, 4) mm arrays.
     """
-    from ..acquisition.plan import eq14_poses, random_poses
     from ..geometry import pose_mean
+    from ..poses import eq14_poses, random_poses
 
     truth = truth or Truth.random(rng, with_probe=with_probe)
     if plan == "random":

@@ -1,0 +1,74 @@
+"""Pose generators: where a robot flange goes, as base_from_flange 4×4 poses in mm. Pure
+functions of an explicit ``numpy.random.Generator``; no I/O. Both the simulator
+(:mod:`tmscal.sim`) and the acquisition plans (:mod:`tmscal.acquisition.plan`) use them.
+
+* ``eq14_poses``: Eq. 14 of Wang et al. (2018), P_i = P0 · T(t) · Rx(θ1) · Ry(θ2) · Rz(θ3),
+  t uniform in ±r mm per axis, θ uniform in ±d degrees (their experiment: 100 mm, 10°).
+* ``sphere_poses``: positions uniform in a ball of radius r around P0, yaw/pitch/roll uniform
+  in ±d degrees (the sphere workspace of the Panda/Vicra TMS comparison of QR24, SGO and
+  QUAT).
+* ``random_poses``: fully random robot poses (the simulation of Wang et al. 2018): Haar-random
+  rotations, translations uniform in ±r mm per axis.
+* ``make_plan``: an acquisition plan of any of the first two kinds, reproducible pose by pose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import compose, make_pose, random_rotation, rot_x, rot_y, rot_z
+
+__all__ = ["PLAN_KINDS", "eq14_poses", "sphere_poses", "random_poses", "make_plan"]
+
+
+def eq14_poses(p0: np.ndarray, n: int, rng: np.random.Generator, r_mm: float = 100.0,
+               d_deg: float = 10.0) -> np.ndarray:
+    """n poses (n, 4, 4) mm by Eq. 14 of Wang et al. (2018) around P0 (base_from_flange, mm).
+
+    The translation T(t) is applied in the P0 flange frame, then Rx·Ry·Rz (radians drawn
+    uniformly from ±d_deg)."""
+    t = rng.uniform(-r_mm, r_mm, size=(n, 3))
+    th = np.radians(rng.uniform(-d_deg, d_deg, size=(n, 3)))
+    R = rot_x(th[:, 0]) @ rot_y(th[:, 1]) @ rot_z(th[:, 2])
+    return compose(np.asarray(p0, dtype=float), make_pose(np.eye(3), t), make_pose(R))
+
+
+def sphere_poses(p0: np.ndarray, n: int, rng: np.random.Generator, r_mm: float = 100.0,
+                 d_deg: float = 10.0) -> np.ndarray:
+    """n poses (n, 4, 4) mm with the flange origin uniform in a ball of radius r_mm around
+    P0's origin (P0 frame) and yaw/pitch/roll uniform in ±d_deg (the sphere workspace of the
+    Panda/Vicra TMS comparison of QR24, SGO and QUAT)."""
+    u = rng.standard_normal((n, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    t = u * (r_mm * rng.uniform(0.0, 1.0, size=(n, 1)) ** (1.0 / 3.0))
+    th = np.radians(rng.uniform(-d_deg, d_deg, size=(n, 3)))
+    R = rot_z(th[:, 0]) @ rot_y(th[:, 1]) @ rot_x(th[:, 2])
+    return compose(np.asarray(p0, dtype=float), make_pose(np.eye(3), t), make_pose(R))
+
+
+def random_poses(n: int, rng: np.random.Generator, r_mm: float = 500.0) -> np.ndarray:
+    """n fully random poses (n, 4, 4) mm: Haar-random rotations, translations uniform in
+    ±r_mm per axis (the simulation of Wang et al. 2018; its text does not give the
+    translation range)."""
+    return make_pose(random_rotation(rng, n), rng.uniform(-r_mm, r_mm, size=(n, 3)))
+
+
+#: plan kind → generator, for acquisition plans
+PLAN_KINDS = {"eq14": eq14_poses, "sphere": sphere_poses}
+
+
+def make_plan(kind: str, p0: np.ndarray, n: int, seed: int, radius_mm: float,
+              rotation_deg: float) -> np.ndarray:
+    """The acquisition plan: n poses (n, 4, 4) base_from_flange in mm around P0, reproducible
+    from (kind, P0, n, seed, ranges) alone so that ``--resume`` regenerates the same plan.
+    The first n of a longer plan with the same seed are the same poses."""
+    gen = PLAN_KINDS.get(kind)
+    if gen is None:
+        raise ValueError(f"unknown plan kind {kind!r}; expected 'eq14' or 'sphere'")
+    # pose i comes from its own generator seeded by (seed, i): any prefix of a plan is the
+    # plan of that length, and a resumed run regenerates exactly the poses it skipped
+    out = np.empty((n, 4, 4))
+    for i in range(n):
+        out[i] = gen(p0, 1, np.random.default_rng([seed, i]), r_mm=radius_mm,
+                     d_deg=rotation_deg)[0]
+    return out
