@@ -236,9 +236,9 @@ def main(verbose: int) -> None:
     \b
     Typical use:
       tmscal demo                          the whole job on the built-in mock rig
-      tmscal simulate -o sim.jsonl         a simulated session (seed 000's protocol)
+      tmscal simulate -o sim.jsonl         a simulated session (Wang et al. 2018)
       tmscal solve sim.jsonl --train 250   QR36 on 250 poses, errors on the rest
-      tmscal study sim.jsonl --plot f.png  seed 000's Tables 1/3 and Figure 3
+      tmscal study sim.jsonl --plot f.png  convergence: error against the pose count
     \b
     At the rig (or against `tmscal mock CONFIG`):
       tmscal track CONFIG                  live tool poses: are the tools right?
@@ -258,8 +258,8 @@ def main(verbose: int) -> None:
               help="Number of robot poses.")
 @click.option("--plan", type=click.Choice(["eq14", "random"]), default="eq14",
               show_default=True,
-              help="eq14: seed 000's experiment plan (±100 mm, ±10° around P0); random: fully "
-                   "random robot poses (seed 000's simulation).")
+              help="eq14: the experiment plan of Wang et al. 2018 (their Eq. 14: ±100 mm, "
+                   "±10° around P0); random: fully random robot poses (their simulation).")
 @click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
               help="Random seed (≥ 0).")
 @click.option("--samples", type=click.IntRange(1, 10000), default=1, show_default=True,
@@ -280,7 +280,8 @@ def main(verbose: int) -> None:
 def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
              fiducial_sigma: float, robot_rot_sigma: float, robot_trans_sigma: float,
              radius: float | None, rotation: float, marker_only: bool, force: bool) -> None:
-    """Write a simulated session (seed 000's protocol); the header carries the truth."""
+    """Write a simulated session (the simulation of Wang et al. 2018, docs/methods.md); the
+    header carries the truth."""
     from .session import make_header, records_from_arrays, write_session
     from .sim import Noise
     from .sim import simulate as run_sim
@@ -330,7 +331,8 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
           as_json: bool, output: Path | None, plot: Path | None, force: bool,
           strict: bool) -> None:
-    """Solve a session for X, Y, Z and report the errors (seed 000's metrics)."""
+    """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
+    docs/methods.md)."""
     from .report.evaluate import pose_residuals, solve_session
     from .report.text import calibration_yaml, format_result, plot_residuals
     from .session import sha256_of
@@ -363,13 +365,15 @@ def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
 @click.option("--orthonormal", is_flag=True, help="Apply orthonormal matrices.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Write seed 000's Figure 3 (error against n) as a PNG.")
+              help="Write the error against the number of poses as a PNG (as Figure 3 of "
+                   "Wang et al. 2018).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_json: bool,
           plot: Path | None, force: bool, strict: bool) -> None:
-    """Convergence study: seed 000's Tables 1 and 3 and Figure 3 for a session."""
+    """Convergence study of a session: errors against the number of poses, with the statistics
+    and thresholds of Wang et al. 2018 (their Tables 1 and 3, Figure 3; docs/methods.md)."""
     from tqdm import tqdm
 
     from .calib import METHODS
@@ -532,25 +536,27 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
     """Connect to the robot, report its identity and flange pose; optionally jog."""
     from .acquisition.devices import envelope_for, make_robot
     from .config import load_config
-    from .errors import ConfigError
     from .geometry import matrix_from_denso_p
 
+    target = None
+    if move_to is not None:  # parsed before anything connects
+        try:
+            vals = [float(v) for v in move_to.split(",")]
+            if len(vals) != 6 or not np.isfinite(vals).all():
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(f"{move_to!r}: expected 6 finite numbers "
+                                     "X,Y,Z,RX,RY,RZ (mm, deg)", param_hint="--move-to") \
+                from None
+        target = matrix_from_denso_p(vals)
     cfg = load_config(config)
     with make_robot(cfg, envelope_for(cfg, None), host) as rb:
         click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
         here = rb.flange_pose()
         click.echo("flange (base ← flange): " + _pose_line(here))
         click.echo(_matrix_text(here))
-        if move_to is None:
+        if target is None:
             return
-        try:
-            vals = [float(v) for v in move_to.split(",")]
-            if len(vals) != 6:
-                raise ValueError
-        except ValueError:
-            raise ConfigError(f"--move-to {move_to!r}: expected 6 numbers X,Y,Z,RX,RY,RZ "
-                              "(mm, deg)") from None
-        target = matrix_from_denso_p(vals)
         rb.envelope = envelope_for(cfg, here)
         rb.envelope.check_pose(target, "--move-to target")
         v = speed if speed is not None else rb.speed_mm_s

@@ -126,6 +126,8 @@ CASES = [
     ("robot-nan-box", "robot {d}/nan-box.yaml", "workspace_min_mm"),
     ("robot-speed-nan", "robot {d}/good.yaml --speed nan", "--speed"),
     ("robot-speed-neg", "robot {d}/good.yaml --speed -5", "--speed"),
+    ("robot-move-to-words", "robot {d}/good.yaml --move-to 1,2,3", "--move-to"),
+    ("robot-move-to-nan", "robot {d}/good.yaml --move-to 500,0,nan,180,0,0", "--move-to"),
     ("mock-missing", "mock {d}/none.yaml", "none.yaml"),
     ("mock-dir", "mock {d}/folder", "directory"),
     ("demo-config-fifo", "demo --config {d}/fifo", "FIFO"),

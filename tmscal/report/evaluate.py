@@ -99,8 +99,9 @@ def _flat_errors(err: dict[str, Any]) -> dict[str, Any]:
 def study_session(session: Session, methods: list[str], n_max: int = 250, n_min: int = 5,
                   thresholds_mm: tuple[float, ...] = (0.4, 0.3), orthonormal: bool = False,
                   progress: Any = None) -> dict[str, Any]:
-    """Seed 000's convergence study on a session: curves (Figure 3), statistics with the n of
-    each (Tables 1 and 2) and the n after which e_t stays below each threshold (Table 3)."""
+    """The convergence study of Wang et al. (2018) on a session: curves (their Figure 3),
+    statistics with the n of each (Tables 1 and 2) and the n after which e_t stays below each
+    threshold (Table 3)."""
     need_probe = "qr36" in methods
     for m in methods:
         session_arrays(session, m)

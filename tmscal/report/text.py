@@ -60,7 +60,7 @@ def format_result(res: dict[str, Any], show_matrices: bool = True) -> str:
 
 
 def format_study(study: dict[str, Any], paper: dict[str, Any] | None = None) -> str:
-    """Tables 1 and 3 of seed 000 for a study result."""
+    """Tables 1 and 3 of Wang et al. (2018) for a study result."""
     out = [f"convergence study: train on the first n poses (n = {study['n'][0]}…"
            f"{study['n'][-1]}), test on {study['n_test']} later poses", ""]
     hdr = f"  {'method':<7}{'metric':<16}" + "".join(
@@ -84,7 +84,7 @@ def format_study(study: dict[str, Any], paper: dict[str, Any] | None = None) -> 
 
 
 def calibration_yaml(res: dict[str, Any], session_path: str, session_sha256: str) -> str:
-    """The calibration YAML (DESIGN.md): X, Y, Z orthonormal, raw matrices, method, poses
+    """The calibration YAML (docs/conventions.md): X, Y, Z orthonormal, raw matrices, method, poses
     used, held-out errors, and the session's SHA-256. Units mm."""
     doc = {
         "format": "tmscal-calibration",
@@ -108,8 +108,8 @@ def calibration_yaml(res: dict[str, Any], session_path: str, session_sha256: str
 
 
 def plot_study(study: dict[str, Any], path: str, title: str | None = None) -> None:
-    """Seed 000's Figure 3: e_t (and θ_t) against the number of poses, one line per method.
-    Writes a PNG; needs matplotlib (extra ``plot``)."""
+    """Figure 3 of Wang et al. (2018): e_t (and θ_t) against the number of poses, one line
+    per method. Writes a PNG; needs matplotlib (extra ``plot``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
