@@ -314,23 +314,16 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
     t_start = time.monotonic()
     dev = _Devices(cfg, tracker_port, robot_host, robot_port)
     writer: SessionWriter | None = None
-    faults = 0
-    new = 0
-    stopped = False
-    clean = False
+    faults = new = 0
+    stopped = clean = False
     hint = "resume with: " + resume_command(cfg.path, out, tracker_port, robot_host)
     try:
         writer, spec, plan, envelope, st = _start_or_resume(cfg, out, dev, resume, poses,
                                                              samples)
         for note in st.notes:
             log.warning("resuming %s with %s", out, note)
-        assert dev.robot is not None and dev.tracker is not None
         if writer is None:
-            header = make_header(
-                dev.tracker.tools, config=cfg.raw,
-                devices={"robot": dev.robot.identity(), "tracker": dev.tracker.identity()},
-                plan=spec.to_header(), sampling=st.to_header())
-            writer = SessionWriter.create(out, header)
+            writer = _create_session(out, cfg, dev, spec, st)
         done = writer.session.indices()
         t_offset = max((p.time for p in writer.session.poses), default=0.0)
         total = len(plan)
@@ -355,14 +348,26 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
         clean = True
         recs = [p for p in writer.session.poses if p.index < total]
         return AcquireResult(path=out, recorded=sum(p.skipped is None for p in recs),
-                             skipped=sum(p.skipped is not None for p in recs), total=total,
-                             stopped=stopped, faults=faults,
+                             skipped=len(recs) - sum(p.skipped is None for p in recs),
+                             total=total, stopped=stopped, faults=faults,
                              elapsed_s=time.monotonic() - t_start, new_poses=new,
                              notes=st.notes)
     finally:
         dev.close(stop_robot=not clean)
         if writer is not None:
             writer.close()
+
+
+def _create_session(out: Path, cfg: RigConfig, dev: _Devices, spec: PlanSpec,
+                    st: _Settings) -> SessionWriter:
+    """A new session file (locked) whose header records the config, the devices' identity,
+    the plan and the sampling settings."""
+    assert dev.robot is not None and dev.tracker is not None
+    header = make_header(
+        dev.tracker.tools, config=cfg.raw,
+        devices={"robot": dev.robot.identity(), "tracker": dev.tracker.identity()},
+        plan=spec.to_header(), sampling=st.to_header())
+    return SessionWriter.create(out, header)
 
 
 def _valid_or_skipped(rec: PoseRecord) -> PoseRecord:
