@@ -16,6 +16,8 @@ All functions are pure and accept single poses or batches where stated.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -47,15 +49,20 @@ __all__ = [
     "pose_mean",
     "random_rotation",
     "absolute_orientation",
+    "RIGID_TOL_DEFAULT",
 ]
 
-_RIGID_TOL = 1e-6
+#: Rigidity tolerance of :func:`check_poses` and the calibration inputs: the largest accepted
+#: entry of |R Rᵀ − I| and of |det R − 1|. Poses that went through a quaternion, a rotation
+#: vector, Euler angles or a JSON round trip are rigid to ~1e-15; 1e-5 also admits matrices
+#: printed with six or more decimals.
+RIGID_TOL_DEFAULT = 1e-5
 _OFF_L = np.array([0, 1, 2, 0, 1, 2, 3, 4, 5])
 _OFF_R = np.array([3, 4, 5, 6, 7, 8, 6, 7, 8])
 
 
 def check_poses(poses: ArrayLike, name: str = "poses", rigid: bool = True,
-                tol: float = _RIGID_TOL) -> Array:
+                tol: float = RIGID_TOL_DEFAULT) -> Array:
     """Validate and return a batch of 4×4 poses as float64, shape (n, 4, 4).
 
     A single 4×4 is promoted to (1, 4, 4). Raises ``ValueError`` naming ``name`` and quoting
@@ -99,7 +106,7 @@ def _det3(R: np.ndarray) -> np.ndarray:
 
 
 def check_pose(pose: ArrayLike, name: str = "pose", rigid: bool = True,
-               tol: float = _RIGID_TOL) -> Array:
+               tol: float = RIGID_TOL_DEFAULT) -> Array:
     """Validate one 4×4 pose (mm) and return it as float64 (4, 4); see :func:`check_poses`."""
     a = np.asarray(pose, dtype=np.float64)
     if a.shape != (4, 4):
@@ -176,85 +183,88 @@ def orthonormalize(M: ArrayLike) -> Array:
 
 # --- elementary rotations -------------------------------------------------------------
 
-def rot_x(a: ArrayLike) -> Array:
-    """Rotation(s) about x by angle(s) ``a`` in radians, shape (…, 3, 3)."""
+def _elementary_rotation(a: ArrayLike, axis: int) -> Array:
+    """Rotation(s) about coordinate axis ``axis`` (0 = x, 1 = y, 2 = z) by angle(s) ``a`` in
+    radians, shape (…, 3, 3): the right-handed rotation, R e_i = cos a e_i + sin a e_j for the
+    cyclic successors (i, j) of the axis."""
     a = np.asarray(a, dtype=np.float64)
     c, s = np.cos(a), np.sin(a)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
     R = np.zeros(a.shape + (3, 3))
-    R[..., 0, 0] = 1.0
-    R[..., 1, 1] = c
-    R[..., 1, 2] = -s
-    R[..., 2, 1] = s
-    R[..., 2, 2] = c
+    R[..., axis, axis] = 1.0
+    R[..., i, i] = c
+    R[..., i, j] = -s
+    R[..., j, i] = s
+    R[..., j, j] = c
     return R
+
+
+def rot_x(a: ArrayLike) -> Array:
+    """Rotation(s) about x by angle(s) ``a`` in radians, shape (…, 3, 3)."""
+    return _elementary_rotation(a, 0)
 
 
 def rot_y(a: ArrayLike) -> Array:
     """Rotation(s) about y by angle(s) ``a`` in radians, shape (…, 3, 3)."""
-    a = np.asarray(a, dtype=np.float64)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    R[..., 1, 1] = 1.0
-    R[..., 0, 0] = c
-    R[..., 0, 2] = s
-    R[..., 2, 0] = -s
-    R[..., 2, 2] = c
-    return R
+    return _elementary_rotation(a, 1)
 
 
 def rot_z(a: ArrayLike) -> Array:
     """Rotation(s) about z by angle(s) ``a`` in radians, shape (…, 3, 3)."""
-    a = np.asarray(a, dtype=np.float64)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    R[..., 2, 2] = 1.0
-    R[..., 0, 0] = c
-    R[..., 0, 1] = -s
-    R[..., 1, 0] = s
-    R[..., 1, 1] = c
-    return R
+    return _elementary_rotation(a, 2)
 
 
 # --- quaternions (scalar first, as NDI) -------------------------------------------------
+#
+# Hand-written rather than scipy.spatial.transform.Rotation: the NDI codec converts every tool
+# of every frame (``benchmarks/tracker.py`` reads 1,500 frames/s) and the metrics take one
+# rotation angle per test pose. On single rotations these forms take ~10 µs (quaternion →
+# matrix) and ~17 µs (matrix → quaternion) against scipy's ~19 µs and ~77 µs (its from_matrix
+# re-orthonormalises first). tests/unit/test_geometry.py checks both against scipy.
+
+
+def _matrix_terms(w: float, x: float, y: float, z: float) -> np.ndarray:
+    """|q|² R(q) for q = (w, x, y, z): the Euler–Rodrigues formula (as in Horn 1987)."""
+    return np.array([[w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z]])
+
+
+#: 4 q_k q_m of a unit quaternion q = (w, x, y, z) of R, linear in R (Shepperd 1978):
+#: ((k, m), identity term, [(coefficient, row, column) of R]).
+_OUTER_FROM_R = (
+    ((0, 0), 1.0, [(1, 0, 0), (1, 1, 1), (1, 2, 2)]),    # 4w² = 1 + R00 + R11 + R22
+    ((1, 1), 1.0, [(1, 0, 0), (-1, 1, 1), (-1, 2, 2)]),  # 4x² = 1 + R00 − R11 − R22
+    ((2, 2), 1.0, [(-1, 0, 0), (1, 1, 1), (-1, 2, 2)]),  # 4y² = 1 − R00 + R11 − R22
+    ((3, 3), 1.0, [(-1, 0, 0), (-1, 1, 1), (1, 2, 2)]),  # 4z² = 1 − R00 − R11 + R22
+    ((0, 1), 0.0, [(1, 2, 1), (-1, 1, 2)]),              # 4wx = R21 − R12
+    ((0, 2), 0.0, [(1, 0, 2), (-1, 2, 0)]),              # 4wy = R02 − R20
+    ((0, 3), 0.0, [(1, 1, 0), (-1, 0, 1)]),              # 4wz = R10 − R01
+    ((1, 2), 0.0, [(1, 0, 1), (1, 1, 0)]),               # 4xy = R01 + R10
+    ((1, 3), 0.0, [(1, 0, 2), (1, 2, 0)]),               # 4xz = R02 + R20
+    ((2, 3), 0.0, [(1, 1, 2), (1, 2, 1)]),               # 4yz = R12 + R21
+)
+
 
 def _quat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Constant tables: R(q) = (q ⊗ q) · _Q2R / |q|² and 4 q qᵀ = _R2Q_C + vec(R) · _R2Q_L."""
-    def rraw(w: float, x: float, y: float, z: float) -> np.ndarray:
-        return np.array([[w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                         [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
-                         [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z]])
+    """Constant tables turning both conversions into one matrix product each:
+    |q|² vec R(q) = (q ⊗ q) · _Q2R (16 × 9, from :func:`_matrix_terms` on basis quaternions)
+    and vec(4 q qᵀ) = _R2Q_C + vec(R) · _R2Q_L (from :data:`_OUTER_FROM_R`)."""
     E = np.eye(4)
     q2r = np.zeros((16, 9))
     for k in range(4):
         for m in range(4):
             if k == m:
-                q2r[4 * k + m] = rraw(*E[k]).reshape(9)
+                q2r[4 * k + m] = _matrix_terms(*E[k]).reshape(9)
             else:  # symmetric split of the cross term
-                q2r[4 * k + m] = ((rraw(*(E[k] + E[m])) - rraw(*E[k]) - rraw(*E[m])) / 2).reshape(9)
-    # 4 q qᵀ in terms of R (rows: w, x, y, z)
+                cross = _matrix_terms(*(E[k] + E[m])) - _matrix_terms(*E[k]) - _matrix_terms(*E[m])
+                q2r[4 * k + m] = (cross / 2).reshape(9)
     c = np.zeros((4, 4))
-    c[np.diag_indices(4)] = 1.0
     L = np.zeros((9, 4, 4))
-
-    def add(i: int, j: int, k: int, m: int, v: float) -> None:
-        L[3 * i + j, k, m] += v
-        if k != m:
-            L[3 * i + j, m, k] += v
-    for i, sgn in ((0, (1, 1, -1, -1)), (1, (1, -1, 1, -1)), (2, (1, -1, -1, 1))):
-        for k in range(4):
-            add(i, i, k, k, sgn[k])
-    add(2, 1, 0, 1, 1)
-    add(1, 2, 0, 1, -1)
-    add(0, 2, 0, 2, 1)
-    add(2, 0, 0, 2, -1)
-    add(1, 0, 0, 3, 1)
-    add(0, 1, 0, 3, -1)
-    add(0, 1, 1, 2, 1)
-    add(1, 0, 1, 2, 1)
-    add(0, 2, 1, 3, 1)
-    add(2, 0, 1, 3, 1)
-    add(1, 2, 2, 3, 1)
-    add(2, 1, 2, 3, 1)
+    for (k, m), const, terms in _OUTER_FROM_R:
+        c[k, m] = const
+        for coef, i, j in terms:
+            L[3 * i + j, k, m] = L[3 * i + j, m, k] = coef
     return q2r, c.reshape(16), L.reshape(9, 16)
 
 
@@ -262,9 +272,11 @@ _Q2R, _R2Q_C, _R2Q_L = _quat_tables()
 
 
 def matrix_from_quaternion(q: ArrayLike) -> Array:
-    """Rotation matrices (…, 3, 3) from quaternions (…, 4) = (q0, qx, qy, qz).
+    """Rotation matrices (…, 3, 3) from quaternions (…, 4) = (q0, qx, qy, qz), scalar first as
+    in the NDI Polaris Application Program Interface Guide (BX/TX replies).
 
-    The quaternion is normalised first; a zero quaternion raises ``ValueError``.
+    The quaternion is normalised first; a zero quaternion raises ``ValueError``. The formula
+    is Euler–Rodrigues' (as in Horn 1987), evaluated as one product with a constant table.
     """
     q = np.asarray(q, dtype=np.float64)
     n2 = (q * q).sum(axis=-1)
@@ -278,7 +290,9 @@ def quaternion_from_matrix(R: ArrayLike) -> Array:
     """Unit quaternions (…, 4) = (q0, qx, qy, qz), q0 ≥ 0, from rotation matrices (…, 3, 3).
 
     Accepts 4×4 poses too (the rotation block is used). Robust for all angles: 4 q qᵀ is
-    linear in R, and q is read off its column with the largest diagonal entry (Shepperd).
+    linear in R, and q is read off its column with the largest diagonal entry (Shepperd 1978,
+    "Quaternion from rotation matrix", J. Guidance and Control 1(3):223), so no square root of
+    a small number is taken.
     """
     M = np.asarray(R, dtype=np.float64)
     if M.shape[-2:] == (4, 4):
@@ -296,28 +310,33 @@ def quaternion_from_matrix(R: ArrayLike) -> Array:
 
 # --- rotation vectors (UR) -------------------------------------------------------------
 
+def _batched_rotation(values: np.ndarray, build: str, *args: Any, **kw: Any) -> Array:
+    """(…, 3, 3) matrices from (…, k) values through ``scipy.spatial.transform.Rotation.<build>``.
+
+    scipy is imported on first use: it adds ~0.3 s to the import of every tmscal command.
+    """
+    from scipy.spatial.transform import Rotation
+
+    lead = values.shape[:-1]
+    flat = values.reshape(-1, values.shape[-1])
+    return getattr(Rotation, build)(*args, flat, **kw).as_matrix().reshape(lead + (3, 3))
+
+
 def matrix_from_rotvec(rv: ArrayLike) -> Array:
-    """Rotation matrices (…, 3, 3) from rotation vectors (…, 3), axis × angle in radians."""
+    """Rotation matrices (…, 3, 3) from rotation vectors (…, 3), axis × angle in radians (the
+    pose vector of the Universal Robots script manual). scipy's ``Rotation.from_rotvec``."""
     rv = np.asarray(rv, dtype=np.float64)
-    theta = np.linalg.norm(rv, axis=-1)
-    small = theta < 1e-12
-    safe = np.where(small, 1.0, theta)
-    k = rv / safe[..., None]
-    K = np.zeros(rv.shape[:-1] + (3, 3))
-    K[..., 0, 1] = -k[..., 2]
-    K[..., 0, 2] = k[..., 1]
-    K[..., 1, 0] = k[..., 2]
-    K[..., 1, 2] = -k[..., 0]
-    K[..., 2, 0] = -k[..., 1]
-    K[..., 2, 1] = k[..., 0]
-    s = np.sin(theta)[..., None, None]
-    c = np.cos(theta)[..., None, None]
-    R = np.eye(3) + s * K + (1 - c) * (K @ K)
-    return np.where(small[..., None, None], np.eye(3), R)
+    if rv.shape[-1:] != (3,):
+        raise ValueError(f"matrix_from_rotvec: expected (…, 3), got shape {rv.shape}")
+    return _batched_rotation(rv, "from_rotvec")
 
 
 def rotvec_from_matrix(R: ArrayLike) -> Array:
-    """Rotation vectors (…, 3), axis × angle in radians (angle in [0, π]), from (…, 3, 3)."""
+    """Rotation vectors (…, 3), axis × angle in radians (angle in [0, π]), from (…, 3, 3).
+
+    Through :func:`quaternion_from_matrix`: angle = 2 atan2(|v|, w), axis = v / |v| (hand-written
+    because scipy's ``Rotation.from_matrix`` re-orthonormalises and is ~2× slower; the UR mock
+    calls this on every servo step). Tested against scipy's ``as_rotvec``."""
     M = np.asarray(R, dtype=np.float64)
     if M.shape[-2:] == (4, 4):
         M = M[..., :3, :3]
@@ -349,21 +368,24 @@ def rotvec_pose_from_matrix(pose: ArrayLike) -> Array:
 def matrix_from_denso_p(p: ArrayLike) -> Array:
     """4×4 pose (mm) from DENSO P-type values [x, y, z (mm), rx, ry, rz (deg)].
 
-    R = Rz(rz) · Ry(ry) · Rx(rx): rotations about the fixed base axes, RX applied first.
-    Extra trailing values (the ``fig`` code) are ignored.
+    R = Rz(rz) · Ry(ry) · Rx(rx): rotations about the fixed base axes, RX applied first (the
+    DENSO RC8 programmer's manual, P-type; scipy's extrinsic "xyz" Euler angles). Extra
+    trailing values (the ``fig`` code) are ignored.
     """
     v = np.asarray(p, dtype=np.float64)
     if v.shape[-1] < 6:
         raise ValueError(f"matrix_from_denso_p: expected ≥ 6 values, got shape {v.shape}")
-    a = np.radians(v[..., 3:6])
-    R = rot_z(a[..., 2]) @ rot_y(a[..., 1]) @ rot_x(a[..., 0])
+    R = _batched_rotation(v[..., 3:6], "from_euler", "xyz", degrees=True)
     return make_pose(R, v[..., :3])
 
 
 def denso_p_from_matrix(pose: ArrayLike) -> Array:
     """DENSO P-type [x, y, z (mm), rx, ry, rz (deg)] from a 4×4 pose in mm.
 
-    Inverse of :func:`matrix_from_denso_p`; ry is returned in [−90°, 90°].
+    Inverse of :func:`matrix_from_denso_p`; ry is returned in [−90°, 90°], and at gimbal lock
+    (|ry| = 90°) rz = 0. The closed form of the fixed-axis XYZ angles (Craig, Introduction to
+    Robotics, sect. 2.8), hand-written because scipy's ``as_euler`` re-orthonormalises (~2×
+    slower) and warns at gimbal lock; tested against scipy's ``as_euler("xyz")``.
     """
     T = np.asarray(pose, dtype=np.float64)
     R = T[..., :3, :3]

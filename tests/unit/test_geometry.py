@@ -21,7 +21,7 @@ def test_quaternion_round_trip_batched_and_scalar_first_positive():
     np.testing.assert_allclose(g.matrix_from_quaternion(q), R, atol=1e-12)
 
 
-def test_rotvec_hand_worked():
+def test_rotvec_and_ur_pose_vector_hand_worked():
     R = g.matrix_from_rotvec([0.0, 0.0, np.pi / 2])
     np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
     np.testing.assert_allclose(g.rotvec_from_matrix(np.eye(3)), [0, 0, 0], atol=1e-15)
@@ -42,7 +42,7 @@ def test_denso_p_hand_worked():
     np.testing.assert_allclose(g.denso_p_from_matrix(T), [0, 0, 0, 90, 0, 90], atol=1e-12)
 
 
-def test_compose_invert():
+def test_compose_with_inverse_gives_identity():
     rng = np.random.default_rng(1)
     T = g.make_pose(g.random_rotation(rng, 5), rng.normal(0, 100, (5, 3)))
     np.testing.assert_allclose(g.compose(T, g.invert(T)), np.broadcast_to(np.eye(4), T.shape),
@@ -61,7 +61,7 @@ def test_orthonormalize_fixes_reflection_and_keeps_translation():
     np.testing.assert_allclose(Q[:3, 3], [1, 2, 3])
 
 
-def test_rotation_angle_and_mean():
+def test_rotation_angle_30deg_and_mean_of_symmetric_spread():
     R = g.rot_x(np.radians(30.0))
     assert np.degrees(g.rotation_angle(R)) == pytest.approx(30.0)
     # symmetric spread around a rotation averages back to it
@@ -88,3 +88,72 @@ def test_check_pose_errors_quote_shape_and_problem():
     shear[0, 1] = 0.3
     with pytest.raises(ValueError, match="not rigid"):
         g.check_pose(shear)
+
+
+# --- the conversions against scipy.spatial.transform.Rotation over random rotations -----------
+
+_SCIPY_N = 500
+
+
+def _random_rotations(seed: int) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+    return Rotation.random(_SCIPY_N, random_state=seed).as_matrix()
+
+
+def test_matrix_from_quaternion_matches_scipy_scalar_first():
+    from scipy.spatial.transform import Rotation
+    q = np.random.default_rng(10).standard_normal((_SCIPY_N, 4))  # not normalised on purpose
+    want = Rotation.from_quat(q, scalar_first=True).as_matrix()
+    np.testing.assert_allclose(g.matrix_from_quaternion(q), want, atol=1e-14)
+
+
+def test_quaternion_from_matrix_matches_scipy_up_to_sign():
+    from scipy.spatial.transform import Rotation
+    R = _random_rotations(11)
+    want = Rotation.from_matrix(R).as_quat(scalar_first=True)
+    want *= np.where(want[:, :1] < 0, -1.0, 1.0)  # tmscal returns q0 ≥ 0
+    np.testing.assert_allclose(g.quaternion_from_matrix(R), want, atol=1e-14)
+
+
+def test_rotvec_conversions_match_scipy_both_ways():
+    from scipy.spatial.transform import Rotation
+    R = _random_rotations(12)
+    rv = Rotation.from_matrix(R).as_rotvec()
+    np.testing.assert_allclose(g.rotvec_from_matrix(R), rv, atol=1e-12)
+    np.testing.assert_allclose(g.matrix_from_rotvec(rv), R, atol=1e-14)
+
+
+def test_denso_p_is_scipy_extrinsic_xyz_both_ways():
+    from scipy.spatial.transform import Rotation
+    R = _random_rotations(13)
+    rpy = Rotation.from_matrix(R).as_euler("xyz", degrees=True)  # ry in [−90°, 90°]
+    xyz = np.random.default_rng(13).uniform(-500, 500, (_SCIPY_N, 3))
+    T = g.matrix_from_denso_p(np.concatenate([xyz, rpy], axis=1))
+    np.testing.assert_allclose(T[:, :3, :3], R, atol=1e-14)
+    np.testing.assert_allclose(T[:, :3, 3], xyz)
+    np.testing.assert_allclose(g.denso_p_from_matrix(g.make_pose(R, xyz)),
+                               np.concatenate([xyz, rpy], axis=1), atol=1e-9)
+
+
+def test_elementary_rotations_match_scipy():
+    from scipy.spatial.transform import Rotation
+    a = np.random.default_rng(14).uniform(-np.pi, np.pi, _SCIPY_N)
+    for axis, rot in zip("xyz", (g.rot_x, g.rot_y, g.rot_z)):
+        want = Rotation.from_euler(axis, a[:, None]).as_matrix()
+        np.testing.assert_allclose(rot(a), want, atol=1e-15)
+
+
+def test_rotation_angle_matches_scipy_magnitude():
+    from scipy.spatial.transform import Rotation
+    R = _random_rotations(15)
+    np.testing.assert_allclose(g.rotation_angle(R), Rotation.from_matrix(R).magnitude(),
+                               atol=1e-12)
+
+
+def test_check_poses_tolerance_is_the_public_default():
+    P = np.eye(4)
+    P[0, 0] += 0.4 * g.RIGID_TOL_DEFAULT  # |R Rᵀ − I| ≈ 0.8 tol: accepted
+    g.check_pose(P)
+    P[0, 0] = 1.0 + 2 * g.RIGID_TOL_DEFAULT  # ≈ 4 tol: rejected
+    with pytest.raises(ValueError, match="not rigid"):
+        g.check_pose(P)

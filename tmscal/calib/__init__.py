@@ -5,7 +5,7 @@ Use without any hardware code::
     from tmscal.calib import solve
     cal = solve(A, B, C, method="qr36")      # A, B, C: (n, 4, 4) mm
     cal.X, cal.Y, cal.Z                      # orthonormal 4×4 mm
-    cal.errors(A_test, B_test, C_test)       # seed 000's hold-out metrics
+    cal.errors(A_test, B_test, C_test)       # hold-out metrics (docs/methods.md)
 
 Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
 X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker.
@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
-from ..geometry import check_poses
+from ..geometry import RIGID_TOL_DEFAULT, check_poses
 from .linear import design_matrix, orthonormal_from_raw, solve_linear
 from .metrics import coil_placement_errors, holdout_errors, noise_floor, truth_errors
 
@@ -63,7 +63,8 @@ class Calibration:
 
     def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
                ) -> dict[str, Any]:
-        """Seed 000's errors on the poses given (n, 4, 4): per body "trans_mm", "rot_deg";
+        """Hold-out errors of Wang et al. (2018) on the poses given (n, 4, 4), as defined in
+        docs/methods.md: per body "trans_mm", "rot_deg";
         "e_t_mm", "theta_t_deg"; "e_z_mm", "theta_z_deg" for QR24 on two bodies."""
         u = self.used()
         bodies = {"marker": B}
@@ -78,12 +79,14 @@ class Calibration:
 
 def check_inputs(A: Any, B: Any, C: Any = None) -> tuple[np.ndarray, np.ndarray,
                                                          np.ndarray | None]:
-    """Validate pose arrays (n, 4, 4) mm: equal counts, finite, rigid (tolerance 1e-5).
-    Raises CalibrationError naming the array and pose."""
+    """Validate pose arrays (n, 4, 4) mm: equal counts, finite, rigid (within
+    :data:`tmscal.geometry.RIGID_TOL_DEFAULT`). Raises CalibrationError naming the array and
+    pose."""
     try:
-        A = check_poses(A, "A (base_from_flange)", tol=1e-5)
-        B = check_poses(B, "B (tracker_from_marker)", tol=1e-5)
-        C = None if C is None else check_poses(C, "C (tracker_from_probe)", tol=1e-5)
+        A = check_poses(A, "A (base_from_flange)", tol=RIGID_TOL_DEFAULT)
+        B = check_poses(B, "B (tracker_from_marker)", tol=RIGID_TOL_DEFAULT)
+        C = None if C is None else check_poses(C, "C (tracker_from_probe)",
+                                               tol=RIGID_TOL_DEFAULT)
     except ValueError as e:
         raise CalibrationError(str(e)) from None
     for name, arr in (("B", B), ("C", C)):
@@ -97,9 +100,10 @@ def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool
     """Solve the calibration from poses A (base_from_flange), B (tracker_from_marker) and
     optionally C (tracker_from_probe), each (n, 4, 4) in mm.
 
-    method "qr36" (needs C): X, Y, Z jointly (seed 000). "qr24": marker alone (X, Z), and, if
-    C is given, the probe separately (Y, Z_probe). ``orthonormal`` selects which matrices are
-    applied by :meth:`Calibration.errors` (default: the raw matrices, the paper's way).
+    method "qr36" (needs C): X, Y, Z jointly (Wang et al. 2018). "qr24": marker alone (X, Z),
+    and, if C is given, the probe separately (Y, Z_probe). ``orthonormal`` selects which
+    matrices are applied by :meth:`Calibration.errors` (default: the raw matrices, the paper's
+    way).
     Raises CalibrationError for unusable data (fewer than 3 poses, degenerate rotations,
     non-rigid or NaN poses, qr36 without C).
     """

@@ -1,10 +1,10 @@
 """QR24 and QR36: linear least squares for AX = ZB (and AY = ZC) with the robot side inverted.
 
-Notation (DESIGN.md): A_i = base_from_flange, B_i = tracker_from_marker,
+Notation (README.md, docs/conventions.md): A_i = base_from_flange, B_i = tracker_from_marker,
 C_i = tracker_from_probe, X = flange_from_marker, Y = flange_from_probe,
 Z = base_from_tracker; 4×4, mm.
 
-Robot side inverted (seed 000, after Ernst et al. 2012): A_i⁻¹ Z B_i = X. With R, t the
+Robot side inverted (Wang et al. 2018, after Ernst et al. 2012): A_i⁻¹ Z B_i = X. With R, t the
 rotation and translation of A_i⁻¹ and the unknowns' top 3×4 blocks vectorised column-major
 (vec M[3·col + row] = M[row, col]), each pose contributes 12 rows
 

@@ -1,4 +1,4 @@
-"""Error metrics of seed 000 (Eqs. 8–13, reconstructed in METHODS.md) and ground-truth errors.
+"""Hold-out error metrics of Wang et al. (2018) and ground-truth errors (docs/methods.md).
 
 Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
 X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4, mm.
@@ -26,15 +26,10 @@ __all__ = ["body_errors", "holdout_errors", "truth_errors", "coil_placement_erro
            "noise_floor"]
 
 
-def _affine_inv(M: np.ndarray) -> np.ndarray:
-    """Inverse of (…, 4, 4) affine matrices with last row 0001 (general 3×3 block)."""
-    return np.linalg.inv(M)
-
-
 def body_errors(A: np.ndarray, N: np.ndarray, X: np.ndarray, Z: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-pose (e_trans mm, θ deg) of E = (A X)⁻¹ Z N for poses A, N (n, 4, 4)."""
-    E = _affine_inv(A @ X) @ (Z @ N)
+    E = np.linalg.inv(A @ X) @ (Z @ N)  # general inverse: raw X, Z are affine, not rigid
     O = orthonormalize(E)
     return np.linalg.norm(O[:, :3, 3], axis=1), np.degrees(rotation_angle(O))
 

@@ -1,5 +1,6 @@
-"""Convergence study (seed 000, Tables 1 and 3, Figure 3): train on the first n poses for
-n = n_min … n_max, test on the poses after n_max, and summarise the error curve.
+"""Convergence study (Wang et al. 2018, Tables 1 and 3, Figure 3; docs/methods.md): train on
+the first n poses for n = n_min … n_max, test on the poses after n_max, and summarise the
+error curve.
 
 Frames as everywhere: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe;
 (n, 4, 4) mm. Errors in mm and degrees.
@@ -22,7 +23,7 @@ def convergence(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
                 methods: Sequence[str] = ("qr24", "qr36"), n_min: int = 5, n_max: int = 250,
                 orthonormal: bool = False, progress: Any = None) -> dict[str, Any]:
     """Error curves for each method. The test set is every pose from index ``n_max`` on
-    (seed 000: train on P1…Pn, test on P251…P500); needs more than ``n_max`` poses.
+    (Wang et al. 2018: train on P1…Pn, test on P251…P500); needs more than ``n_max`` poses.
 
     Returns {"n": [..], "n_test": int, "methods": {name: {"e_t_mm": [..], "theta_t_deg": [..],
     "marker_trans_mm": [..], …, "e_z_mm": [..] (qr24 with probe)}}}. ``progress`` is an

@@ -1,4 +1,5 @@
-"""The simulated rig (seed 000's simulation protocol, after Ernst et al. 2012).
+"""The simulated rig: the simulation protocol of Wang et al. (2018), after Ernst et al. (2012);
+see docs/methods.md.
 
 Frames: ``base_from_flange`` (A), ``tracker_from_<body>`` (B for the marker, C for the probe),
 ``flange_from_<body>`` (X for the marker, Y for the probe), ``base_from_tracker`` (Z). All
@@ -40,8 +41,8 @@ from ..geometry import (
 
 #: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
 #: 56, 89, 62 mm). Sphere centres in the tool frame, mm; the origin is the centroid. The
-#: exact ROM geometry was a figure in seed 000; this planar layout reproduces those distances
-#: to within 2 mm, which is what matters for the noise of Horn's fit.
+#: exact ROM geometry was a figure in Wang et al. (2018); this planar layout reproduces those
+#: distances to within 2 mm, which is what matters for the noise of Horn's fit.
 TOOL_8700340_MM = np.array([
     [0.0, 0.0, 0.0],
     [50.0, 0.0, 0.0],
@@ -77,8 +78,8 @@ class Truth:
 
     @classmethod
     def random(cls, rng: np.random.Generator, with_probe: bool = True) -> Truth:
-        """Seed 000's truth: random rotations; t(X), t(Y) entries uniform in [−50, 50] mm;
-        t(Z) entries of magnitude uniform in [500, 2000] mm with random sign."""
+        """The truth of Wang et al. (2018): random rotations; t(X), t(Y) entries uniform in
+        [−50, 50] mm; t(Z) entries of magnitude uniform in [500, 2000] mm with random sign."""
         def rnd_small() -> np.ndarray:
             return make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
         X = rnd_small()
@@ -99,8 +100,8 @@ def tms_rig_truth(distance_mm: float = 1500.0) -> Truth:
     The coil hangs below the flange: the marker sits on top of the coil (X: 60 mm along the
     tool axis, tilted 15°) and the probe at the coil's effective centre (Y: 110 mm along the
     tool axis). The tracker stands ``distance_mm`` away from the coil at P0, looking at it, so
-    both tools appear near (0, 0, −distance) in tracker coordinates, like seed 000's set-up
-    (|x|, |y| < 100 mm, z ≈ −1500 mm). All 4×4, mm.
+    both tools appear near (0, 0, −distance) in tracker coordinates, like the set-up of Wang et
+    al. (2018) (|x|, |y| < 100 mm, z ≈ −1500 mm). All 4×4, mm.
     """
     from ..geometry import rot_x, rot_z
     X = make_pose(rot_z(np.radians(30)) @ rot_x(np.radians(-15)), [12.0, -8.0, 60.0])
@@ -118,7 +119,7 @@ def tms_rig_truth(distance_mm: float = 1500.0) -> Truth:
 @dataclass(frozen=True)
 class Noise:
     """Noise model: tracker fiducial σ (mm), robot positioning error σ (deg, mm) per move,
-    optional robot reading jitter σ (deg, mm) per read. Defaults are seed 000's."""
+    optional robot reading jitter σ (deg, mm) per read. Defaults are those of Wang et al. (2018)."""
 
     fiducial_sigma_mm: float = 0.05
     robot_rot_sigma_deg: float = 0.05
@@ -227,7 +228,8 @@ class SimRig:
 
 def facing_start(truth: Truth, distance_mm: float = 1500.0) -> np.ndarray:
     """A start pose P0 (base_from_flange, mm) that puts the marker at (0, 0, −distance) in
-    tracker coordinates, as in seed 000's experiment (tools near the volume's centre)."""
+    tracker coordinates, as in the experiment of Wang et al. (2018): tools near the centre of
+    the measurement volume."""
     target = make_pose(np.eye(3), [0.0, 0.0, -distance_mm])
     return compose(truth.Z, target, invert(truth.X))
 
@@ -236,8 +238,8 @@ def simulate(n: int, rng: np.random.Generator, plan: str = "eq14", noise: Noise 
              truth: Truth | None = None, samples: int = 1, with_probe: bool = True,
              radius_mm: float | None = None, rotation_deg: float = 10.0
              ) -> tuple[Truth, dict[str, np.ndarray]]:
-    """Seed 000's simulation: a truth (random unless given), n poses by ``plan`` ("random":
-    fully random robot poses; "eq14": Eq. 14 around a P0 facing the tracker), and noisy
+    """The simulation of Wang et al. (2018): a truth (random unless given), n poses by ``plan``
+    ("random": fully random robot poses; "eq14": Eq. 14 around a P0 facing the tracker), and noisy
     observations, ``samples`` of them averaged per pose (chordal mean).
 
     Returns (truth, {"A", "commanded", "marker", ["probe"]}) with (n, 4, 4) mm arrays.
