@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from tmscal.drivers.base import Envelope
-from tmscal.drivers.denso.bcap import (
+from tmscal.drivers.denso.client import BCAPClient
+from tmscal.drivers.denso.hresult import (
     E_ACCESSDENIED,
     E_BUSY_PROC,
     E_EMERGENCY_STOP,
@@ -22,6 +23,14 @@ from tmscal.drivers.denso.bcap import (
     E_MOTOR_OFF,
     S_EXECUTING,
     S_OK,
+)
+from tmscal.drivers.denso.packet import (
+    Fn,
+    PacketFramer,
+    encode_packet,
+)
+from tmscal.drivers.denso.robot import DensoRobot
+from tmscal.drivers.denso.variant import (
     VT_ARRAY,
     VT_BSTR,
     VT_I2,
@@ -29,13 +38,8 @@ from tmscal.drivers.denso.bcap import (
     VT_R4,
     VT_UI4,
     VT_VARIANT,
-    BCAPClient,
-    Fn,
-    PacketFramer,
     Variant,
-    encode_packet,
 )
-from tmscal.drivers.denso.robot import DensoRobot
 from tmscal.errors import (
     ConfigError,
     ConnectionLost,

@@ -14,18 +14,22 @@ import numpy as np
 import pytest
 
 from tmscal.drivers.base import wait_until
-from tmscal.drivers.denso.bcap import (
+from tmscal.drivers.denso.hresult import (
     E_INVALIDARG,
     S_EXECUTING,
     S_OK,
-    VT_ARRAY,
-    VT_I4,
-    VT_R8,
+)
+from tmscal.drivers.denso.packet import (
     Fn,
     Packet,
     PacketFramer,
-    Variant,
     encode_packet,
+)
+from tmscal.drivers.denso.variant import (
+    VT_ARRAY,
+    VT_I4,
+    VT_R8,
+    Variant,
 )
 from tmscal.geometry import make_pose, rotvec_pose_from_matrix
 from tmscal.mocks.clock import FAST, REAL_TIME

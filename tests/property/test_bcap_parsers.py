@@ -9,13 +9,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
-from tmscal.drivers.denso import bcap as b
-from tmscal.drivers.denso.bcap import (
+from tmscal.drivers.denso import variant as b
+from tmscal.drivers.denso.packet import (
     PacketFramer,
-    Variant,
     decode_packet,
-    decode_variant,
     encode_packet,
+)
+from tmscal.drivers.denso.variant import (
+    Variant,
+    decode_variant,
     encode_variant,
 )
 from tmscal.errors import ProtocolError

@@ -16,15 +16,17 @@ from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
 from tests.property.test_bcap_parsers import variants
-from tmscal.drivers.denso import bcap as b
-from tmscal.drivers.denso.bcap import (
+from tmscal.drivers.denso import variant as b
+from tmscal.drivers.denso.client import finite_numbers
+from tmscal.drivers.denso.packet import (
     Packet,
     PacketFramer,
-    Variant,
     decode_packet,
-    decode_variant,
     encode_packet,
-    finite_numbers,
+)
+from tmscal.drivers.denso.variant import (
+    Variant,
+    decode_variant,
 )
 from tmscal.drivers.ndi import protocol as p
 from tmscal.errors import ProtocolError

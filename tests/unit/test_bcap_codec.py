@@ -9,15 +9,25 @@ from decimal import Decimal
 
 import pytest
 
-from tmscal.drivers.denso.bcap import (
+from tmscal.drivers.denso.hresult import (
     E_BUSY_PROC,
     E_INVALIDPACKET,
+    S_OK,
+    hresult_name,
+)
+from tmscal.drivers.denso.packet import (
     MAX_ARGUMENTS,
+    MAX_PACKET_SIZE,
+    Fn,
+    PacketFramer,
+    decode_packet,
+    encode_packet,
+    next_serial,
+)
+from tmscal.drivers.denso.variant import (
     MAX_ARRAY_ELEMENTS,
     MAX_NESTING,
-    MAX_PACKET_SIZE,
     MAX_VARIANTS,
-    S_OK,
     VT_ARRAY,
     VT_BOOL,
     VT_BSTR,
@@ -36,16 +46,10 @@ from tmscal.drivers.denso.bcap import (
     VT_UI4,
     VT_UI8,
     VT_VARIANT,
-    Fn,
-    PacketFramer,
     Variant,
     date_from_datetime,
-    decode_packet,
     decode_variant,
-    encode_packet,
     encode_variant,
-    hresult_name,
-    next_serial,
     to_variant,
 )
 from tmscal.errors import ProtocolError

@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from ..drivers.denso.bcap import (
+from ..drivers.denso.hresult import (
     E_ACCESSDENIED,
     E_BUSY_PROC,
     E_CAO_OBJECT_NOTFOUND,
@@ -64,6 +64,16 @@ from ..drivers.denso.bcap import (
     E_NOTIMPL,
     S_EXECUTING,
     S_OK,
+    hresult_name,
+)
+from ..drivers.denso.packet import (
+    Fn,
+    PacketFramer,
+    decode_packet,
+    encode_packet,
+    function_name,
+)
+from ..drivers.denso.variant import (
     VT_ARRAY,
     VT_BOOL,
     VT_BSTR,
@@ -79,13 +89,7 @@ from ..drivers.denso.bcap import (
     VT_UI4,
     VT_UI8,
     VT_VARIANT,
-    Fn,
-    PacketFramer,
     Variant,
-    decode_packet,
-    encode_packet,
-    function_name,
-    hresult_name,
 )
 from ..errors import ProtocolError
 from ..geometry import denso_p_from_matrix, matrix_from_denso_p

@@ -35,7 +35,8 @@ import numpy as np
 from ...errors import DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
-from .bcap import DEFAULT_PORT, BCAPClient, to_variant
+from .client import DEFAULT_PORT, BCAPClient
+from .variant import to_variant
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +145,7 @@ class DensoRobot(Robot):
     @property
     def client(self) -> BCAPClient:
         if self._client is None:
-            raise DeviceError("denso: not connected", device="denso")
+            raise DeviceError(f"{self.name}: not connected", device=self.name)
         return self._client
 
     def _open(self) -> None:
@@ -234,7 +235,8 @@ class DensoRobot(Robot):
         p = self.client.cur_pos(self._robot)  # type, length and finiteness checked there
         T = matrix_from_denso_p(p[:6])
         if not np.isfinite(T).all():  # pragma: no cover - finite P-type gives a finite pose
-            raise ProtocolError(f"denso: CurPos {p} gives a non-finite pose", device="denso")
+            raise ProtocolError(f"{self.name}: CurPos {p} gives a non-finite pose",
+                                device=self.name)
         return T
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
