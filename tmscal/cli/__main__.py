@@ -1,0 +1,5 @@
+"""``python -m tmscal.cli``: the same as the ``tmscal`` command."""
+
+from . import main
+
+main()

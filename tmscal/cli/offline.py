@@ -1,0 +1,179 @@
+"""Commands without devices: ``simulate``, ``solve``, ``study``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+import numpy as np
+
+from . import (
+    FORCE_HELP,
+    INPUT_FILE,
+    STRICT_HELP,
+    _Finite,
+    _plot,
+    _print_json,
+    _read_session,
+    _write_atomic,
+    check_outputs,
+    handle_errors,
+    main,
+)
+
+# --- simulate -------------------------------------------------------------------------------
+
+@main.command()
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Session file to write (JSON Lines).")
+@click.option("--poses", type=click.IntRange(1, 100000), default=500, show_default=True,
+              help="Number of robot poses.")
+@click.option("--plan", type=click.Choice(["eq14", "random"]), default="eq14",
+              show_default=True,
+              help="eq14: the experiment plan of Wang et al. 2018 (their Eq. 14: ±100 mm, "
+                   "±10° around P0); random: fully random robot poses (their simulation).")
+@click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
+              help="Random seed (≥ 0).")
+@click.option("--samples", type=click.IntRange(1, 10000), default=1, show_default=True,
+              help="Tracker observations averaged per pose.")
+@click.option("--fiducial-sigma", type=_Finite(0, 100), default=0.05, show_default=True,
+              help="Tracker fiducial noise σ per coordinate, mm.")
+@click.option("--robot-rot-sigma", type=_Finite(0, 90), default=0.05, show_default=True,
+              help="Robot rotation noise σ, degrees.")
+@click.option("--robot-trans-sigma", type=_Finite(0, 100), default=0.05,
+              show_default=True, help="Robot translation noise σ per axis, mm.")
+@click.option("--radius", type=_Finite(0, 1e5), default=None,
+              help="Translation range ±mm per axis (default 100 for eq14, 500 for random).")
+@click.option("--rotation", type=_Finite(0, 180), default=10.0, show_default=True,
+              help="eq14 rotation range ±degrees per axis.")
+@click.option("--marker-only", is_flag=True, help="Simulate the marker only (no probe).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@handle_errors
+def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
+             fiducial_sigma: float, robot_rot_sigma: float, robot_trans_sigma: float,
+             radius: float | None, rotation: float, marker_only: bool, force: bool) -> None:
+    """Write a simulated session (the simulation of Wang et al. 2018, docs/methods.md); the
+    header carries the truth."""
+    from ..session import make_header, records_from_arrays, write_session
+    from ..sim import Noise
+    from ..sim import simulate as run_sim
+
+    check_outputs({"--output": output}, [], force)
+    if force and output.exists():
+        output.unlink()
+    rng = np.random.default_rng(seed)
+    noise = Noise(fiducial_sigma, robot_rot_sigma, robot_trans_sigma)
+    truth, d = run_sim(poses, rng, plan=plan, noise=noise, samples=samples,
+                       with_probe=not marker_only, radius_mm=radius, rotation_deg=rotation)
+    bodies = ["marker"] if marker_only else ["marker", "probe"]
+    header = make_header(
+        bodies, truth=truth.as_dict(),
+        config={"simulate": {"poses": poses, "plan": plan, "seed": seed, "samples": samples,
+                             "fiducial_sigma_mm": fiducial_sigma,
+                             "robot_rot_sigma_deg": robot_rot_sigma,
+                             "robot_trans_sigma_mm": robot_trans_sigma,
+                             "radius_mm": radius, "rotation_deg": rotation}},
+        devices={"robot": {"driver": "sim"}, "tracker": {"driver": "sim"}})
+    recs = records_from_arrays(d["A"], d["marker"], d.get("probe"), d["commanded"], samples)
+    write_session(output, header, recs, overwrite=force)
+    click.echo(f"wrote {output}: {poses} poses ({plan} plan, seed {seed}), bodies "
+               f"{', '.join(bodies)}, truth in the header")
+
+
+# --- solve ----------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("session_file", type=INPUT_FILE)
+@click.option("--method", type=click.Choice(["qr36", "qr24"]), default="qr36",
+              show_default=True, help="qr36: X, Y, Z jointly; qr24: each body on its own.")
+@click.option("--train", type=int, default=None,
+              help="Solve on poses [0, N) and report errors on the rest (default: all poses, "
+                   "errors in-sample).")
+@click.option("--orthonormal", is_flag=True,
+              help="Apply the orthonormal matrices (rotations projected, translations "
+                   "re-solved) instead of the raw non-orthogonal ones (the paper's way).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the calibration YAML here.")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write a PNG of the per-pose errors (spot outlier poses).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
+@handle_errors
+def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
+          as_json: bool, output: Path | None, plot: Path | None, force: bool,
+          strict: bool) -> None:
+    """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
+    docs/methods.md)."""
+    from ..report.evaluate import pose_residuals, solve_session
+    from ..report.text import calibration_yaml, format_result, plot_residuals
+    from ..session import sha256_of
+
+    check_outputs({"--output": output, "--plot": plot}, [session_file], force)
+    session = _read_session(session_file, strict)
+    cal, res = solve_session(session, method=method, train=train, orthonormal=orthonormal)
+    if output is not None:
+        _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
+    if plot is not None:
+        _plot(plot_residuals, pose_residuals(session, cal), res["n_solve"], str(plot),
+              f"{session_file.name}: {res['method']} per-pose errors")
+    if as_json:
+        _print_json(res)
+    else:
+        click.echo(format_result(res))
+        for f in (output, plot):
+            if f is not None:
+                click.echo(f"\nwrote {f}")
+
+
+# --- study ----------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("session_file", type=INPUT_FILE)
+@click.option("--methods", default="qr24,qr36", show_default=True,
+              help="Comma-separated methods to compare.")
+@click.option("--n-max", type=click.IntRange(5), default=250, show_default=True,
+              help="Largest training set; poses from n-max on are the test set.")
+@click.option("--orthonormal", is_flag=True, help="Apply orthonormal matrices.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the error against the number of poses as a PNG (as Figure 3 of "
+                   "Wang et al. 2018).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
+@handle_errors
+def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_json: bool,
+          plot: Path | None, force: bool, strict: bool) -> None:
+    """Convergence study of a session: errors against the number of poses, with the statistics
+    and thresholds of Wang et al. 2018 (their Tables 1 and 3, Figure 3; docs/methods.md)."""
+    from tqdm import tqdm
+
+    from ..calib import METHODS
+    from ..errors import CalibrationError
+    from ..report.evaluate import study_session
+    from ..report.text import format_study, plot_study
+
+    ms = [m.strip().lower() for m in methods.split(",") if m.strip()]
+    bad = [m for m in ms if m not in METHODS]
+    if not ms or bad:
+        raise CalibrationError(f"--methods: unknown method {bad[0] if bad else '(none)'}; "
+                               f"known: {', '.join(METHODS)}")
+    check_outputs({"--plot": plot}, [session_file], force)
+    session = _read_session(session_file, strict)
+    total = len(ms) * max(0, n_max - 4)
+    with tqdm(total=total, desc="solving", unit="solve", disable=None, file=sys.stderr,
+              leave=False) as bar:
+        res = study_session(session, ms, n_max=n_max, orthonormal=orthonormal,
+                            progress=bar.update)
+    if plot is not None:
+        _plot(plot_study, res, str(plot),
+              title=f"{session_file.name}: hold-out error on {res['n_test']} poses")
+    if as_json:
+        _print_json(res)
+    else:
+        click.echo(format_study(res))
+        if plot is not None:
+            click.echo(f"\nwrote {plot}")
+
+

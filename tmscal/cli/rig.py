@@ -1,0 +1,392 @@
+"""Commands at the rig (or against ``tmscal mock``): ``mock``, ``track``, ``robot``,
+``acquire``, ``demo``."""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from . import (
+    EXIT_INTERRUPTED,
+    FORCE_HELP,
+    INPUT_FILE,
+    _fail,
+    _Finite,
+    _print_json,
+    _same_file,
+    check_outputs,
+    handle_errors,
+    main,
+)
+
+# --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
+
+def _default_demo_config() -> Path:
+    return Path(__file__).resolve().parents[2] / "configs" / "mock-ur-polaris.yaml"
+
+
+def _matrix_text(T: np.ndarray) -> str:
+    from ..report.text import format_matrix
+    return format_matrix(T)
+
+
+def _pose_line(T: np.ndarray) -> str:
+    from ..geometry import denso_p_from_matrix
+    p = denso_p_from_matrix(T)
+    return (f"x {p[0]:9.2f}  y {p[1]:9.2f}  z {p[2]:9.2f} mm   "
+            f"rx {p[3]:8.3f}  ry {p[4]:8.3f}  rz {p[5]:8.3f} deg")
+
+
+class _StopFlag:
+    """First SIGINT/SIGTERM sets the flag (finish the pose in flight); a second SIGINT raises
+    KeyboardInterrupt."""
+
+    def __init__(self) -> None:
+        self.set = False
+
+    def __call__(self) -> bool:
+        return self.set
+
+    def install(self) -> None:
+        import signal
+
+        def handler(signum: int, frame: Any) -> None:
+            if self.set and signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            self.set = True
+            click.echo("\nstopping after the pose in flight (Ctrl-C again to abort now)",
+                       err=True)
+
+        signal.signal(signal.SIGINT, handler)
+        signal.signal(signal.SIGTERM, handler)
+
+
+@main.command()
+@click.argument("config", type=INPUT_FILE)
+@click.option("--transport", type=click.Choice(["config", "pty", "tcp"]), default="config",
+              show_default=True,
+              help="Tracker transport: config = TCP on the config's socket:// port (else a "
+                   "pty); pty = a new /dev/pts; tcp = an ephemeral loopback port.")
+@click.option("--json", "as_json", is_flag=True,
+              help='Print the endpoints as one JSON object on the first line, e.g. '
+                   '{"tracker": "/dev/pts/7", "robot": "127.0.0.2"}.')
+@handle_errors
+def mock(config: Path, transport: str, as_json: bool) -> None:
+    """Serve the mock devices of a rig config (one shared sim rig) until Ctrl-C / SIGTERM."""
+    import signal
+    import threading
+
+    from ..config import load_config
+    from ..mocks.rig import start_mock_rig
+
+    cfg = load_config(config)
+    done = threading.Event()
+    signal.signal(signal.SIGINT, lambda *a: done.set())
+    signal.signal(signal.SIGTERM, lambda *a: done.set())
+    with start_mock_rig(cfg, tracker_transport=transport) as mr:
+        if as_json:
+            click.echo(json.dumps(mr.endpoints), nl=True)
+        else:
+            for k, v in mr.endpoints.items():
+                click.echo(f"{k:<8} {v}")
+            click.echo("serving; Ctrl-C to stop")
+        sys.stdout.flush()
+        while not done.wait(0.2):
+            pass
+
+
+@main.command()
+@click.argument("config", type=INPUT_FILE)
+@click.option("--port", "port", default=None,
+              help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
+@click.option("--frames", type=click.IntRange(1), default=None,
+              help="Stop after this many distinct frames (default: until Ctrl-C).")
+@handle_errors
+def track(config: Path, port: str | None, frames: int | None) -> None:
+    """Connect to the tracker, list the tools and print live poses, quality and flags."""
+    from ..acquisition.devices import make_tracker
+    from ..config import load_config
+    from ..drivers.ndi.tracker import iter_frames
+
+    cfg = load_config(config)
+    with make_tracker(cfg, port) as tr:
+        ident = tr.identity()
+        click.echo("tracker: " + ", ".join(f"{k} {v}" for k, v in ident.items() if v))
+        handles = getattr(tr, "handles", {})
+        for name in tr.tools:
+            h = handles.get(name)
+            click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
+        try:
+            for fr in iter_frames(tr, frames):
+                parts = [f"frame {fr.frame:>8}"]
+                for name, st in fr.tools.items():
+                    if st.pose is None:
+                        parts.append(f"{name}: MISSING")
+                        continue
+                    t = st.pose[:3, 3]
+                    flags = [f for f, on in (("out-of-volume", st.out_of_volume),
+                                             ("partly-out", st.partially_out_of_volume))
+                             if on]
+                    err = f" err {st.error_mm:.3f}" if st.error_mm is not None else ""
+                    parts.append(f"{name}: ({t[0]:8.2f} {t[1]:8.2f} {t[2]:9.2f}) mm{err}"
+                                 + (" " + ",".join(flags) if flags else ""))
+                click.echo("  ".join(parts))
+        except KeyboardInterrupt:
+            pass
+
+
+@main.command()
+@click.argument("config", type=INPUT_FILE)
+@click.option("--host", default=None, help="Robot address (overrides the config).")
+@click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,RX,RY,RZ",
+              help="Jog the flange to this pose (mm, deg; R = Rz·Ry·Rx, base frame) after a "
+                   "confirmation. The config's safety envelope applies around the current "
+                   "pose.")
+@click.option("--speed", type=_Finite(0, lo_open=True), default=None,
+              help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
+@click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
+@handle_errors
+def robot(config: Path, host: str | None, move_to: str | None, speed: float | None,
+          yes: bool) -> None:
+    """Connect to the robot, report its identity and flange pose; optionally jog."""
+    from ..acquisition.devices import envelope_for, make_robot
+    from ..config import load_config
+    from ..geometry import matrix_from_denso_p
+
+    target = None
+    if move_to is not None:  # parsed before anything connects
+        try:
+            vals = [float(v) for v in move_to.split(",")]
+            if len(vals) != 6 or not np.isfinite(vals).all():
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(f"{move_to!r}: expected 6 finite numbers "
+                                     "X,Y,Z,RX,RY,RZ (mm, deg)", param_hint="--move-to") \
+                from None
+        target = matrix_from_denso_p(vals)
+    cfg = load_config(config)
+    with make_robot(cfg, envelope_for(cfg, None), host) as rb:
+        click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
+        here = rb.flange_pose()
+        click.echo("flange (base ← flange): " + _pose_line(here))
+        click.echo(_matrix_text(here))
+        if target is None:
+            return
+        rb.envelope = envelope_for(cfg, here)
+        rb.envelope.check_pose(target, "--move-to target")
+        v = speed if speed is not None else rb.speed_mm_s
+        if not yes and not click.confirm(f"move the flange to {_pose_line(target)} at "
+                                         f"{v} mm/s?", default=False):
+            click.echo("not moved")
+            return
+        rb.move_to(target, v)
+        click.echo("arrived: " + _pose_line(rb.flange_pose()))
+
+
+@main.command()
+@click.argument("config", type=INPUT_FILE)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Session file (JSON Lines) to write or, with --resume, to continue.")
+@click.option("--resume", is_flag=True,
+              help="Continue an interrupted session: same plan, same P0, done poses skipped.")
+@click.option("--poses", type=click.IntRange(1, 100000), default=None,
+              help="Number of poses (overrides plan.poses).")
+@click.option("--samples", type=click.IntRange(1), default=None,
+              help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
+@click.option("--dry-run", is_flag=True,
+              help="Print the plan's extent and estimated duration; move nothing.")
+@click.option("--tracker-port", default=None, help="Tracker port (overrides the config).")
+@click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@handle_errors
+def acquire(config: Path, output: Path, resume: bool, poses: int | None,
+            samples: int | None, dry_run: bool, tracker_port: str | None,
+            robot_host: str | None) -> None:
+    """Move the robot through the plan and record a session (A, B, C at every pose).
+
+    Each pose: move, settle, average N distinct tracker frames (and the robot pose read
+    alongside), append one fsynced line. Ctrl-C finishes the pose in flight and leaves a
+    resumable session; device faults are retried with a reconnect.
+    """
+    from tqdm import tqdm
+
+    from ..acquisition.run import AcquisitionStopped
+    from ..acquisition.run import acquire as run_acquire
+    from ..config import load_config
+
+    if _same_file(output, config):  # an existing session is the run's to resume, never this
+        raise click.BadParameter(f"{output} is the config file; it is never written over",
+                                 param_hint="--output")
+    cfg = load_config(config)
+    if dry_run:
+        _dry_run(cfg, poses, samples, robot_host)
+        return
+    stop = _StopFlag()
+    stop.install()
+    bar: Any = None
+    skipped = [0]
+
+    def on_start(done: int, total: int) -> None:
+        nonlocal bar
+        bar = tqdm(total=total, initial=done, desc="poses", unit="pose", file=sys.stderr,
+                   dynamic_ncols=True)
+
+    def on_pose(done: int, total: int, rec: Any) -> None:
+        post = {}
+        for b in ("marker", "probe"):
+            sp = rec.spread.get(b)
+            if sp:
+                post[b] = f"{sp['trans_mm']:.3f}mm/{sp['rot_deg']:.3f}°"
+        if rec.skipped:
+            skipped[0] += 1
+        if skipped[0]:
+            post["skipped"] = str(skipped[0])
+        bar.set_postfix(post, refresh=False)
+        bar.update(1)
+
+    try:
+        res = run_acquire(cfg, output, resume=resume, poses=poses, samples=samples,
+                          tracker_port=tracker_port, robot_host=robot_host, on_pose=on_pose,
+                          on_start=on_start, should_stop=stop)
+    except AcquisitionStopped as e:
+        if bar is not None:
+            bar.close()
+        _fail(f"acquisition stopped: {e}")
+        return
+    finally:
+        if bar is not None:
+            bar.close()
+    _acquire_summary(res, config, output, tracker_port, robot_host)
+    if res.stopped:
+        sys.exit(EXIT_INTERRUPTED)
+
+
+def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | None = None,
+                     robot_host: str | None = None) -> None:
+    from ..acquisition.run import resume_command
+
+    state = "stopped early (resumable)" if res.stopped else "complete"
+    for note in res.notes:
+        click.echo(f"note: {note}")
+    click.echo(f"session {output}: {state}; {res.recorded} poses recorded, {res.skipped} "
+               f"skipped, of {res.total} planned; {res.new_poses} new in "
+               f"{res.elapsed_s:.1f} s; device faults recovered: {res.faults}")
+    if res.stopped:
+        click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
+    click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")
+
+
+def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str | None) -> None:
+    from ..acquisition.dryrun import dry_run
+    from ..errors import SafetyError
+
+    d = dry_run(cfg, poses, samples, robot_host)
+    s = d.summary
+    click.echo(f"plan {d.spec.kind}: {d.spec.n} poses, seed {d.spec.seed}, around P0 "
+               f"({d.p0_source}):")
+    click.echo("  P0 " + _pose_line(d.spec.p0))
+    click.echo(f"  offsets from P0: x {s['x_range_mm'][0]:.1f}…{s['x_range_mm'][1]:.1f}, "
+               f"y {s['y_range_mm'][0]:.1f}…{s['y_range_mm'][1]:.1f}, "
+               f"z {s['z_range_mm'][0]:.1f}…{s['z_range_mm'][1]:.1f} mm; "
+               f"max {s['offset_max_mm']:.1f} mm")
+    click.echo(f"  rotation from P0: max {s['rotation_max_deg']:.2f} deg")
+    click.echo(f"  {'in the robot base frame (mm)':<32} {'x':^16}{'y':^16}{'z':^16}")
+    for label, key in (("workspace box (safety)", "box"), ("flange over the plan", "flange"),
+                       ("tool points over the plan", "tool")):
+        lo, hi = s[f"{key}_min_mm"], s[f"{key}_max_mm"]
+        if lo is not None:
+            cells = "".join(f"{a:8.1f}…{b:<7.1f}" for a, b in zip(lo, hi))
+            click.echo(f"    {label:<30} {cells}")
+    if s["tool_min_mm"] is None:
+        click.echo("    (no safety.tool_points_mm: the box bounds the flange only)")
+    click.echo(f"  estimated duration: {s['duration_s'] / 60:.1f} min (travel "
+               f"{s['travel_mm'] / 1000:.1f} m = {s['motion_s']:.0f} s at "
+               f"{d.speed_mm_s:g} mm/s, sampling {s['sampling_s']:.0f} s)")
+    if d.refusal is not None:
+        raise SafetyError(d.refusal)
+    click.echo("  safety envelope: every pose inside")
+
+
+@main.command()
+@click.option("--config", "config", type=INPUT_FILE, default=None,
+              help="Mock rig config (default: configs/mock-ur-polaris.yaml).")
+@click.option("--poses", type=click.IntRange(3, 100000), default=None,
+              help="Override plan.poses.")
+@click.option("--samples", type=click.IntRange(1), default=None,
+              help="Override sampling.samples.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Keep the session here (default: a temporary file).")
+@click.option("--transport", type=click.Choice(["tcp", "pty"]), default="tcp",
+              show_default=True,
+              help="How the Polaris mock is reached: loopback TCP (socket://, as NDI's network "
+                   "trackers) or a pty (as a serial port).")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the solve result (with the mock rig's truth) as one JSON object.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@handle_errors
+def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
+         transport: str, as_json: bool, force: bool) -> None:
+    """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
+    through the real drivers and wire protocols, solve with QR36, compare with the truth."""
+    from tqdm import tqdm
+
+    from ..acquisition.run import acquire as run_acquire
+    from ..config import load_config
+    from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..report.evaluate import solve_session
+    from ..report.text import format_result
+    from ..session import read_session
+
+    cfg_path = config or _default_demo_config()
+    check_outputs({"--output": output}, [cfg_path], force)
+    if output is not None and force and output.exists():
+        output.unlink()
+    cfg = load_config(cfg_path)
+    truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
+    tmp = None
+    if output is None:
+        tmp = tempfile.TemporaryDirectory(prefix="tmscal-demo-")
+        output = Path(tmp.name) / "demo-session.jsonl"
+    try:
+        # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
+        with spawn_mock_rig(cfg_path, transport=transport) as mp:
+            ep = mp.endpoints
+            if not as_json:
+                click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
+            bar: Any = None
+
+            def on_start(done: int, total: int) -> None:
+                nonlocal bar
+                bar = tqdm(total=total, initial=done, desc="acquiring", unit="pose",
+                           file=sys.stderr, disable=None)
+
+            host, _, port = ep["robot"].partition(":")
+            res = run_acquire(cfg, output, poses=poses, samples=samples,
+                              tracker_port=ep["tracker"], robot_host=host,
+                              robot_port=int(port) if port else None,
+                              on_start=on_start, on_pose=lambda d, t, r: bar.update(1))
+            if bar is not None:
+                bar.close()
+        session = read_session(output)
+        session.header["truth"] = truth.as_dict()
+        _, result = solve_session(session, "qr36")
+        if as_json:
+            _print_json(result)
+            return
+        click.echo(f"acquired {res.recorded} poses ({res.skipped} skipped) in "
+                   f"{res.elapsed_s:.1f} s through the wire protocols\n")
+        click.echo(format_result(result))
+        click.echo("\n  truth (the mock rig's):")
+        for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
+                        ("Z", "base_from_tracker")):
+            click.echo(f"  {k} = {name}")
+            click.echo(_matrix_text(np.asarray(getattr(truth, k))))
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
