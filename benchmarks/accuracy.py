@@ -1,8 +1,8 @@
-"""Seed 000's simulated Tables 1 and 3 for QR24 and QR36, with the paper's figures beside ours.
+"""Wang et al. (2018), simulated Tables 1 and 3, for QR24 and QR36: the paper's figures beside ours.
 
     .venv/bin/python benchmarks/accuracy.py [--seeds 5] [--plan eq14|random|both]
 
-Protocol (METHODS.md): random truth (t(X), t(Y) in ±50 mm, |t(Z)| in [500, 2000] mm), 500 robot
+Protocol (docs/methods.md): random truth (t(X), t(Y) in ±50 mm, |t(Z)| in [500, 2000] mm), 500 robot
 poses (Eq. 14: ±100 mm, ±10° around a P0 that puts the marker 1.5 m in front of the tracker;
 or fully random), four-sphere tools with σ = 0.05 mm fiducial noise and Horn's method, robot
 noise 0.05° / 0.05 mm; train on the first n = 5…250 poses, test on poses 251…500.
@@ -19,7 +19,7 @@ from tmscal.calib import noise_floor
 from tmscal.calib.study import convergence, summarize, threshold_n
 from tmscal.sim import Noise, simulate
 
-PAPER = {  # seed 000, Table 1 (simulated) and Table 3
+PAPER = {  # Wang et al. (2018), Table 1 (simulated) and Table 3
     "qr24": {"e_t_min": 0.3419, "e_z_min": 0.1267, "theta_t_min": 0.1675,
              "n_0.4": 118, "n_0.3": None},
     "qr36": {"e_t_min": 0.2143, "e_z_min": None, "theta_t_min": 0.1659,
