@@ -1,0 +1,480 @@
+"""The simulated UR controller behind the mock's servers: the emulated ``rtde_control`` script
+(ur_rtde's register handshake), the program's runtime state, linear motion of the sim rig's
+flange, the protective stop, and the values RTDE streams. No sockets here: the servers
+(``servers.py``) feed register writes in and read variables out, under ``self._lock``.
+
+The handshake: the command id arrives in ``input_int_register_0`` (``moveL``: cmd 3, pose in
+``input_double_register_0..5`` as metres and rotation vector, speed in ``_6`` m/s,
+acceleration in ``_7``, asynchronous flag in ``input_int_register_1``);
+``output_int_register_0`` is 1 when ready and 2 when the command is done; asynchronous
+progress is in ``output_int_register_2`` (bit 15 running, bits 16–23 change count).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import InitVar, dataclass
+from typing import Any
+
+import numpy as np
+
+from ...geometry import (
+    matrix_from_rotvec,
+    pose_from_rotvec,
+    rotvec_from_matrix,
+    rotvec_pose_from_matrix,
+)
+from ...sim.rig import SimRig
+from ..clock import REAL_TIME, Clock
+from .rtde import rtde_type, zero_value
+
+log = logging.getLogger(__name__)
+
+# Controller constants (UR e-Series / CB3 RTDE definitions).
+RUNTIME_STOPPED, RUNTIME_PLAYING, RUNTIME_PAUSED = 1, 2, 4
+ROBOT_MODE_RUNNING = 7
+SAFETY_NORMAL, SAFETY_PROTECTIVE_STOP = 1, 3
+SAFETY_BIT_NORMAL, SAFETY_BIT_PROTECTIVE, SAFETY_BIT_STOPPED_BY_SAFETY = 1 << 0, 1 << 2, 1 << 10
+ROBOT_BIT_POWER_ON, ROBOT_BIT_PROGRAM_RUNNING = 1 << 0, 1 << 1
+JOINT_RUNNING_MODE = 253
+
+# ur_rtde command ids (input_int_register_0)
+CMD_NO_CMD, CMD_MOVEJ, CMD_MOVEJ_IK, CMD_MOVEL, CMD_MOVEL_FK = 0, 1, 2, 3, 4
+CMD_STOPL, CMD_STOPJ, CMD_WATCHDOG, CMD_STOP_SCRIPT = 33, 34, 99, 255
+#: commands the script processes and acknowledges with "ready" at once (servo, speed, …)
+REALTIME_CMDS = frozenset({24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71})
+MOVE_CMDS = {CMD_MOVEJ: "moveJ", CMD_MOVEJ_IK: "moveJ_IK", CMD_MOVEL: "moveL",
+             CMD_MOVEL_FK: "moveL_FK"}
+
+#: Placeholder joint angles (rad) reported as actual_q / target_q: the mock has no kinematics.
+HOME_Q = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
+
+#: Number of input/output int and double registers.
+N_REGISTERS = 48
+_REGISTER = re.compile(r"(input|output)_(int|double)_register_(\d+)")
+#: Cycle of the emulated control script's main loop (s).
+SCRIPT_PERIOD_S = 0.004
+
+#: Output variables whose value never changes in the mock.
+CONSTANT_OUTPUTS: dict[str, Any] = {
+    "robot_mode": ROBOT_MODE_RUNNING, "joint_mode": [JOINT_RUNNING_MODE] * 6,
+    "joint_temperatures": [30.0] * 6, "actual_joint_voltage": [48.0] * 6,
+    "actual_main_voltage": 48.0, "actual_robot_voltage": 48.0, "actual_robot_current": 0.5,
+    "speed_scaling": 1.0, "target_speed_fraction": 1.0, "actual_execution_time": 0.3,
+    "actual_tool_accelerometer": [0.0, 0.0, 9.81], "output_bit_registers0_to_31": 0,
+    "output_bit_registers32_to_63": 0,
+}
+
+
+@dataclass(frozen=True)
+class URFaults:
+    """Faults to inject. Moves (moveL, moveJ, moveL_FK, moveJ_IK) are counted from 1.
+
+    ``protective_stop_at_move``: the k-th move triggers a protective stop half-way (the program
+    pauses; the client's ``moveL`` fails). ``drop_at_move``: the network link fails during
+    the k-th move: the controller finishes that move, and when the client clears the command
+    every client socket (RTDE, dashboard, script) is shut down and the listeners close, so
+    reconnects are refused (named like the DENSO mock's ``drop_at_request``; the earlier name
+    ``drop_connection_at_move`` is still accepted). None disables a fault. (Dropping the
+    link while ur_rtde 1.6.5 waits inside a call makes the library hang, or segfault when it
+    can reconnect.)
+    """
+
+    protective_stop_at_move: int | None = None
+    drop_at_move: int | None = None
+    drop_connection_at_move: InitVar[int | None] = None
+
+    def __post_init__(self, drop_connection_at_move: int | None) -> None:
+        if drop_connection_at_move is None:
+            return
+        if self.drop_at_move is not None and self.drop_at_move != drop_connection_at_move:
+            raise ValueError("URFaults: drop_at_move and drop_connection_at_move (its earlier "
+                             "name) disagree; give one")
+        object.__setattr__(self, "drop_at_move", drop_connection_at_move)
+
+
+# The InitVar's class attribute would always read None: read the field it stands for.
+URFaults.drop_connection_at_move = property(  # type: ignore[assignment,misc]
+    lambda self: self.drop_at_move, doc="The earlier name of ``drop_at_move``.")
+
+
+@dataclass
+class Motion:
+    """A linear move of the flange (base_from_flange 4×4 mm) under way."""
+
+    start: np.ndarray          # base_from_flange 4×4 mm at the start
+    target: np.ndarray         # base_from_flange 4×4 mm commanded
+    t0: float
+    duration: float            # s
+    asynchronous: bool
+    speed: float               # m/s (rad/s for rotation-only moves)
+    stop_fraction: float | None = None   # protective stop at this fraction of the motion
+
+    def fraction(self, now: float) -> float:
+        if self.duration <= 0:
+            return 1.0
+        return min(1.0, max(0.0, (now - self.t0) / self.duration))
+
+    def pose_at(self, f: float) -> np.ndarray:
+        """Interpolated base_from_flange (mm): translation lerp, rotation along the geodesic."""
+        if f >= 1.0:
+            return self.target.copy()
+        out = np.eye(4)
+        out[:3, 3] = self.start[:3, 3] + f * (self.target[:3, 3] - self.start[:3, 3])
+        rel = self.start[:3, :3].T @ self.target[:3, :3]
+        out[:3, :3] = self.start[:3, :3] @ matrix_from_rotvec(f * rotvec_from_matrix(rel))
+        return out
+
+    def velocity(self, now: float) -> list[float]:
+        """TCP speed [vx, vy, vz (m/s), wx, wy, wz (rad/s)] in the base frame (zero when
+        done)."""
+        if self.duration <= 0 or self.fraction(now) >= 1.0:
+            return [0.0] * 6
+        v = (self.target[:3, 3] - self.start[:3, 3]) / 1000.0 / self.duration
+        rel = self.start[:3, :3].T @ self.target[:3, :3]
+        w = self.start[:3, :3] @ rotvec_from_matrix(rel) / self.duration
+        return [float(x) for x in (*v, *w)]
+
+
+class URController:
+    """The controller state machine serving ``rig`` (see the module docstring).
+
+    ``clock``: ``REAL_TIME``, moves take distance/speed seconds; ``FAST``, they complete at
+    once. ``faults``: ``URFaults`` to inject. ``program_running``: a control program runs at
+    start (runtime_state 2, ready); False, the controller starts stopped. State is guarded
+    by ``_lock``; ``_tick()`` is one cycle of the control script. ``_link_down()`` is the
+    hook a server fills to drop its connections (the ``drop_at_move`` fault).
+    """
+
+    def __init__(self, rig: SimRig, clock: Clock = REAL_TIME, faults: URFaults = URFaults(),
+                 program_running: bool = True) -> None:
+        self.rig = rig
+        self.clock = clock
+        self.faults = faults
+        self.move_count = 0
+        self._lock = threading.RLock()
+        self._t_start = time.monotonic()
+        self.in_int = [0] * N_REGISTERS
+        self.in_double = [0.0] * N_REGISTERS
+        self.out_int = [0] * N_REGISTERS
+        self.out_double = [0.0] * N_REGISTERS
+        self.external_force_torque = [0.0] * 6
+        self.safety_mode = SAFETY_NORMAL
+        self.runtime_state = RUNTIME_PLAYING if program_running else RUNTIME_STOPPED
+        self.target_q = list(HOME_Q)
+        self._program_loaded = program_running
+        self._executing = False
+        self._motion: Motion | None = None
+        self._interrupted: Motion | None = None   # resumed by dashboard "play"
+        self._async_wr_count = 0
+        self._async_op_id = 0
+        self._done_pending = False     # a sync command waits for its motion to finish
+        self._drop_after_command = False
+        if program_running:
+            self.out_int[0] = 1
+            self._write_async(-1)
+
+    def _link_down(self) -> None:
+        """The network link fails (filled by the servers; nothing to drop here)."""
+
+    # --- status -------------------------------------------------------------------------------
+
+    @property
+    def protective_stopped(self) -> bool:
+        return self.safety_mode == SAFETY_PROTECTIVE_STOP
+
+    def _safety_status_bits(self) -> int:
+        if self.safety_mode == SAFETY_PROTECTIVE_STOP:
+            return SAFETY_BIT_PROTECTIVE | SAFETY_BIT_STOPPED_BY_SAFETY
+        return SAFETY_BIT_NORMAL
+
+    def _robot_status_bits(self) -> int:
+        bits = ROBOT_BIT_POWER_ON
+        if self.runtime_state == RUNTIME_PLAYING:
+            bits |= ROBOT_BIT_PROGRAM_RUNNING
+        return bits
+
+    def _write_async(self, value: int) -> None:
+        """output_int_register_2 as the script's write_async_progress_register(value) writes
+        it: change count (7 bits) in bits 16–23, operation id (7 bits, incremented when an
+        operation starts, value 0) in bits 24–30, bit 15 + progress while running (value ≥ 0);
+        a negative value means finished."""
+        self._async_wr_count = (self._async_wr_count + 1) % 128
+        if value == 0:
+            self._async_op_id = (self._async_op_id + 1) % 128
+        reg = self._async_wr_count * 65536 + self._async_op_id * 16777216
+        if value >= 0:
+            reg += min(value, 32767) + 32768
+        self.out_int[2] = reg
+
+    def _flange_now(self, now: float) -> np.ndarray:
+        """Reported base_from_flange (4×4 mm), interpolated while a real-time move runs."""
+        m = self._motion
+        if m is not None:
+            return m.pose_at(m.fraction(now))
+        return self.rig.reported_flange()
+
+    def tcp_pose(self) -> list[float]:
+        """actual_TCP_pose as UR reports it: [x, y, z (m), rx, ry, rz (rad)]."""
+        with self._lock:
+            T = self._flange_now(self.clock.now())
+        return [float(v) for v in rotvec_pose_from_matrix(T)]
+
+    # --- RTDE variables -----------------------------------------------------------------------
+
+    def value_getter(self, name: str) -> Callable[[float], Any]:
+        """A function now → value(s) of output variable ``name`` (typed zero if unknown)."""
+        regs = self._registers(name)
+        if regs is not None:
+            arr, i = regs
+            return (lambda now: 0) if i >= N_REGISTERS else (lambda now: arr[i])
+        if name in CONSTANT_OUTPUTS:
+            value = CONSTANT_OUTPUTS[name]
+            return lambda now: value
+        table: dict[str, Callable[[float], Any]] = {
+            "timestamp": lambda now: now - self._t_start,
+            "actual_TCP_pose": self._tcp_vector,
+            "target_TCP_pose": self._target_tcp_vector,
+            "actual_TCP_speed": self._tcp_speed,
+            "target_TCP_speed": self._tcp_speed,
+            "actual_q": lambda now: self.target_q,
+            "target_q": lambda now: self.target_q,
+            "safety_mode": lambda now: self.safety_mode,
+            "safety_status": lambda now: self.safety_mode,
+            "safety_status_bits": lambda now: self._safety_status_bits(),
+            "runtime_state": lambda now: self.runtime_state,
+            "robot_status_bits": lambda now: self._robot_status_bits(),
+            "external_force_torque": lambda now: self.external_force_torque,
+        }
+        if name in table:
+            return table[name]
+        zero = zero_value(rtde_type(name))
+        return lambda now: zero
+
+    def write_input(self, name: str, values: list[Any]) -> None:
+        """An input variable from a client's data package (call with ``_lock`` held)."""
+        regs = self._registers(name, inputs_only=True)
+        if regs is not None and regs[1] < N_REGISTERS:
+            regs[0][regs[1]] = values[0]
+        elif name == "external_force_torque":
+            self.external_force_torque = [float(x) for x in values]
+
+    def _registers(self, name: str, inputs_only: bool = False) -> tuple[list[Any], int] | None:
+        """(register array, index) for ``{input,output}_{int,double}_register_N``."""
+        m = _REGISTER.fullmatch(name)
+        if m is None or (inputs_only and m.group(1) != "input"):
+            return None
+        arrays = {("input", "int"): self.in_int, ("input", "double"): self.in_double,
+                  ("output", "int"): self.out_int, ("output", "double"): self.out_double}
+        return arrays[(m.group(1), m.group(2))], int(m.group(3))
+
+    def _tcp_vector(self, now: float) -> list[float]:
+        return list(rotvec_pose_from_matrix(self._flange_now(now)))
+
+    def _target_tcp_vector(self, now: float) -> list[float]:
+        m = self._motion
+        return list(rotvec_pose_from_matrix(m.target)) if m is not None else self._tcp_vector(now)
+
+    def _tcp_speed(self, now: float) -> list[float]:
+        m = self._motion
+        return [0.0] * 6 if m is None else m.velocity(now)
+
+    # --- the program --------------------------------------------------------------------------
+
+    def _reset_script(self, runtime_state: int) -> None:
+        """Stop any motion and forget the script's command state."""
+        self._abort_motion()
+        self._interrupted = None
+        self._executing = False
+        self._done_pending = False
+        self.runtime_state = runtime_state
+
+    def _start_program(self, why: str) -> None:
+        """(Re)start the emulated rtde_control script: clean state, ready for a command."""
+        self._reset_script(RUNTIME_PLAYING)
+        self._program_loaded = True
+        self.out_int[0] = 1
+        self._write_async(-1)
+        log.info("UR mock: control script running (%s)", why)
+
+    def _stop_program(self, why: str) -> None:
+        self._reset_script(RUNTIME_STOPPED)
+        log.info("UR mock: program stopped (%s)", why)
+
+    def _runtime_error(self, why: str) -> None:
+        """A runtime error of the control script: the program stops where the flange is."""
+        log.error("UR mock: runtime error in the control script: %s; program stopped", why)
+        self._stop_program(f"runtime error: {why}")
+
+    def _halt(self, m: Motion, fraction: float) -> None:
+        """Put the flange where motion ``m`` is at ``fraction`` and end the motion."""
+        self.rig.move_flange(m.pose_at(fraction))
+        self._motion = None
+
+    def _abort_motion(self, now: float | None = None) -> None:
+        """Stop the flange where it is now (decelerations are not modelled)."""
+        m = self._motion
+        if m is None:
+            return
+        self._halt(m, m.fraction(self.clock.now() if now is None else now))
+        if m.asynchronous:
+            self._write_async(-1)
+
+    def _pause(self) -> None:
+        """Pause the program (dashboard ``pause`` or a protective stop): the flange stops where
+        it is and a running move resumes on ``play``."""
+        m = self._motion
+        if m is not None:
+            self._halt(m, m.fraction(self.clock.now()))
+            self._interrupted = m
+        self.runtime_state = RUNTIME_PAUSED
+
+    def _resume(self) -> None:
+        m, self._interrupted = self._interrupted, None
+        self.runtime_state = RUNTIME_PLAYING
+        if m is not None:
+            self._start_motion(m.target, m.speed, m.asynchronous, self.clock.now(),
+                               "resumed move", resumed=True)
+
+    def _protective_stop(self, m: Motion) -> None:
+        f = m.stop_fraction if m.stop_fraction is not None else 0.5
+        self._halt(m, f)
+        self._interrupted = m
+        self.safety_mode = SAFETY_PROTECTIVE_STOP
+        self.runtime_state = RUNTIME_PAUSED
+        if m.asynchronous:
+            self._write_async(-1)
+        log.warning("UR mock: PROTECTIVE STOP during move %d (flange stopped at %.0f%%)",
+                    self.move_count, 100 * f)
+
+    # --- the control script's cycle -----------------------------------------------------------
+
+    def _advance(self, now: float) -> None:
+        """Finish or interrupt the running motion according to the clock."""
+        m = self._motion
+        if m is None:
+            return
+        if m.stop_fraction is not None and (self.clock.fast or m.fraction(now) >= m.stop_fraction):
+            self._protective_stop(m)
+            return
+        if self.clock.fast or m.fraction(now) >= 1.0:
+            self._halt(m, 1.0)
+            if m.asynchronous:
+                self._write_async(-1)
+            elif self._done_pending:
+                self._done_pending = False
+                self.out_int[0] = 2
+
+    def _tick(self) -> None:
+        """One cycle of the emulated rtde_control script's main loop (called every 4 ms and
+        on every input package): commands 0 → ready; a new command runs once, then signals
+        done (``output_int_register_0`` = 2) until the client clears it."""
+        with self._lock:
+            now = self.clock.now()
+            if self.runtime_state != RUNTIME_PLAYING:
+                return
+            self._advance(now)
+            if self.runtime_state != RUNTIME_PLAYING or self._done_pending:
+                return   # paused, stopped, or still inside a synchronous move
+            cmd = self.in_int[0]
+            if cmd in REALTIME_CMDS:
+                log.debug("UR mock: real-time command %d acknowledged without effect", cmd)
+                self.out_int[0] = 1
+                return
+            if cmd == CMD_NO_CMD:
+                self._command_cleared()
+                return
+            if self._executing:
+                return
+            self._executing = True
+            if cmd in MOVE_CMDS:
+                self.move_count += 1
+                self._drop_after_command = self.faults.drop_at_move == self.move_count
+            self._execute(cmd, now)
+
+    def _command_cleared(self) -> None:
+        """The client cleared the command: ready again (the link drops here when the
+        ``drop_at_move`` fault fired for the command just done)."""
+        if self._executing and self._drop_after_command:
+            self._drop_after_command = False
+            log.warning("UR mock: link down after move %d", self.move_count)
+            self._link_down()
+        self._executing = False
+        self.out_int[0] = 1
+
+    def _bad_move(self, cmd: int) -> str | None:
+        """Why the move registers of ``cmd`` cannot be executed (None when they can): the
+        pose (or joints), speed and acceleration must be finite, speed and acceleration > 0."""
+        vals = [float(x) for x in self.in_double[0:8]]
+        if not all(math.isfinite(x) for x in vals):
+            what = "joint target" if cmd in (CMD_MOVEJ, CMD_MOVEL_FK) else "pose"
+            return f"{MOVE_CMDS[cmd]}: non-finite {what}, speed or acceleration {vals}"
+        if cmd in (CMD_MOVEL, CMD_MOVEJ_IK) and not all(math.isfinite(x * 1000.0)
+                                                        for x in vals[:3]):
+            return f"{MOVE_CMDS[cmd]}: position {vals[:3]} m is not finite in millimetres"
+        if vals[6] <= 0 or vals[7] <= 0:
+            return f"{MOVE_CMDS[cmd]}: speed {vals[6]} and acceleration {vals[7]} must be > 0"
+        return None
+
+    def _execute(self, cmd: int, now: float) -> None:
+        d = self.in_double
+        if cmd in MOVE_CMDS:
+            why = self._bad_move(cmd)
+            if why is not None:
+                self._runtime_error(why)
+                return
+        if cmd in (CMD_MOVEL, CMD_MOVEJ_IK):
+            # moveJ_IK takes a pose and is executed like moveL
+            self._start_motion(pose_from_rotvec(d[0:6]), d[6], bool(self.in_int[1]), now,
+                               MOVE_CMDS[cmd])
+        elif cmd in (CMD_MOVEJ, CMD_MOVEL_FK):
+            # No kinematics: joint targets are recorded and reported, the flange stays put.
+            self.target_q = [float(v) for v in d[0:6]]
+            log.warning("UR mock: %s with joint targets: no kinematics, flange not moved",
+                        MOVE_CMDS[cmd])
+            self.out_int[0] = 2
+        elif cmd in (CMD_STOPL, CMD_STOPJ):
+            self._abort_motion(now)
+            self._done_pending = False
+            self.out_int[0] = 2
+        elif cmd == CMD_STOP_SCRIPT:
+            # the script ends without signalling done
+            self._stop_program("STOP_SCRIPT command")
+        else:
+            # getters answer zeros in output_double_register_0.. (e.g. getTCPOffset: zero TCP)
+            log.debug("UR mock: command %d acknowledged without effect", cmd)
+            for i in range(24):
+                self.out_double[i] = 0.0
+            self.out_int[0] = 2
+
+    def _start_motion(self, target: np.ndarray, speed: float, asynchronous: bool, now: float,
+                      what: str, resumed: bool = False) -> None:
+        """Start a linear move of the flange to ``target`` (base_from_flange 4×4 mm) at
+        ``speed`` m/s. A synchronous move signals done when it ends (see ``_advance``)."""
+        start = self._flange_now(now)
+        dist_m = float(np.linalg.norm(target[:3, 3] - start[:3, 3])) / 1000.0
+        angle = float(np.linalg.norm(rotvec_from_matrix(start[:3, :3].T @ target[:3, :3])))
+        speed = speed if speed > 0 else 0.25
+        duration = 0.0 if self.clock.fast else max(dist_m, angle) / speed
+        if not (np.isfinite(target).all() and math.isfinite(duration)):
+            self._runtime_error(f"{what}: target or duration not finite ({duration} s)")
+            return
+        self._abort_motion(now)
+        stop_at = (0.5 if not resumed and self.faults.protective_stop_at_move == self.move_count
+                   else None)
+        self._motion = Motion(start, np.asarray(target, dtype=np.float64).copy(), now,
+                              duration, asynchronous, speed, stop_at)
+        log.debug("UR mock: %s move %d, %.1f mm, %.3f rad, %.3f s%s", what, self.move_count,
+                  dist_m * 1000, angle, duration, " (async)" if asynchronous else "")
+        if asynchronous:
+            self._write_async(0)
+            if not resumed:
+                self.out_int[0] = 2
+        else:
+            self._done_pending = True
+        self._advance(now)

@@ -1,0 +1,497 @@
+"""The UR mock's three servers on one loopback address, each a ``TCPListener``: RTDE (30004),
+dashboard (29999) and primary script (30003), around the simulated controller
+(``controller.URController``). ``URMock`` is the whole device (a ``MockDevice``)."""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import socket
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from ...sim.rig import SimRig
+from ..clock import REAL_TIME, Clock
+from ..net import loopback_family
+from ..server import MockDevice, TCPListener
+from .controller import (
+    RUNTIME_PAUSED,
+    RUNTIME_PLAYING,
+    RUNTIME_STOPPED,
+    SAFETY_NORMAL,
+    SCRIPT_PERIOD_S,
+    URController,
+    URFaults,
+)
+from .rtde import (
+    CONTROLLER_VERSION,
+    HEADER,
+    OUTPUT_FREQUENCY,
+    PROTOCOL_VERSION,
+    PROTOCOL_VERSIONS,
+    PackageType,
+    Recipe,
+    encode_package,
+    parse_names,
+    recv_exact,
+)
+
+log = logging.getLogger(__name__)
+
+RTDE_PORT = 30004
+DASHBOARD_PORT = 29999
+SCRIPT_PORT = 30003
+
+#: Output recipe frequencies (Hz) the mock accepts (e-Series controllers stream at ≤ 500 Hz).
+MIN_FREQUENCY_HZ, MAX_FREQUENCY_HZ = 1.0, 500.0
+#: Output frequency before a client sets one (Hz).
+DEFAULT_FREQUENCY_HZ = 125.0
+#: How often a connection handler looks whether the mock is closing (s).
+POLL_S = 0.2
+#: Longest dashboard line and script the mock buffers before it drops the connection (bytes).
+MAX_DASHBOARD_LINE = 65536
+MAX_SCRIPT_BYTES = 4_000_000
+
+DASHBOARD_BANNER = b"Connected: Universal Robots Dashboard Server\n"
+#: The control program's name as the dashboard reports it.
+PROGRAM_NAME = "rtde_control"
+
+
+class URMock(URController, MockDevice):
+    """A Universal Robots controller (RTDE 30004, dashboard 29999, script 30003) serving ``rig``.
+
+    Parameters
+    ----------
+    rig:
+        The simulated rig; moves call ``rig.move_flange`` (base_from_flange 4×4 mm) and the
+        reported TCP pose is ``rig.reported_flange()`` (TCP offset zero: TCP = flange).
+    host:
+        Loopback address to bind (127.0.0.0/8, ::1 or localhost; anything else raises
+        ``ConfigError``); ports are UR's fixed ones.
+    clock:
+        ``REAL_TIME``: moves take distance/speed seconds; ``FAST``: moves complete at once.
+        Data streaming runs at the client's requested rate on both.
+    faults:
+        ``URFaults`` to inject.
+    version:
+        Controller software version (major, minor, bugfix, build) reported on RTDE and by the
+        dashboard's ``PolyscopeVersion``. ≥ 5.6 makes ur_rtde query version and serial.
+    serial:
+        Serial number reported by ``get serial number``.
+    model:
+        Robot model reported by ``get robot model``.
+    program_running:
+        True (default): a control program is already running at start (runtime_state 2,
+        ready), as it must be for clients using ``flags=0``; with the default upload flag
+        ur_rtde then stops it and uploads its own. False: the controller starts stopped and
+        only a script upload (or dashboard ``play`` after one) makes it run.
+    """
+
+    def __init__(self, rig: SimRig, host: str = "127.0.0.2", clock: Clock = REAL_TIME,
+                 faults: URFaults = URFaults(), version: tuple[int, int, int, int] = (
+                     5, 11, 0, 108249),
+                 serial: str = "20185500001", model: str = "UR5",
+                 program_running: bool = True) -> None:
+        loopback_family(host, "URMock host")  # refuses a non-loopback host at once
+        if len(version) != 4:
+            raise ValueError(f"version must be (major, minor, bugfix, build), got {version!r}")
+        super().__init__(rig, clock=clock, faults=faults, program_running=program_running)
+        self.host = host
+        self.version = tuple(int(v) for v in version)
+        self.serial = serial
+        self.model = model
+        self.last_script: str | None = None
+        self.scripts_received = 0
+        self.dashboard_log: list[str] = []
+        self._stop = threading.Event()
+        self._listeners: list[TCPListener] = []
+        self._script_thread: threading.Thread | None = None
+        self._dashboard = _Dashboard(self)
+
+    # --- lifecycle ----------------------------------------------------------------------------
+
+    def _start(self) -> str:
+        """Bind the three ports on ``host`` and serve in daemon threads. Returns the host
+        string to give to ur_rtde (``RTDEControlInterface(host)``)."""
+        if self._listeners:
+            return self.host
+        try:
+            for port, handler, what in ((RTDE_PORT, self._serve_rtde, "UR RTDE"),
+                                        (DASHBOARD_PORT, self._serve_dashboard, "UR dashboard"),
+                                        (SCRIPT_PORT, self._serve_script, "UR script")):
+                listener = TCPListener(self.host, port, handler, what)
+                self._listeners.append(listener)
+                listener.start()
+        except OSError:
+            self._close()
+            raise
+        self._script_thread = threading.Thread(target=self._script_loop, name="ur-script",
+                                               daemon=True)
+        self._script_thread.start()
+        log.info("UR mock serving on %s (RTDE %d, dashboard %d, script %d)", self.host,
+                 RTDE_PORT, DASHBOARD_PORT, SCRIPT_PORT)
+        return self.host
+
+    def _close(self) -> None:
+        """Stop every thread and close every socket (safe to call twice)."""
+        self._stop.set()
+        for listener in self._listeners:
+            listener.close()
+        t = self._script_thread
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout=2.0)
+        self._script_thread = None
+        self._listeners.clear()
+
+    def _alive(self) -> bool:
+        return not self._stop.is_set()
+
+    def _link_down(self) -> None:
+        """The network link fails: listeners close (reconnects are refused) and every client
+        connection is shut down. Called with ``_lock`` held: nothing is joined here."""
+        for listener in self._listeners:
+            listener.close(join_s=0.0)
+
+    def _script_loop(self) -> None:
+        """The control script's main loop: one ``_tick`` every ``SCRIPT_PERIOD_S``."""
+        nxt = time.monotonic()
+        while self._alive():
+            self._tick()
+            nxt += SCRIPT_PERIOD_S
+            delay = nxt - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                nxt = time.monotonic()
+
+    # --- the three servers --------------------------------------------------------------------
+
+    def _serve_rtde(self, conn: socket.socket) -> None:
+        conn.settimeout(POLL_S)
+        _RTDEConnection(self, conn).run()
+
+    def _serve_dashboard(self, conn: socket.socket) -> None:
+        conn.settimeout(POLL_S)
+        conn.sendall(DASHBOARD_BANNER)
+        buf = b""
+        while self._alive():
+            try:
+                chunk = conn.recv(4096)
+            except TimeoutError:
+                continue
+            if not chunk:
+                return
+            buf += chunk
+            while b"\n" in buf:
+                raw, buf = buf.split(b"\n", 1)
+                line = raw.decode("utf-8", "replace").strip()
+                if not line:
+                    continue
+                self.dashboard_log.append(line)
+                reply, hang_up = self._dashboard.reply(line)
+                log.debug("UR mock dashboard: %r -> %r", line, reply)
+                conn.sendall(reply.encode() + b"\n")
+                if hang_up:
+                    return
+            if len(buf) > MAX_DASHBOARD_LINE:
+                log.warning("UR mock dashboard: line too long, dropping the connection")
+                return
+
+    def _serve_script(self, conn: socket.socket) -> None:
+        conn.settimeout(POLL_S)
+        buf = bytearray()
+        while self._alive():
+            try:
+                chunk = conn.recv(65536)
+            except TimeoutError:
+                chunk = None
+            if chunk == b"":
+                self._take_script(bytes(buf))
+                return
+            if chunk:
+                buf += chunk
+                if len(buf) > MAX_SCRIPT_BYTES:
+                    log.warning("UR mock script port: script too large, dropped")
+                    return
+            if self._take_script(bytes(buf)):
+                buf.clear()
+
+    def _take_script(self, data: bytes) -> bool:
+        """Run a complete program (``def name(): … end`` at column 0, or ``sec``). True if
+        ``data`` held one."""
+        text = data.decode("utf-8", "replace")
+        m = re.match(r"\s*(def|sec)\s+(\w+)\s*\(", text)
+        if not m or not re.search(r"(^|\n)end$", text.rstrip()):
+            return False
+        self.last_script = text
+        self.scripts_received += 1
+        log.info("UR mock: received program %r (%d bytes)", m.group(2), len(data))
+        with self._lock:
+            self._start_program(f"script {m.group(2)!r} uploaded")
+        return True
+
+
+class _Dashboard:
+    """The dashboard server's command table: a fixed reply, or a handler of the command line
+    (exact commands, then prefixes), all lower-cased; anything else gets the real server's
+    ``could not understand: '…'``."""
+
+    FIXED = {
+        "is in remote control": "true", "close safety popup": "closing safety popup",
+        "close popup": "closing popup", "isprogramsaved": f"true {PROGRAM_NAME}.urp",
+        "robotmode": "Robotmode: RUNNING", "power on": "Powering on",
+        "power off": "Powering off", "brake release": "Brake releasing",
+    }
+    HANG_UP = {"quit": "Disconnected", "shutdown": "Shutting down"}
+
+    def __init__(self, mock: URMock) -> None:
+        self.mock = mock
+        self.commands: dict[str, Callable[[str], str]] = {
+            "polyscopeversion": self._version,
+            "get serial number": lambda cmd: mock.serial,
+            "get robot model": lambda cmd: mock.model,
+            "stop": self._stop,
+            "play": self._play,
+            "pause": self._pause,
+            "unlock protective stop": self._unlock,
+            "restart safety": self._restart_safety,
+            "running": self._running,
+            "programstate": self._program_state,
+            "get loaded program": self._loaded_program,
+            "safetymode": lambda cmd: f"Safetymode: {self._safety()}",
+            "safetystatus": lambda cmd: f"Safetystatus: {self._safety()}",
+        }
+        self.prefixes: list[tuple[str, Callable[[str], str]]] = [
+            ("popup ", lambda cmd: "showing popup"),
+            ("load ", lambda cmd: f"Loading program: {cmd[5:]}"),
+            ("addtolog ", lambda cmd: "Added log message"),
+            ("setuserrole ", lambda cmd: "Setting user role: " + cmd[12:]),
+        ]
+
+    def reply(self, line: str) -> tuple[str, bool]:
+        """The answer to one command line, and whether to hang up after it."""
+        cmd = line.strip()
+        low = cmd.lower()
+        if low in self.FIXED:
+            return self.FIXED[low], False
+        if low in self.HANG_UP:
+            return self.HANG_UP[low], True
+        handler = self.commands.get(low)
+        if handler is None:
+            handler = next((h for p, h in self.prefixes if low.startswith(p)), None)
+        if handler is None:
+            return f"could not understand: '{cmd}'", False
+        with self.mock._lock:
+            return handler(cmd), False
+
+    def _version(self, cmd: str) -> str:
+        return f"URSoftware {'.'.join(str(x) for x in self.mock.version)} (Mar 24 2021)"
+
+    def _stop(self, cmd: str) -> str:
+        # A real controller answers "Stopped" even when the program has just ended
+        # (ur_rtde sends STOP_SCRIPT and then "stop", and insists on "Stopped").
+        if self.mock.runtime_state != RUNTIME_STOPPED:
+            self.mock._stop_program("dashboard stop")
+        return "Stopped"
+
+    def _play(self, cmd: str) -> str:
+        m = self.mock
+        if not m._program_loaded or m.safety_mode != SAFETY_NORMAL:
+            return "Failed to execute: play"
+        if m.runtime_state == RUNTIME_PAUSED:
+            m._resume()
+        else:
+            m._start_program("dashboard play")
+        return "Starting program"
+
+    def _pause(self, cmd: str) -> str:
+        if self.mock.runtime_state != RUNTIME_PLAYING:
+            return "Failed to execute: pause"
+        self.mock._pause()
+        return "Pausing program"
+
+    def _unlock(self, cmd: str) -> str:
+        self.mock.safety_mode = SAFETY_NORMAL
+        return "Protective stop releasing"
+
+    def _restart_safety(self, cmd: str) -> str:
+        self.mock.safety_mode = SAFETY_NORMAL
+        return "Restarting safety"
+
+    def _running(self, cmd: str) -> str:
+        return f"Program running: {str(self.mock.runtime_state == RUNTIME_PLAYING).lower()}"
+
+    def _program_state(self, cmd: str) -> str:
+        state = {RUNTIME_PLAYING: "PLAYING", RUNTIME_PAUSED: "PAUSED"}.get(
+            self.mock.runtime_state, "STOPPED")
+        return f"{state} {PROGRAM_NAME}.urp"
+
+    def _loaded_program(self, cmd: str) -> str:
+        if self.mock._program_loaded:
+            return f"Loaded program: /programs/{PROGRAM_NAME}.urp"
+        return "No program loaded"
+
+    def _safety(self) -> str:
+        return "PROTECTIVE_STOP" if self.mock.protective_stopped else "NORMAL"
+
+
+class _RTDEConnection:
+    """One RTDE client: setup requests answered in order (a handler per package type), then
+    a thread that streams the output recipe."""
+
+    def __init__(self, mock: URMock, conn: socket.socket) -> None:
+        self.mock = mock
+        self.conn = conn
+        self.send_lock = threading.Lock()
+        self.output: Recipe | None = None
+        self.output_getters: list[Callable[[float], Any]] = []
+        self.frequency = DEFAULT_FREQUENCY_HZ
+        self.output_refused = False   # an output recipe was refused (bad frequency)
+        self.inputs: dict[int, Recipe] = {}
+        self.streaming = threading.Event()
+        self.closed = threading.Event()
+        self.stream_thread: threading.Thread | None = None
+        self.handlers: dict[int, Callable[[bytes], None]] = {
+            PackageType.RTDE_REQUEST_PROTOCOL_VERSION: self._on_protocol_version,
+            PackageType.RTDE_GET_URCONTROL_VERSION: self._on_controller_version,
+            PackageType.RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS: self._on_setup_outputs,
+            PackageType.RTDE_CONTROL_PACKAGE_SETUP_INPUTS: self._on_setup_inputs,
+            PackageType.RTDE_CONTROL_PACKAGE_START: self._on_start,
+            PackageType.RTDE_CONTROL_PACKAGE_PAUSE: self._on_pause,
+            PackageType.RTDE_DATA_PACKAGE: self._on_data,
+        }
+
+    def alive(self) -> bool:
+        return self.mock._alive() and not self.closed.is_set()
+
+    def send(self, ptype: PackageType, payload: bytes = b"") -> None:
+        with self.send_lock:
+            self.conn.sendall(encode_package(ptype, payload))
+
+    def run(self) -> None:
+        try:
+            while self.alive():
+                head = recv_exact(self.conn, HEADER.size, self.alive)
+                if head is None:
+                    return
+                size, ptype = HEADER.unpack(head)
+                if size < HEADER.size:
+                    log.warning("UR mock RTDE: bad package size %d; closing", size)
+                    return
+                payload = recv_exact(self.conn, size - HEADER.size, self.alive)
+                if payload is None:
+                    return
+                self.handle(ptype, payload)
+        finally:
+            self.closed.set()
+            self.streaming.clear()
+
+    def handle(self, ptype: int, payload: bytes) -> None:
+        handler = self.handlers.get(ptype)
+        if handler is None:
+            log.debug("UR mock RTDE: ignoring package type %r (%d bytes)", chr(ptype),
+                      len(payload))
+            return
+        handler(payload)
+
+    def _on_protocol_version(self, payload: bytes) -> None:
+        version = (PROTOCOL_VERSION.unpack(payload[:PROTOCOL_VERSION.size])[0]
+                   if len(payload) >= PROTOCOL_VERSION.size else 0)
+        self.send(PackageType.RTDE_REQUEST_PROTOCOL_VERSION,
+                  bytes([1 if version in PROTOCOL_VERSIONS else 0]))
+
+    def _on_controller_version(self, payload: bytes) -> None:
+        self.send(PackageType.RTDE_GET_URCONTROL_VERSION,
+                  CONTROLLER_VERSION.pack(*self.mock.version))
+
+    def _on_setup_outputs(self, payload: bytes) -> None:
+        reply = PackageType.RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS
+        if len(payload) < OUTPUT_FREQUENCY.size:
+            self.send(reply, b"\x00")
+            return
+        freq = OUTPUT_FREQUENCY.unpack(payload[:OUTPUT_FREQUENCY.size])[0]
+        if not (math.isfinite(freq) and MIN_FREQUENCY_HZ <= freq <= MAX_FREQUENCY_HZ):
+            log.warning("UR mock RTDE: output frequency %r Hz outside [%g, %g]: recipe "
+                        "refused", freq, MIN_FREQUENCY_HZ, MAX_FREQUENCY_HZ)
+            self.output_refused = True
+            self.send(reply, b"\x00")
+            return
+        self.frequency = freq
+        self.output = Recipe.from_names(parse_names(payload[OUTPUT_FREQUENCY.size:]))
+        self.output_getters = [self.mock.value_getter(n) for n in self.output.names]
+        log.debug("UR mock RTDE: output recipe at %.0f Hz: %s", self.frequency,
+                  ",".join(self.output.names))
+        self.send(reply, self.output.setup_reply(1))
+
+    def _on_setup_inputs(self, payload: bytes) -> None:
+        recipe = Recipe.from_names(parse_names(payload))
+        rid = len(self.inputs) + 1
+        self.inputs[rid] = recipe
+        log.debug("UR mock RTDE: input recipe %d: %s", rid, ",".join(recipe.names))
+        self.send(PackageType.RTDE_CONTROL_PACKAGE_SETUP_INPUTS, recipe.setup_reply(rid))
+
+    def _on_start(self, payload: bytes) -> None:
+        reply = PackageType.RTDE_CONTROL_PACKAGE_START
+        if self.output_refused and self.output is None:
+            self.send(reply, b"\x00")  # the output recipe was refused: nothing to stream
+            return
+        self.send(reply, b"\x01")
+        self.streaming.set()
+        if self.stream_thread is None and self.output is not None:
+            self.stream_thread = threading.Thread(target=self.stream, daemon=True,
+                                                  name="ur-rtde-stream")
+            self.stream_thread.start()
+
+    def _on_pause(self, payload: bytes) -> None:
+        self.streaming.clear()
+        self.send(PackageType.RTDE_CONTROL_PACKAGE_PAUSE, b"\x01")
+
+    def _on_data(self, payload: bytes) -> None:
+        """An input data package: registers (and external_force_torque) written, then one
+        control-script cycle."""
+        if not payload:
+            return
+        rid = payload[0]
+        recipe = self.inputs.get(rid)
+        if recipe is None:
+            log.warning("UR mock RTDE: data for unknown input recipe %d ignored", rid)
+            return
+        if len(payload) != recipe.packer.size:
+            log.warning("UR mock RTDE: input recipe %d: %d bytes, expected %d; ignored", rid,
+                        len(payload) - 1, recipe.packer.size - 1)
+            return
+        mock = self.mock
+        with mock._lock:
+            for name, values in recipe.unpack(payload):
+                mock.write_input(name, values)
+            log.debug("UR mock RTDE: input recipe %d, cmd %d (runtime_state %d, "
+                      "output_int_register_0 %d)", rid, mock.in_int[0], mock.runtime_state,
+                      mock.out_int[0])
+        mock._tick()
+
+    def stream(self) -> None:
+        """Send the output recipe at the requested frequency (wall-clock on every clock)."""
+        assert self.output is not None
+        period = 1.0 / min(max(self.frequency, MIN_FREQUENCY_HZ), MAX_FREQUENCY_HZ)
+        nxt = time.monotonic()
+        mock = self.mock
+        try:
+            while self.alive():
+                if self.streaming.is_set():
+                    with mock._lock:
+                        now = mock.clock.now()
+                        data = self.output.pack(1, [get(now) for get in self.output_getters])
+                    self.send(PackageType.RTDE_DATA_PACKAGE, data)
+                nxt += period
+                delay = nxt - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                elif delay < -0.1:
+                    nxt = time.monotonic()
+        except OSError as e:
+            log.debug("UR mock RTDE stream ended: %s", e)
+        finally:
+            self.closed.set()
