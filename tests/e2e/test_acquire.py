@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from tmscal.acquisition.plan import make_plan
 from tmscal.acquisition.run import AcquisitionStopped, acquire
@@ -23,41 +22,7 @@ from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.report.evaluate import solve_session
 from tmscal.session import read_session
 
-REPO = Path(__file__).resolve().parents[2]
-CONFIGS = REPO / "configs"
-
-
-def write_config(tmp_path: Path, base: str, **changes) -> Path:
-    """A copy of a shipped mock config with sections updated (absolute ROM paths)."""
-    data = yaml.safe_load((CONFIGS / base).read_text())
-    data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
-    for section, values in changes.items():
-        if isinstance(values, dict) and isinstance(data.get(section), dict):
-            data[section].update(values)
-        else:
-            data[section] = values
-    p = tmp_path / f"rig-{base}"
-    p.write_text(yaml.safe_dump(data))
-    return p
-
-
-def point_config(cfg_path: Path, ep: dict[str, str], name: str = "run.yaml") -> Path:
-    """A copy of a config whose tracker port and robot address are the running mocks'."""
-    data = yaml.safe_load(cfg_path.read_text())
-    data["tracker"]["port"] = ep["tracker"]
-    host, _, port = ep["robot"].partition(":")
-    data["robot"]["host"] = host
-    if port:
-        data["robot"]["port"] = int(port)
-    out = cfg_path.parent / name
-    out.write_text(yaml.safe_dump(data))
-    return out
-
-
-def endpoints_kwargs(ep: dict[str, str]) -> dict:
-    host, _, port = ep["robot"].partition(":")
-    return {"tracker_port": ep["tracker"], "robot_host": host,
-            "robot_port": int(port) if port else None}
+from ..rigs import endpoints_kwargs, point_config, write_config  # noqa: F401 (re-exported)
 
 
 def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
@@ -78,12 +43,12 @@ def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
 @pytest.mark.e2e
 @pytest.mark.parametrize("base, host", [("mock-ur-polaris.yaml", "127.0.0.41"),
                                         ("mock-denso-polaris.yaml", "127.0.0.1")])
-def test_acquire_then_solve_recovers_truth(tmp_path, base, host):
+def test_acquire_then_solve_recovers_truth(tmp_path, base, host, mock_config):
     robot = {"host": host}
     if "denso" in base:
         robot["port"] = 0
-    cfg_path = write_config(tmp_path, base, robot=robot, plan={"poses": 30},
-                            sampling={"samples": 10})
+    cfg_path = mock_config(base, robot=robot, plan={"poses": 30},
+                           sampling={"samples": 10})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="pty") as mp:
         res = acquire(load_config(cfg_path), out, **endpoints_kwargs(mp.endpoints))
@@ -95,9 +60,9 @@ def test_acquire_then_solve_recovers_truth(tmp_path, base, host):
 
 
 @pytest.mark.e2e
-def test_kill_9_then_resume_loses_and_duplicates_nothing(tmp_path):
-    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
-                            plan={"poses": 150}, sampling={"samples": 20})
+def test_kill_9_then_resume_loses_and_duplicates_nothing(tmp_path, mock_config):
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           plan={"poses": 150}, sampling={"samples": 20})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="tcp") as mp:
         kw = endpoints_kwargs(mp.endpoints)
@@ -134,9 +99,9 @@ def test_kill_9_then_resume_loses_and_duplicates_nothing(tmp_path):
 
 
 @pytest.mark.e2e
-def test_stop_request_leaves_resumable_session(tmp_path):
-    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
-                            plan={"poses": 12}, sampling={"samples": 5})
+def test_stop_request_leaves_resumable_session(tmp_path, mock_config):
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           plan={"poses": 12}, sampling={"samples": 5})
     cfg = load_config(cfg_path)
     out = tmp_path / "s.jsonl"
     with start_mock_rig(cfg, tracker_transport="pty") as mr:
@@ -150,9 +115,9 @@ def test_stop_request_leaves_resumable_session(tmp_path):
 
 
 @pytest.mark.e2e
-def test_tracker_faults_end_in_complete_session(tmp_path):
-    cfg_path = write_config(
-        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 20},
+def test_tracker_faults_end_in_complete_session(tmp_path, mock_config):
+    cfg_path = mock_config(
+        "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 20},
         sampling={"samples": 10, "min_share": 0.6},
         tracker={"options": {"timeout_s": 0.3, "retries": 5}},
         mock={"tracker": {"model": "spectra",
@@ -170,9 +135,9 @@ def test_tracker_faults_end_in_complete_session(tmp_path):
 
 
 @pytest.mark.e2e
-def test_tool_missing_everywhere_is_skipped_with_reason(tmp_path):
-    cfg_path = write_config(
-        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 3},
+def test_tool_missing_everywhere_is_skipped_with_reason(tmp_path, mock_config):
+    cfg_path = mock_config(
+        "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 3},
         sampling={"samples": 5},
         mock={"tracker": {"model": "spectra", "faults": {"missing_fraction": 1.0}}})
     cfg = load_config(cfg_path)
@@ -184,9 +149,9 @@ def test_tool_missing_everywhere_is_skipped_with_reason(tmp_path):
 
 
 @pytest.mark.e2e
-def test_dropped_robot_connection_is_reconnected(tmp_path):
-    cfg_path = write_config(
-        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 10},
+def test_dropped_robot_connection_is_reconnected(tmp_path, mock_config):
+    cfg_path = mock_config(
+        "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 10},
         sampling={"samples": 5}, run={"retries": 2, "reconnect_wait_s": 0.05},
         mock={"robot": {"faults": {"drop_at_request": 60}}})
     cfg = load_config(cfg_path)
@@ -199,9 +164,9 @@ def test_dropped_robot_connection_is_reconnected(tmp_path):
 
 
 @pytest.mark.e2e
-def test_robot_fault_stops_cleanly_with_cause(tmp_path):
-    cfg_path = write_config(
-        tmp_path, "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 10},
+def test_robot_fault_stops_cleanly_with_cause(tmp_path, mock_config):
+    cfg_path = mock_config(
+        "mock-denso-polaris.yaml", robot={"port": 0}, plan={"poses": 10},
         sampling={"samples": 5}, mock={"robot": {"faults": {"fail_move_at": 4}}})
     cfg = load_config(cfg_path)
     out = tmp_path / "s.jsonl"
@@ -214,9 +179,9 @@ def test_robot_fault_stops_cleanly_with_cause(tmp_path):
 
 
 @pytest.mark.e2e
-def test_ur_protective_stop_stops_cleanly(tmp_path):
-    cfg_path = write_config(
-        tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.42"}, plan={"poses": 8},
+def test_ur_protective_stop_stops_cleanly(tmp_path, mock_config):
+    cfg_path = mock_config(
+        "mock-ur-polaris.yaml", robot={"host": "127.0.0.42"}, plan={"poses": 8},
         sampling={"samples": 5}, mock={"robot": {"faults": {"protective_stop_at_move": 3}}})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="pty") as mp:
@@ -227,10 +192,10 @@ def test_ur_protective_stop_stops_cleanly(tmp_path):
 
 
 @pytest.mark.e2e
-def test_plan_outside_envelope_never_moves(tmp_path):
-    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
-                            plan={"poses": 50, "radius_mm": 100},
-                            safety={"max_offset_mm": 60})
+def test_plan_outside_envelope_never_moves(tmp_path, mock_config):
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           plan={"poses": 50, "radius_mm": 100},
+                           safety={"max_offset_mm": 60})
     cfg = load_config(cfg_path)
     out = tmp_path / "s.jsonl"
     with start_mock_rig(cfg, tracker_transport="pty") as mr:
@@ -241,8 +206,8 @@ def test_plan_outside_envelope_never_moves(tmp_path):
 
 
 @pytest.mark.e2e
-def test_mock_command_prints_json_endpoints_first(tmp_path):
-    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0})
+def test_mock_command_prints_json_endpoints_first(mock_config):
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0})
     proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "mock", str(cfg_path),
                              "--json", "--transport", "pty"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -257,14 +222,14 @@ def test_mock_command_prints_json_endpoints_first(tmp_path):
 
 
 @pytest.mark.e2e
-def test_ur_dropped_connection_stops_cleanly_and_resumable(tmp_path):
+def test_ur_dropped_connection_stops_cleanly_and_resumable(tmp_path, mock_config):
     """The UR mock closes every socket (and refuses reconnects) at the 3rd move: the run
     (in a child process, as ur_rtde may misbehave on a dropped link) ends with one error line
     naming the cause and the resume command, and the session keeps the poses before."""
-    cfg = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
-                       plan={"poses": 8}, sampling={"samples": 5},
-                       run={"retries": 2, "reconnect_wait_s": 0.1},
-                       mock={"robot": {"faults": {"drop_connection_at_move": 3}}})
+    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
+                      plan={"poses": 8}, sampling={"samples": 5},
+                      run={"retries": 2, "reconnect_wait_s": 0.1},
+                      mock={"robot": {"faults": {"drop_connection_at_move": 3}}})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg, transport="pty") as mp:
         r = subprocess.run([sys.executable, "-m", "tmscal.cli", "acquire", str(cfg), "-o",
@@ -280,10 +245,10 @@ def test_ur_dropped_connection_stops_cleanly_and_resumable(tmp_path):
 
 
 @pytest.mark.e2e
-def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path):
-    cfg = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
-                       plan={"poses": 50}, sampling={"samples": 20, "settle_s": 0.1},
-                       mock={"clock": "real"})
+def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path, mock_config):
+    cfg = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                      plan={"poses": 50}, sampling={"samples": 20, "settle_s": 0.1},
+                      mock={"clock": "real"})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg, transport="pty") as mp:
         run_cfg = point_config(cfg, mp.endpoints)
@@ -305,9 +270,9 @@ def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path):
 
 
 @pytest.mark.e2e
-def test_resume_can_extend_the_plan(tmp_path):
-    cfg_path = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
-                            plan={"poses": 6}, sampling={"samples": 3})
+def test_resume_can_extend_the_plan(tmp_path, mock_config):
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           plan={"poses": 6}, sampling={"samples": 3})
     cfg = load_config(cfg_path)
     out = tmp_path / "s.jsonl"
     with start_mock_rig(cfg, tracker_transport="pty") as mr:

@@ -16,13 +16,12 @@ from tmscal.config import load_config
 from tmscal.mocks.rig import start_mock_rig
 from tmscal.sim import TMS_RIG_P0
 
-from .test_acquire import point_config, write_config
+from ..rigs import NOISE_FREE_MOCK, point_config
 
 
-def test_track_robot_dry_run_and_jog(tmp_path):
-    base_cfg = write_config(tmp_path, "mock-denso-polaris.yaml", robot={"port": 0},
-                            mock={"noise": {"fiducial_sigma_mm": 0.0, "robot_rot_sigma_deg": 0.0,
-                                            "robot_trans_sigma_mm": 0.0}})
+def test_track_robot_dry_run_and_jog(tmp_path, mock_config):
+    base_cfg = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           mock={"noise": NOISE_FREE_MOCK})
     with start_mock_rig(load_config(base_cfg), tracker_transport="pty") as mr:
         cfg = point_config(base_cfg, mr.endpoints, "pointed.yaml")
         r = CliRunner().invoke(main, ["track", str(cfg), "--frames", "3"])
@@ -66,8 +65,8 @@ def test_track_robot_dry_run_and_jog(tmp_path):
         np.testing.assert_allclose(mr.rig.flange[:3, :3], TMS_RIG_P0[:3, :3], atol=1e-9)
 
 
-def test_demo_json_recovers_truth(tmp_path):
-    cfg = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.43"})
+def test_demo_json_recovers_truth(mock_config):
+    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.43"})
     out = subprocess.run([sys.executable, "-m", "tmscal.cli", "demo", "--config", str(cfg),
                           "--poses", "25", "--samples", "10", "--json"],
                          capture_output=True, text=True, timeout=240)

@@ -17,7 +17,7 @@ from tmscal.errors import SessionError
 from tmscal.mocks.rig import start_mock_rig
 from tmscal.session import read_session
 
-from .test_acquire import endpoints_kwargs, write_config
+from ..rigs import endpoints_kwargs, write_config
 
 
 def _edit_header(path: Path, edit) -> None:

@@ -11,12 +11,13 @@ from tmscal.calib.metrics import coil_placement_errors, holdout_errors
 from tmscal.calib.study import convergence, summarize, threshold_n
 from tmscal.sim import Noise, Truth, simulate
 
+from ..rigs import simulated
+
 
 @pytest.mark.parametrize("plan", ["random", "eq14"])
 @pytest.mark.parametrize("method", ["qr24", "qr36"])
-def test_exact_recovery_noise_free(plan, method):
-    rng = np.random.default_rng(11)
-    truth, d = simulate(60, rng, plan=plan, noise=Noise.none())
+def test_noise_free_data_recovers_truth_to_1e9_mm(plan, method):
+    truth, d = simulated(60, seed=11, plan=plan, noise=Noise.none())
     cal = solve(d["A"], d["marker"], d["probe"], method=method)
     for est, true in ((cal.X, truth.X), (cal.Y, truth.Y), (cal.Z, truth.Z),
                       (cal.X_raw, truth.X), (cal.Y_raw, truth.Y), (cal.Z_raw, truth.Z)):
@@ -25,7 +26,7 @@ def test_exact_recovery_noise_free(plan, method):
         np.testing.assert_allclose(cal.Z_probe, truth.Z, atol=1e-9, rtol=0)
 
 
-def test_rows_match_independent_construction():
+def test_design_matrix_rows_equal_pose_residuals_for_any_unknowns():
     """D w − b must equal vec(A⁻¹ Z B − X) (and the probe analogue) for ANY w, evaluated by
     plain matrix arithmetic on arbitrary (non-rigid) Z, X, Y."""
     rng = np.random.default_rng(3)
@@ -45,8 +46,7 @@ def test_rows_match_independent_construction():
 
 
 def test_structured_solve_equals_dense_least_squares():
-    rng = np.random.default_rng(4)
-    _, d = simulate(40, rng, plan="eq14", noise=Noise())
+    _, d = simulated(40, seed=4, plan="eq14", noise=Noise())
     cal = solve(d["A"], d["marker"], d["probe"], method="qr36")
     D, b = design_matrix(d["A"], d["marker"], d["probe"])
     Q, R = np.linalg.qr(D)
@@ -64,8 +64,7 @@ def test_vec34_is_column_major():
 
 
 def test_noisy_errors_near_noise_floor_and_qr24_ez_penalty():
-    rng = np.random.default_rng(5)
-    truth, d = simulate(500, rng, plan="eq14", noise=Noise())
+    truth, d = simulated(500, seed=5, plan="eq14", noise=Noise())
     A, B, C = d["A"], d["marker"], d["probe"]
     tr, te = slice(0, 250), slice(250, 500)
     floor = holdout_errors(A[te], {"marker": B[te], "probe": C[te]},
@@ -78,9 +77,8 @@ def test_noisy_errors_near_noise_floor_and_qr24_ez_penalty():
     assert e24["e_t_mm"] > e36["e_t_mm"]
 
 
-def test_orthonormal_variant_is_rigid_and_close():
-    rng = np.random.default_rng(6)
-    truth, d = simulate(100, rng, plan="eq14", noise=Noise())
+def test_orthonormal_variant_is_rigid_and_holds_out_below_half_mm():
+    truth, d = simulated(100, seed=6, plan="eq14", noise=Noise())
     cal = solve(d["A"], d["marker"], d["probe"], "qr36", orthonormal=True)
     assert cal.applied == "orthonormal"
     for M in (cal.X, cal.Y, cal.Z):
@@ -112,23 +110,21 @@ def test_coil_placement_zero_with_true_transforms_and_known_offset():
     np.testing.assert_allclose(coil_placement_errors(C, truth.Y, Zs, truth.Y, truth.Z), 2.0)
 
 
-def test_too_few_poses():
-    rng = np.random.default_rng(0)
-    _, d = simulate(2, rng, plan="random", noise=Noise.none())
+def test_fewer_than_3_poses_is_a_calibration_error():
+    _, d = simulated(2, seed=0, plan="random", noise=Noise.none())
     with pytest.raises(CalibrationError, match="at least 3 poses"):
         solve(d["A"], d["marker"], d["probe"])
 
 
-def test_parallel_rotation_axes_rejected():
+def test_rotations_about_one_axis_are_rejected():
     A = np.stack([g.make_pose(g.rot_z(a), [a * 10, a * 20, 0]) for a in np.linspace(0, 1, 10)])
     B = np.stack([np.eye(4)] * 10)
     with pytest.raises(CalibrationError, match="rotation diversity"):
         solve(A, B, B)
 
 
-def test_nan_and_non_rigid_rejected():
-    rng = np.random.default_rng(1)
-    _, d = simulate(10, rng, plan="random", noise=Noise.none())
+def test_nan_and_non_rigid_poses_are_rejected_naming_the_pose():
+    _, d = simulated(10, seed=1, plan="random", noise=Noise.none())
     A = d["A"].copy()
     A[3, 0, 0] = np.nan
     with pytest.raises(CalibrationError, match="pose 3 contains NaN"):
@@ -139,16 +135,15 @@ def test_nan_and_non_rigid_rejected():
         solve(d["A"], B, d["probe"])
 
 
-def test_qr36_needs_probe():
-    rng = np.random.default_rng(1)
-    _, d = simulate(10, rng, plan="random", noise=Noise.none(), with_probe=False)
+def test_qr36_needs_probe_poses_and_qr24_runs_marker_only():
+    _, d = simulated(10, seed=1, plan="random", noise=Noise.none(), with_probe=False)
     with pytest.raises(CalibrationError, match="qr36 needs probe"):
         solve(d["A"], d["marker"], None, "qr36")
     cal = solve(d["A"], d["marker"], None, "qr24")
     assert cal.Y is None
 
 
-def test_study_summary_and_threshold():
+def test_summary_and_threshold_n_on_a_hand_made_curve():
     ns = [5, 6, 7, 8, 9]
     vals = [0.9, 0.35, 0.5, 0.3, 0.2]
     assert threshold_n(vals, ns, 0.4) == 8
@@ -159,9 +154,8 @@ def test_study_summary_and_threshold():
     assert s["median"]["value"] == pytest.approx(0.35)
 
 
-def test_convergence_shapes():
-    rng = np.random.default_rng(2)
-    _, d = simulate(40, rng, plan="eq14", noise=Noise())
+def test_convergence_curve_lengths_and_too_few_test_poses():
+    _, d = simulated(40, seed=2, plan="eq14", noise=Noise())
     out = convergence(d["A"], d["marker"], d["probe"], ("qr36",), n_min=5, n_max=20)
     assert out["n"] == list(range(5, 21)) and out["n_test"] == 20
     assert len(out["methods"]["qr36"]["e_t_mm"]) == 16

@@ -13,13 +13,12 @@ from tmscal.session import (
     records_from_arrays,
     write_session,
 )
-from tmscal.sim import Noise, simulate
+
+from ..rigs import simulated
 
 
 def _sim(n=5, probe=True):
-    truth, d = simulate(n, np.random.default_rng(0), plan="eq14", noise=Noise(),
-                        with_probe=probe)
-    return truth, d
+    return simulated(n, with_probe=probe)
 
 
 def test_round_trip(tmp_path):

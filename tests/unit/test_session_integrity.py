@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tmscal import session as session_mod
 from tmscal.errors import SessionError
 from tmscal.session import (
     PoseRecord,
@@ -30,9 +29,11 @@ from tmscal.session import (
     validate_record,
     write_session,
 )
-from tmscal.sim import Noise, simulate
+from tmscal.session import files as session_mod
 
-_TRUTH, _D = simulate(6, np.random.default_rng(0), plan="eq14", noise=Noise())
+from ..rigs import simulated
+
+_TRUTH, _D = simulated(6)
 _RECS = records_from_arrays(_D["A"], _D["marker"], _D["probe"], _D["commanded"], samples=10)
 _HEADER = make_header(["marker", "probe"])
 

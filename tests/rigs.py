@@ -1,0 +1,76 @@
+"""Shared test rigs: the shipped configs, copies of them with sections changed, and the
+simulated TMS rig without noise. The fixtures in ``tests/conftest.py`` wrap these; import them
+directly where a module-level helper needs them.
+
+Frames and units as everywhere: 4×4 poses in mm (``docs/conventions.md``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from tmscal.sim import TMS_RIG_P0, Noise, SimRig, Truth, simulate, tms_rig_truth
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = REPO / "configs"
+TOOLS_DIR = CONFIGS / "tools"
+
+#: ``mock.noise`` of a mock config that makes the mock rig exact
+NOISE_FREE_MOCK = {"fiducial_sigma_mm": 0.0, "robot_rot_sigma_deg": 0.0,
+                   "robot_trans_sigma_mm": 0.0}
+
+
+def write_config(tmp_path: Path, base: str, **changes: Any) -> Path:
+    """A copy of the shipped config ``configs/<base>`` in ``tmp_path``, ROM paths made
+    absolute, each keyword a section: a dict updates that section, anything else replaces it."""
+    data = yaml.safe_load((CONFIGS / base).read_text())
+    data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
+    for section, values in changes.items():
+        if isinstance(values, dict) and isinstance(data.get(section), dict):
+            data[section].update(values)
+        else:
+            data[section] = values
+    p = tmp_path / f"rig-{base}"
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+def point_config(cfg_path: Path, ep: dict[str, str], name: str = "run.yaml") -> Path:
+    """A copy of a config whose tracker port and robot address are the running mocks'."""
+    data = yaml.safe_load(cfg_path.read_text())
+    data["tracker"]["port"] = ep["tracker"]
+    host, _, port = ep["robot"].partition(":")
+    data["robot"]["host"] = host
+    if port:
+        data["robot"]["port"] = int(port)
+    out = cfg_path.parent / name
+    out.write_text(yaml.safe_dump(data))
+    return out
+
+
+def endpoints_kwargs(ep: dict[str, str]) -> dict[str, Any]:
+    """``acquire``'s endpoint overrides (tracker_port, robot_host, robot_port) for the
+    endpoints of a running mock rig."""
+    host, _, port = ep["robot"].partition(":")
+    return {"tracker_port": ep["tracker"], "robot_host": host,
+            "robot_port": int(port) if port else None}
+
+
+def quiet_tms_rig(**kw: Any) -> SimRig:
+    """The built-in TMS rig (``tms_rig_truth``) without noise, the flange at ``TMS_RIG_P0``;
+    keywords override SimRig's fields."""
+    kw.setdefault("noise", Noise.none())
+    kw.setdefault("start", TMS_RIG_P0)
+    return SimRig(tms_rig_truth(), **kw)
+
+
+def simulated(n: int, seed: int = 0, plan: str = "eq14", noise: Noise | None = None,
+              **kw: Any) -> tuple[Truth, dict[str, np.ndarray]]:
+    """``tmscal.sim.simulate`` of n poses from ``default_rng(seed)`` (default noise: the
+    paper's); returns (truth, {"A", "commanded", "marker"[, "probe"]}) in mm."""
+    return simulate(n, np.random.default_rng(seed), plan=plan,
+                    noise=Noise() if noise is None else noise, **kw)
