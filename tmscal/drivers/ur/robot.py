@@ -21,13 +21,15 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError, RobotFault
 from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
+from ...timing import Deadline
 from ..base import Envelope, Robot
 
 log = logging.getLogger(__name__)
@@ -46,6 +48,10 @@ RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "P
 RECEIVE_VARIABLES = ["timestamp", "actual_TCP_pose", "robot_mode", "safety_mode",
                      "safety_status_bits", "runtime_state", "robot_status_bits"]
 _SAFE_MODES = (1, 2)   # NORMAL, REDUCED: motion allowed
+_POLL_S = 0.005          # how often a wait looks at the worker or the receive stream (s)
+_FRESH_POLL_S = 0.0005   # how often a wait for new data looks at the timestamp (s)
+_LINK_GRACE_S = 0.5      # a receive link down this long during a call: the call is abandoned
+_DIAGNOSE_S = 1.0        # longest wait for the receive stream to show why a move failed (s)
 
 
 def base_from_flange_from_tcp(tcp_pose: Any, flange_from_tcp: np.ndarray) -> np.ndarray:
@@ -119,16 +125,13 @@ class URRobot(Robot):
             import rtde_receive
         except ImportError as e:  # pragma: no cover - the ur extra is missing
             raise DeviceError(f"ur {self.host}: the ur_rtde library is not installed ({e}); "
-                              "pip install 'tmscal[ur]'", device="ur") from e
+                              "pip install 'tmscal[ur]'", device=self.name) from e
         freq = -1.0 if self.frequency_hz is None else float(self.frequency_hz)
         flags = (rtde_control.RTDEControlInterface.Flags.FLAG_UPLOAD_SCRIPT
                  if self.upload_script else 0)
-        try:
+        with self._translated("connect"):
             self._rx = rtde_receive.RTDEReceiveInterface(self.host, freq, RECEIVE_VARIABLES)
             self._ctl = rtde_control.RTDEControlInterface(self.host, freq, int(flags))
-        except RuntimeError as e:
-            raise ConnectionLost(f"ur {self.host}: cannot connect: {e}", device="ur",
-                                 text=str(e)) from e
         self._wait_fresh_data("first data from the controller")
         try:
             self._check_safety("open")
@@ -199,7 +202,7 @@ class URRobot(Robot):
         v = self._call("getActualTCPPose", self._rx.getActualTCPPose)
         if len(v) != 6 or not np.all(np.isfinite(v)):
             raise ProtocolError(f"ur {self.host}: getActualTCPPose returned {v!r}, expected 6 "
-                                "finite values", device="ur")
+                                "finite values", device=self.name)
         return base_from_flange_from_tcp(v, self.flange_from_tcp)
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
@@ -224,21 +227,36 @@ class URRobot(Robot):
 
     # --- helpers ------------------------------------------------------------------------------
 
-    def _call(self, what: str, fn: Any) -> Any:
-        """Run a ur_rtde call; its RuntimeError becomes ConnectionLost or DeviceError."""
+    @contextmanager
+    def _translated(self, what: str) -> Iterator[None]:
+        """The one place ur_rtde's errors become tmscal's: a ``RuntimeError`` raised inside
+        becomes ``ConnectionLost`` (the link is down, or the library says so),
+        ``DeviceTimeout`` (the library timed out) or ``DeviceError``, naming ``what``; a
+        ``DeviceError`` passes through unchanged (with its ``code``)."""
         try:
-            return fn()
+            yield
         except RuntimeError as e:
-            connected = self._connected()
-            cls = ConnectionLost if (not connected or "connect" in str(e).lower()) \
-                else DeviceError
-            raise cls(f"ur {self.host}: {what} failed: {e}", device="ur", text=str(e)) from e
+            text = str(e)
+            low = text.lower()
+            if not self._connected() or "connect" in low:
+                cls: type[DeviceError] = ConnectionLost
+            elif "timeout" in low or "timed out" in low:
+                cls = DeviceTimeout
+            else:
+                cls = DeviceError
+            raise cls(f"ur {self.host}: {what} failed: {e}", device=self.name,
+                      text=text) from e
+
+    def _call(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)``, a ur_rtde call, with its errors translated (``_translated``)."""
+        with self._translated(what):
+            return fn(*args)
 
     def _call_watched(self, what: str, fn: Callable[[], Any], timeout_s: float,
                       watch: bool = True) -> Any:
         """Run a (possibly blocking) ur_rtde call in a worker thread. Raise ``ConnectionLost``
         when the receive link drops while it runs (``watch``), ``DeviceTimeout`` after
-        ``timeout_s``; the library's RuntimeError becomes a typed error too."""
+        ``timeout_s``; the library's errors are translated (``_translated``)."""
         box: dict[str, Any] = {}
 
         def run() -> None:
@@ -249,33 +267,31 @@ class URRobot(Robot):
 
         worker = threading.Thread(target=run, name=f"ur-{what}", daemon=True)
         worker.start()
-        deadline = time.monotonic() + timeout_s
-        lost_at: float | None = None
+        self._watch(worker, what, Deadline(timeout_s), watch)
+        if "error" in box:
+            with self._translated(what):
+                raise box["error"]
+        return box.get("value")
+
+    def _watch(self, worker: threading.Thread, what: str, deadline: Deadline,
+               watch: bool) -> None:
+        """Wait for ``worker``; abandon it (``_stuck``) when the receive link has been down
+        for ``_LINK_GRACE_S`` (``watch``) or ``deadline`` expires."""
+        lost: Deadline | None = None
         while worker.is_alive():
-            worker.join(0.005)
+            worker.join(_POLL_S)
             if not worker.is_alive():
                 break
-            now = time.monotonic()
-            if watch and lost_at is None and not self._rx_connected():
-                lost_at = now
-            if lost_at is not None and now - lost_at > 0.5:
+            if watch and lost is None and not self._rx_connected():
+                lost = Deadline(_LINK_GRACE_S)
+            if lost is not None and lost.expired():
                 self._stuck = True
                 raise ConnectionLost(f"ur {self.host}: connection lost during {what}",
-                                     device="ur")
-            if now > deadline:
+                                     device=self.name)
+            if deadline.expired():
                 self._stuck = True
                 raise DeviceTimeout(f"ur {self.host}: {what} did not return within "
-                                    f"{timeout_s:.1f} s", device="ur")
-        if "error" in box:
-            e = box["error"]
-            if isinstance(e, RuntimeError):
-                connected = self._connected()
-                cls = ConnectionLost if (not connected or "connect" in str(e).lower()) \
-                    else DeviceError
-                raise cls(f"ur {self.host}: {what} failed: {e}", device="ur",
-                          text=str(e)) from e
-            raise e
-        return box.get("value")
+                                    f"{deadline.timeout_s:.1f} s", device=self.name)
 
     def _rx_connected(self) -> bool:
         try:
@@ -293,56 +309,67 @@ class URRobot(Robot):
     def _check_connected(self, what: str) -> None:
         if not self._connected():
             raise ConnectionLost(f"ur {self.host}: {what}: the RTDE connection is lost",
-                                 device="ur")
+                                 device=self.name)
 
     def _safety(self) -> tuple[int, str, bool, bool, int]:
-        rx = self._rx
-        mode = int(rx.getSafetyMode())
-        return (mode, SAFETY_MODES.get(mode, f"safety mode {mode}"),
-                bool(rx.isProtectiveStopped()), bool(rx.isEmergencyStopped()),
-                int(rx.getRuntimeState()))
+        """(safety mode, its name, protective stop, emergency stop, runtime state), read
+        through the translator."""
+        def read() -> tuple[int, str, bool, bool, int]:
+            rx = self._rx
+            mode = int(rx.getSafetyMode())
+            return (mode, SAFETY_MODES.get(mode, f"safety mode {mode}"),
+                    bool(rx.isProtectiveStopped()), bool(rx.isEmergencyStopped()),
+                    int(rx.getRuntimeState()))
+        return self._call("safety status", read)
+
+    def _fault(self, what: str, status: tuple[int, str, bool, bool, int]) -> RobotFault | None:
+        """A ``RobotFault`` naming ``what`` when ``status`` (from ``_safety``) says the robot
+        is stopped or faulted, else None."""
+        mode, name, protective, emergency, _ = status
+        if protective or emergency or mode not in _SAFE_MODES:
+            return RobotFault(f"ur {self.host}: {what}: robot in {name}", code=mode, text=name,
+                              device=self.name)
+        return None
 
     def _check_safety(self, what: str) -> None:
-        mode, name, protective, emergency, _ = self._call("safety status", self._safety)
-        if protective or emergency or mode not in _SAFE_MODES:
-            raise RobotFault(f"ur {self.host}: {what} refused: robot in {name}", code=mode,
-                             text=name, device="ur")
+        fault = self._fault(f"{what} refused", self._safety())
+        if fault is not None:
+            raise fault
 
     def _diagnose_failed_move(self, target: list[float]) -> None:
         """moveL returned False: raise the typed error that says why. The receive stream may
         lag the control stream by a few cycles, so watch it for a short while."""
-        deadline = time.monotonic() + min(1.0, self.timeout_s)
+        deadline = Deadline(min(_DIAGNOSE_S, self.timeout_s))
         while True:
             if not self._connected():
                 raise ConnectionLost(f"ur {self.host}: connection lost during moveL to "
-                                     f"{target}", device="ur")
-            mode, name, protective, emergency, runtime = self._call("safety status",
-                                                                    self._safety)
-            if protective or emergency or mode not in _SAFE_MODES:
-                raise RobotFault(f"ur {self.host}: moveL to {target} aborted: robot in {name}",
-                                 code=mode, text=name, device="ur")
-            if time.monotonic() > deadline:
+                                     f"{target}", device=self.name)
+            status = self._safety()
+            fault = self._fault(f"moveL to {target} aborted", status)
+            if fault is not None:
+                raise fault
+            if deadline.expired():
+                name, runtime = status[1], status[4]
                 state = RUNTIME_STATES.get(runtime, str(runtime))
                 raise RobotFault(f"ur {self.host}: moveL to {target} failed (safety {name}, "
                                  f"program {state}); is the control script running?",
-                                 code=runtime, text=state, device="ur")
-            time.sleep(0.005)
+                                 code=runtime, text=state, device=self.name)
+            time.sleep(_POLL_S)
 
     def _wait_fresh_data(self, what: str) -> None:
         """Wait until the receive stream has moved on by two packages, so that a pose read next
         was produced after the event just seen on the control stream."""
-        t0 = float(self._call("getTimestamp", self._rx.getTimestamp))
+        last = float(self._call("getTimestamp", self._rx.getTimestamp))
         seen = 0
-        last = t0
-        deadline = time.monotonic() + self.timeout_s
+        deadline = Deadline(self.timeout_s)
         while seen < 2:
             self._check_connected(what)
-            t = float(self._rx.getTimestamp())
+            t = float(self._call("getTimestamp", self._rx.getTimestamp))
             if t != last:
                 seen += 1
                 last = t
-            elif time.monotonic() > deadline:
+            elif deadline.expired():
                 raise DeviceTimeout(f"ur {self.host}: no {what} within {self.timeout_s:.1f} s",
-                                    device="ur")
+                                    device=self.name)
             else:
-                time.sleep(0.0005)
+                time.sleep(_FRESH_POLL_S)
