@@ -4,6 +4,7 @@ client's handling of keep-alives and foreign serials against a scripted server."
 
 from __future__ import annotations
 
+import dataclasses
 import ipaddress
 import socket
 import threading
@@ -304,7 +305,7 @@ def test_denso_robot_connection_lost_during_move(rig: SimRig) -> None:
     with DensoMock(rig, clock=FAST) as m:
         robot = DensoRobot(port=port_of(m.start()))
         robot.open()
-        m.faults.drop_at_request = m.stats["requests"] + 1
+        m.faults = dataclasses.replace(m.faults, drop_at_request=m.stats["requests"] + 1)
         with pytest.raises(ConnectionLost):
             robot.move_to(TMS_RIG_P0 @ make_pose(t=[5, 0, 0]))
         robot.close()  # best effort, does not raise
@@ -377,12 +378,13 @@ def test_bad_curpos_raises_protocol_error_naming_curpos(rig: SimRig, fault: str,
                                                          why: str) -> None:
     with DensoMock(rig, clock=FAST) as m, \
             DensoRobot(port=port_of(m.start()), watchdog_ms=None) as robot:
-        m.faults.bad_curpos = fault
+        m.faults = dataclasses.replace(m.faults, bad_curpos=fault)
         with pytest.raises(ProtocolError) as ei:
             robot.flange_pose()
         assert "CurPos" in str(ei.value) and why in str(ei.value)
         assert ei.value.device == "denso"
-        m.faults.bad_curpos = None  # the link is still usable: the next read is good
+        m.faults = dataclasses.replace(m.faults, bad_curpos=None)  # the link is still usable
+        # the next read is good
         assert np.allclose(robot.flange_pose(), TMS_RIG_P0, atol=1e-9)
 
 

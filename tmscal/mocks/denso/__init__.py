@@ -1,0 +1,47 @@
+"""A DENSO RC8 b-CAP server (TCP, loopback only) that serves a ``SimRig``: ``DensoMock``
+(``mock.py``: the server), its controller (``controller.py``: state, ``DensoFaults`` and one
+handler per b-CAP function) and request arguments (``args.py``).
+
+What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
+
+* Service_Start / Service_Stop (``WDT=<ms>`` in the option turns on S_EXECUTING keep-alives;
+  0 turns them off, other values outside 10..3,600,000 ms get E_INVALIDARG),
+  Controller_Connect / Disconnect / GetRobot / GetRobotNames / GetVariable / Execute
+  (``GetErrorDescription``, ``ClearError``), Robot_Execute (TakeArm, GiveArm, Motor, ExtSpeed,
+  CurPos, CurJnt), Robot_Move (comp 1 = MOVE P, 2 = MOVE L; pose as text
+  ``"@P P(x, y, z, rx, ry, rz, fig)"`` or VARIANT array ``[[x, …, fig], "P", "@P"]``; options
+  ``SPEED=<percent>``, ``ACCEL=<percent>``, ``DECEL=<percent>`` and ``NEXT``), Robot_Halt,
+  Robot_Speed, Robot_GetVariable
+  (``@CURRENT_POSITION``, ``@CURRENT_ANGLE``), Robot_Release, Variable_GetValue / PutValue /
+  Release (controller ``@VERSION``, ``@MODE`` and user variables ``I1``, ``F2``, ``D3``,
+  ``S4``, ``P5`` …).
+* Handles per connection (released when the connection closes, with the arm); the motor and
+  the rig are shared by all connections, like one physical controller.
+* A move needs TakeArm (else E_ACCESSDENIED 0x80070005: a stand-in, as the real controller's
+  code for this could not be checked) and the motor on (else 0x81501003).
+* Motion takes ``distance / speed`` seconds on the real-time clock (``motion_time_s``
+  overrides it), none on the fast clock; ``rig.move_flange(target)`` is called when the
+  motion ends. Speed = ``SPEED`` option (percent, default 100) × ExtSpeed (percent) ×
+  ``max_linear_speed_mm_s``. ExtSpeed ``[speed, accel, decel]`` (percent; accel and decel
+  default to speed² / 100 as on the RC8) and the ACCEL/DECEL move options are recorded
+  (``ext_accel``, ``ext_decel``, ``ext_speed_log``, ``move_accel``, ``move_decel``) but do
+  not change the timing. Every percentage must be finite and in [0.01, 100] (else
+  E_INVALIDARG). The mock has no kinematics: CurJnt returns zeros, and a halted
+  motion leaves the rig where it was (the blocking move then answers E_FAIL).
+* While a motion runs, any request but Robot_Halt gets E_BUSY_PROC (0x809100AA); with NEXT
+  the move answers at once but the connection stays busy until the motion ends. With a
+  watchdog, a blocking move sends one S_EXECUTING packet per WDT period it lasts.
+* One reply per request, in one ``sendall``, with the request's serial; malformed requests
+  get E_INVALIDPACKET, bad arguments E_INVALIDARG (NaN, ±inf and out-of-range numbers
+  included), unknown handles E_HANDLE, anything the mock cannot handle E_FAIL; the socket is
+  never closed mid-request except by the ``drop_at_request`` fault.
+
+Poses: the rig's ``base_from_flange`` 4×4 mm ↔ P-type via ``tmscal.geometry``.
+"""
+
+from .args import PCT_MAX, PCT_MIN
+from .controller import BAD_CURPOS, WDT_MAX_MS, WDT_MIN_MS, DensoFaults
+from .mock import DensoMock
+
+__all__ = ["DensoMock", "DensoFaults", "BAD_CURPOS", "PCT_MIN", "PCT_MAX", "WDT_MIN_MS",
+           "WDT_MAX_MS"]

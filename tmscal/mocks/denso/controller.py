@@ -1,0 +1,468 @@
+"""The simulated RC8 controller behind the DENSO mock: its shared state (motor, speeds,
+variables, the rig), the per-connection state (handles, arm, watchdog, motion) and one small
+handler per b-CAP function, looked up in a table by function ID.
+
+A handler takes the connection's :class:`Session`, the request's serial and its arguments
+(padded with EMPTY to four) and returns the reply's value (None: no value; ``DEFERRED``: the
+reply comes when the motion ends), or raises :class:`~.args.Refusal` with an error HRESULT.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import re
+import socket
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ...drivers.denso.hresult import (
+    E_ACCESSDENIED,
+    E_CAO_OBJECT_NOTFOUND,
+    E_EMERGENCY_STOP,
+    E_FAIL,
+    E_HANDLE,
+    E_INVALIDARG,
+    E_MOTOR_OFF,
+    E_NOTIMPL,
+    hresult_name,
+)
+from ...drivers.denso.packet import Fn, PacketFramer, encode_packet, function_name
+from ...drivers.denso.variant import (
+    NUMERIC_VTS,
+    VT_ARRAY,
+    VT_BOOL,
+    VT_BSTR,
+    VT_EMPTY,
+    VT_I4,
+    VT_R4,
+    VT_R8,
+    VT_VARIANT,
+    Variant,
+)
+from ...geometry import denso_p_from_matrix, matrix_from_denso_p
+from ...sim.rig import SimRig
+from ..clock import Clock
+from . import args
+from .args import PCT_MIN, Refusal
+
+log = logging.getLogger(__name__)
+
+#: Watchdog periods (ms) Service_Start accepts (0 = off).
+WDT_MIN_MS, WDT_MAX_MS = 10, 3_600_000
+#: Values of ``DensoFaults.bad_curpos``.
+BAD_CURPOS = ("nan", "inf", "short", "long", "bstr", "bool_array", "empty", "nested_bstr")
+#: A handler's answer when the reply is sent later (when a blocking move ends).
+DEFERRED = object()
+
+_CONTROLLER_VARIABLES = ("@VERSION", "@MODE")
+_ROBOT_VARIABLES = ("@CURRENT_POSITION", "@CURRENT_ANGLE")
+_USER_VAR = re.compile(r"^([IFDSPJV])(\d+)$", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class DensoFaults:
+    """Injected faults, counted over all connections of one mock (1-based).
+
+    ``fail_move_at``: the k-th Robot_Move is refused with ``fail_move_hresult`` (default
+    0x83500178, not executable during emergency stop); ``move_fail_rate``: probability that
+    any move is refused the same way. ``drop_at_request``: at the k-th request the mock
+    closes that connection instead of answering; ``drop_rate``: probability per request.
+    Random faults draw from ``numpy.random.default_rng(seed)``.
+    ``bad_curpos``: every CurPos (and ``@CURRENT_POSITION``) reply is corrupted the named way:
+    "nan" / "inf" (x is NaN / +inf), "short" (5 values), "long" (9 values), "bstr" (a BSTR),
+    "bool_array" (a BOOL array), "empty" (EMPTY), "nested_bstr" (a VARIANT array with a BSTR
+    in it). None (default): correct replies. The mock reads its ``faults`` at every request,
+    so a test may swap them (``dataclasses.replace``) while it serves.
+    """
+
+    fail_move_at: int | None = None
+    fail_move_hresult: int = E_EMERGENCY_STOP
+    move_fail_rate: float = 0.0
+    drop_at_request: int | None = None
+    drop_rate: float = 0.0
+    seed: int = 0
+    bad_curpos: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.bad_curpos is not None and self.bad_curpos not in BAD_CURPOS:
+            raise ValueError(f"bad_curpos must be one of {', '.join(BAD_CURPOS)} or None, got "
+                             f"{self.bad_curpos!r}")
+
+
+@dataclass
+class Job:
+    """A motion in progress on one connection (times on the mock's clock, s)."""
+
+    target: np.ndarray  # base_from_flange 4×4 mm
+    start: float
+    end: float
+    serial: int | None  # blocking move: reply pending with this serial; None for NEXT
+    wdt_s: float | None
+    next_keepalive: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.wdt_s:
+            self.next_keepalive = self.start + self.wdt_s
+
+
+@dataclass
+class Session:
+    """One client connection: its handles, whether it holds the arm, its watchdog period
+    and the motion it runs."""
+
+    sock: socket.socket
+    peer: str
+    handles: dict[int, tuple[str, Any]] = field(default_factory=dict)
+    arm: bool = False
+    wdt_s: float | None = None
+    job: Job | None = None
+    framer: PacketFramer = field(default_factory=PacketFramer)
+
+    def reply(self, serial: int, code: int, value: Variant | None = None) -> None:
+        """Send one reply packet (in one ``sendall``)."""
+        self.sock.sendall(encode_packet(serial, code, [] if value is None else [value]))
+
+
+Handler = Callable[[Session, int, list[Variant]], Any]
+
+
+class DensoController:
+    """The state one RC8 shares between its connections, and the b-CAP functions on it.
+
+    ``rig`` is moved on ``clock`` at up to ``max_linear_speed_mm_s`` (SPEED=100 and
+    ExtSpeed=100); ``motion_time_s`` fixes every motion's duration on the real-time clock;
+    ``robot_names`` are the names Controller_GetRobot accepts. ``stats`` counts connections,
+    requests, moves, keep-alives, busy replies and dropped connections.
+    """
+
+    def __init__(self, rig: SimRig, clock: Clock, max_linear_speed_mm_s: float,
+                 faults: DensoFaults | None, motion_time_s: float | None,
+                 robot_names: tuple[str, ...]) -> None:
+        if not (math.isfinite(max_linear_speed_mm_s) and max_linear_speed_mm_s > 0):
+            raise ValueError(f"max_linear_speed_mm_s must be finite and > 0, got "
+                             f"{max_linear_speed_mm_s}")
+        self.rig = rig
+        self.clock = clock
+        self.max_linear_speed_mm_s = float(max_linear_speed_mm_s)
+        self.faults = faults or DensoFaults()
+        self.motion_time_s = motion_time_s
+        self.robot_names = tuple(robot_names)
+        self._rng = np.random.default_rng(self.faults.seed)
+        self._lock = threading.RLock()
+        self._handles = itertools.count(1)
+        self.motor_on = False
+        self.ext_speed = 100.0
+        self.ext_accel = 100.0
+        self.ext_decel = 100.0
+        #: every accepted ExtSpeed as (speed, accel, decel) percent, oldest first (bounded)
+        self.ext_speed_log: list[tuple[float, float, float]] = []
+        self.move_accel: float | None = None   # ACCEL / DECEL of the last move (percent)
+        self.move_decel: float | None = None
+        self.robot_speed = 100.0
+        self.fig = -1
+        self.variables: dict[str, Any] = {}
+        self.stats = {"connections": 0, "requests": 0, "moves": 0, "keepalives": 0,
+                      "busy": 0, "dropped": 0}
+        # function ID → (least number of arguments, handler)
+        self._functions: dict[int, tuple[int, Handler]] = {
+            Fn.SERVICE_START: (0, self._on_service_start),
+            Fn.SERVICE_STOP: (0, self._on_service_stop),
+            Fn.CONTROLLER_CONNECT: (2, self._on_controller_connect),
+            Fn.CONTROLLER_DISCONNECT: (1, self._on_controller_disconnect),
+            Fn.CONTROLLER_GETROBOT: (2, self._on_controller_get_robot),
+            Fn.CONTROLLER_GETVARIABLE: (2, self._on_controller_get_variable),
+            Fn.CONTROLLER_GETROBOTNAMES: (1, self._on_controller_get_robot_names),
+            Fn.CONTROLLER_EXECUTE: (2, self._on_controller_execute),
+            Fn.ROBOT_GETVARIABLE: (2, self._on_robot_get_variable),
+            Fn.ROBOT_EXECUTE: (2, self._on_robot_execute),
+            Fn.ROBOT_HALT: (1, self._on_robot_halt),
+            Fn.ROBOT_MOVE: (3, self._on_robot_move),
+            Fn.ROBOT_SPEED: (3, self._on_robot_speed),
+            Fn.ROBOT_RELEASE: (1, self._on_robot_release),
+            Fn.VARIABLE_GETVALUE: (1, self._on_variable_get_value),
+            Fn.VARIABLE_PUTVALUE: (2, self._on_variable_put_value),
+            Fn.VARIABLE_RELEASE: (1, self._on_variable_release),
+        }
+        # Robot_Execute command (lower case) → handler(session, parameter)
+        self._robot_commands: dict[str, Callable[[Session, Variant], Variant]] = {
+            "takearm": self._take_arm, "givearm": self._give_arm, "motor": self._motor,
+            "extspeed": self._ext_speed, "curpos": lambda s, p: self._cur_pos(),
+            "curjnt": lambda s, p: Variant(VT_R8 | VT_ARRAY, [0.0] * 8),
+        }
+
+    def _count(self, key: str, at: int | None = None, rate: float = 0.0) -> tuple[int, bool]:
+        """Count one more ``stats[key]``; returns the new count k and whether a fault fires
+        (k == ``at``, or a draw below ``rate``)."""
+        with self._lock:
+            self.stats[key] += 1
+            k = self.stats[key]
+            hit = at == k or (rate > 0 and self._rng.random() < rate)
+        return k, hit
+
+    def dispatch(self, sess: Session, serial: int, fid: int, a: list[Variant]) -> Any:
+        """Run function ``fid`` with arguments ``a`` for ``sess``; see the module doc."""
+        entry = self._functions.get(fid)
+        if entry is None:
+            raise Refusal(E_NOTIMPL, f"function {fid} is not implemented by the mock")
+        need, handler = entry
+        if len(a) < need:
+            raise Refusal(E_INVALIDARG, f"{function_name(fid)} needs {need} arguments, "
+                                        f"got {len(a)}")
+        return handler(sess, serial, a + [Variant(VT_EMPTY)] * (4 - len(a)))
+
+    # --- handles -----------------------------------------------------------------------------
+    def _new_handle(self, sess: Session, kind: str, obj: Any) -> Variant:
+        with self._lock:
+            h = next(self._handles)
+        sess.handles[h] = (kind, obj)
+        return Variant(VT_I4, h)
+
+    def _get(self, sess: Session, v: Variant, kind: str) -> Any:
+        x = float(v.value) if v.vt in NUMERIC_VTS else float("nan")
+        if not math.isfinite(x) or x != int(x):
+            raise Refusal(E_INVALIDARG, f"handle must be an integer, got {v!r}")
+        h = int(x)
+        ent = sess.handles.get(h)
+        if ent is None or ent[0] != kind:
+            raise Refusal(E_HANDLE, f"{h} is not a {kind} handle")
+        return ent[1]
+
+    def _release(self, sess: Session, v: Variant, kind: str) -> None:
+        self._get(sess, v, kind)
+        del sess.handles[int(v.value)]
+
+    # --- service and controller ----------------------------------------------------------------
+    def _on_service_start(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        wdt = args.options(args.text(a[0], "option")).get("WDT")
+        try:
+            ms = int(wdt) if wdt else 0
+        except ValueError:
+            raise Refusal(E_INVALIDARG, f"WDT={wdt!r} is not a number of ms") from None
+        if ms != 0 and not WDT_MIN_MS <= ms <= WDT_MAX_MS:
+            raise Refusal(E_INVALIDARG, f"WDT={ms} ms outside {WDT_MIN_MS}..{WDT_MAX_MS} "
+                                        "(0 = off)")
+        sess.wdt_s = ms / 1000.0 if ms else None
+
+    def _on_service_stop(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        return None
+
+    def _on_controller_connect(self, sess: Session, serial: int, a: list[Variant]) -> Variant:
+        provider = args.text(a[1], "provider")
+        if not provider.upper().startswith("CAOPROV.DENSO"):
+            raise Refusal(E_CAO_OBJECT_NOTFOUND, f"unknown provider {provider!r}")
+        return self._new_handle(sess, "controller", provider)
+
+    def _on_controller_disconnect(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        self._release(sess, a[0], "controller")
+
+    def _on_controller_get_robot(self, sess: Session, serial: int, a: list[Variant]) -> Variant:
+        self._get(sess, a[0], "controller")
+        name = args.text(a[1], "robot name")
+        if name not in self.robot_names:
+            raise Refusal(E_CAO_OBJECT_NOTFOUND, f"no robot {name!r}")
+        return self._new_handle(sess, "robot", name)
+
+    def _on_controller_get_robot_names(self, sess: Session, serial: int,
+                                       a: list[Variant]) -> Variant:
+        self._get(sess, a[0], "controller")
+        return Variant(VT_BSTR | VT_ARRAY, list(self.robot_names))
+
+    def _on_controller_get_variable(self, sess: Session, serial: int,
+                                    a: list[Variant]) -> Variant:
+        self._get(sess, a[0], "controller")
+        name = args.text(a[1], "variable name")
+        if name.upper() not in _CONTROLLER_VARIABLES and not _USER_VAR.match(name):
+            raise Refusal(E_CAO_OBJECT_NOTFOUND, f"no controller variable {name!r}")
+        return self._new_handle(sess, "variable", name.upper())
+
+    def _on_controller_execute(self, sess: Session, serial: int, a: list[Variant]) -> Variant:
+        self._get(sess, a[0], "controller")
+        cmd = args.text(a[1], "command")
+        if cmd.lower() == "geterrordescription":
+            code = int(args.number(a[2], "error code")) & 0xFFFFFFFF
+            return Variant(VT_BSTR, hresult_name(code))
+        if cmd.lower() == "clearerror":
+            return Variant(VT_EMPTY)
+        raise Refusal(E_NOTIMPL, f"Controller_Execute {cmd!r} not implemented")
+
+    # --- robot ---------------------------------------------------------------------------------
+    def _on_robot_get_variable(self, sess: Session, serial: int, a: list[Variant]) -> Variant:
+        self._get(sess, a[0], "robot")
+        name = args.text(a[1], "variable name").upper()
+        if name not in _ROBOT_VARIABLES:
+            raise Refusal(E_CAO_OBJECT_NOTFOUND, f"no robot variable {name!r}")
+        return self._new_handle(sess, "variable", name)
+
+    def _on_robot_execute(self, sess: Session, serial: int, a: list[Variant]) -> Variant:
+        self._get(sess, a[0], "robot")
+        cmd = args.text(a[1], "command")
+        run = self._robot_commands.get(cmd.lower())
+        if run is None:
+            raise Refusal(E_NOTIMPL, f"Robot_Execute {cmd!r} not implemented by the mock")
+        return run(sess, a[2])
+
+    def _on_robot_halt(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        self._get(sess, a[0], "robot")
+        job, sess.job = sess.job, None
+        if job is not None and job.serial is not None:
+            sess.reply(job.serial, E_FAIL)  # the halted blocking move fails
+
+    def _on_robot_move(self, sess: Session, serial: int, a: list[Variant]) -> Any:
+        self._get(sess, a[0], "robot")
+        return self._move(sess, serial, int(args.number(a[1], "comp")), a[2],
+                          args.text(a[3], "option"))
+
+    def _on_robot_speed(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        self._get(sess, a[0], "robot")
+        speed = args.number(a[2], "speed")
+        if not math.isfinite(speed) or 0 <= speed < PCT_MIN:
+            raise Refusal(E_INVALIDARG, f"Robot_Speed {speed!r} is not a usable percentage")
+        if speed > 0:  # negative: keep the current speed
+            self.robot_speed = min(speed, 100.0)
+
+    def _on_robot_release(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        self._release(sess, a[0], "robot")
+
+    # --- variables -----------------------------------------------------------------------------
+    def _on_variable_get_value(self, sess: Session, serial: int, a: list[Variant]) -> Variant:
+        return self._var_value(self._get(sess, a[0], "variable"))
+
+    def _on_variable_put_value(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        name = self._get(sess, a[0], "variable")
+        if name.startswith("@"):
+            raise Refusal(E_ACCESSDENIED, f"{name} is read-only")
+        self.variables[name] = a[1]
+
+    def _on_variable_release(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        self._release(sess, a[0], "variable")
+
+    def _var_value(self, name: str) -> Variant:
+        fixed = {"@CURRENT_ANGLE": Variant(VT_R8 | VT_ARRAY, [0.0] * 8),
+                 "@VERSION": Variant(VT_BSTR, "tmscal DENSO b-CAP mock 1.0"),
+                 "@MODE": Variant(VT_I4, 3)}
+        if name == "@CURRENT_POSITION":
+            return self._cur_pos()
+        if name in fixed:
+            return fixed[name]
+        if name in self.variables:
+            return self.variables[name]
+        kind = name[0]  # a user variable never written: its type's zero
+        if kind == "I":
+            return Variant(VT_I4, 0)
+        if kind in "FD":
+            return Variant(VT_R8 if kind == "D" else VT_R4, 0.0)
+        if kind == "S":
+            return Variant(VT_BSTR, "")
+        return Variant(VT_R8 | VT_ARRAY, [0.0] * (7 if kind == "P" else 6))
+
+    # --- Robot_Execute commands ----------------------------------------------------------------
+    def _take_arm(self, sess: Session, param: Variant) -> Variant:
+        args.numbers(param, "TakeArm")
+        sess.arm = True
+        return Variant(VT_EMPTY)
+
+    def _give_arm(self, sess: Session, param: Variant) -> Variant:
+        sess.arm = False
+        return Variant(VT_EMPTY)
+
+    def _motor(self, sess: Session, param: Variant) -> Variant:
+        vals = args.numbers(param, "Motor")
+        if not vals:
+            raise Refusal(E_INVALIDARG, "Motor needs a state (0 or 1)")
+        if vals[0] != 0 and not sess.arm:
+            raise Refusal(E_ACCESSDENIED, "Motor on without TakeArm")
+        self.motor_on = vals[0] != 0
+        return Variant(VT_EMPTY)
+
+    def _ext_speed(self, sess: Session, param: Variant) -> Variant:
+        vals = args.numbers(param, "ExtSpeed")
+        if not 1 <= len(vals) <= 3:
+            raise Refusal(E_INVALIDARG, f"ExtSpeed needs [speed, accel, decel], got {vals}")
+        speed = args.percent(vals[0], "ExtSpeed speed")
+        # omitted accel / decel: speed² / 100, as the RC8 does
+        accel = args.percent(vals[1], "ExtSpeed accel") if len(vals) > 1 else max(
+            speed * speed / 100.0, PCT_MIN)
+        decel = args.percent(vals[2], "ExtSpeed decel") if len(vals) > 2 else accel
+        with self._lock:
+            self.ext_speed, self.ext_accel, self.ext_decel = speed, accel, decel
+            self.ext_speed_log = [*self.ext_speed_log[-999:], (speed, accel, decel)]
+        return Variant(VT_EMPTY)
+
+    def _cur_pos(self) -> Variant:
+        """The CurPos reply: R8 array [x, y, z (mm), rx, ry, rz (deg), fig], or the
+        configured fault."""
+        p = [float(x) for x in denso_p_from_matrix(self.rig.reported_flange())]
+        p.append(float(self.fig))
+        bad = self.faults.bad_curpos
+        if bad is None:
+            return Variant(VT_R8 | VT_ARRAY, p)
+        log.info("DENSO mock: fault: CurPos reply %s", bad)
+        corrupt: dict[str, Callable[[], Variant]] = {
+            "nan": lambda: Variant(VT_R8 | VT_ARRAY, [math.nan] + p[1:]),
+            "inf": lambda: Variant(VT_R8 | VT_ARRAY, [math.inf] + p[1:]),
+            "short": lambda: Variant(VT_R8 | VT_ARRAY, p[:5]),
+            "long": lambda: Variant(VT_R8 | VT_ARRAY, p + [0.0, 0.0]),
+            "bstr": lambda: Variant(VT_BSTR, "P(" + ", ".join(f"{x:g}" for x in p) + ")"),
+            "bool_array": lambda: Variant(VT_BOOL | VT_ARRAY, [True] * 7),
+            "empty": lambda: Variant(VT_EMPTY),
+            "nested_bstr": lambda: Variant(VT_VARIANT | VT_ARRAY, [
+                *(Variant(VT_R8, x) for x in p[:6]), Variant(VT_BSTR, "-1")]),
+        }
+        return corrupt[bad]()
+
+    # --- motion --------------------------------------------------------------------------------
+    def _move(self, sess: Session, serial: int, comp: int, pose: Variant, option: str) -> Any:
+        """Robot_Move: check, then move at once (fast clock) or start a :class:`Job`."""
+        k, fail = self._count("moves", self.faults.fail_move_at, self.faults.move_fail_rate)
+        if comp not in (1, 2):
+            raise Refusal(E_NOTIMPL if comp == 3 else E_INVALIDARG,
+                          f"Robot_Move comp {comp} (mock supports 1 = MOVE P, 2 = MOVE L)")
+        p = args.pose(pose)
+        opts = args.options(option)
+        pct = args.option_percent(opts, ("SPEED", "S"), "SPEED", option)
+        if pct is None:
+            pct = args.percent(self.robot_speed, "Robot_Speed")
+        accel = args.option_percent(opts, ("ACCEL", "A"), "ACCEL", option)
+        decel = args.option_percent(opts, ("DECEL", "D"), "DECEL", option)
+        if not sess.arm:
+            raise Refusal(E_ACCESSDENIED, "Robot_Move without TakeArm")
+        if not self.motor_on:
+            raise Refusal(E_MOTOR_OFF, "Robot_Move with the motor off")
+        if fail:
+            raise Refusal(self.faults.fail_move_hresult, f"fault injected at move {k}")
+        target = matrix_from_denso_p(p[:6])
+        if not np.isfinite(target).all():
+            raise Refusal(E_INVALIDARG, f"pose {p} gives a non-finite target")
+        duration = self._duration(target, pct)
+        self.move_accel, self.move_decel = accel, decel
+        if p[6] >= 0:
+            self.fig = int(p[6])
+        if duration <= 0:
+            self.rig.move_flange(target)
+            return None
+        now = self.clock.now()
+        nxt = "NEXT" in opts
+        sess.job = Job(target=target, start=now, end=now + duration,
+                       serial=None if nxt else serial, wdt_s=sess.wdt_s)
+        return None if nxt else DEFERRED
+
+    def _duration(self, target: np.ndarray, pct: float) -> float:
+        """Seconds a move to ``target`` (base_from_flange, mm) at SPEED ``pct`` % takes."""
+        speed = self.max_linear_speed_mm_s * pct / 100.0 * self.ext_speed / 100.0
+        dist = float(np.linalg.norm(target[:3, 3] - self.rig.reported_flange()[:3, 3]))
+        if self.clock.fast:
+            duration = 0.0
+        elif self.motion_time_s is not None:
+            duration = float(self.motion_time_s)
+        else:
+            duration = dist / speed if speed > 0 else math.inf
+        if not math.isfinite(duration):
+            raise Refusal(E_INVALIDARG, f"a move of {dist:g} mm at {speed:g} mm/s never ends")
+        return duration
+
