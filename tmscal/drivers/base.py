@@ -1,5 +1,5 @@
 """Device contracts shared by every driver: ``Tracker``, ``Robot``, ``TrackerFrame``, the
-driver registry, and (re-exported) the typed errors.
+safety ``Envelope``, and (re-exported) the driver registry and the typed errors.
 
 A driver subclasses ``Tracker`` or ``Robot`` and fills the private hooks (``_open``,
 ``_close``, ``_read`` / ``_flange_pose``, ``_move_to``, ``_stop``); the base class owns the
@@ -12,12 +12,12 @@ Frames and units: tracker poses are ``tracker_from_<tool>`` 4×4 in mm; robot po
 
 from __future__ import annotations
 
-import importlib
 import logging
 import math
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping, Sequence
+from collections import deque
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,10 +34,10 @@ from ..errors import (  # noqa: F401  (re-exported: the contract's error types)
     SessionError,
     TmscalError,
 )
+from ..timing import Deadline
+from .registry import DriverSpec, driver_class  # noqa: F401  (re-exported: the registry)
 
 log = logging.getLogger(__name__)
-
-Pose = np.ndarray
 
 
 # --- tracker ---------------------------------------------------------------------------------
@@ -136,7 +136,7 @@ class _Device(ABC):
 class Tracker(_Device):
     """An optical tracker. ``tools`` are the configured tool names (e.g. "marker", "probe");
     ``read()`` returns the next ``TrackerFrame`` (it may repeat a frame number when polled
-    faster than ``frame_rate_hz``: count distinct frames)."""
+    faster than ``frame_rate_hz``); ``distinct_frames()`` yields each frame once."""
 
     def __init__(self, tools: Sequence[str], frame_rate_hz: float) -> None:
         super().__init__()
@@ -151,6 +151,56 @@ class Tracker(_Device):
 
     @abstractmethod
     def _read(self) -> TrackerFrame: ...
+
+    def distinct_frames(self, limit: int | None = None, timeout_s: float | None = None, *,
+                        max_reads: int | None = None,
+                        stall_s: float | None = None) -> Iterator[TrackerFrame]:
+        """Yield each new frame once: ``read()`` repeats a frame number when polled faster
+        than ``frame_rate_hz``, and a repeat is skipped. Stops after ``limit`` distinct frames
+        (None: when the caller stops iterating).
+
+        Bounds, each off when None: ``timeout_s`` seconds for the whole iteration (time the
+        caller spends between frames counts), ``max_reads`` calls of ``read()``, ``stall_s``
+        seconds without a new frame. Reaching one raises ``DeviceTimeout`` naming how many
+        distinct frames arrived in how many reads. A frame number is remembered for the last
+        ``_SEEN_WINDOW`` distinct frames (a counter that wraps is seen anew after that)."""
+        total, stall = Deadline(timeout_s), Deadline(stall_s)
+        seen: set[int] = set()
+        order: deque[int] = deque()
+        reads = distinct = 0
+        while limit is None or distinct < limit:
+            if reads:
+                self._check_frame_bounds(distinct, limit, reads, max_reads, total, stall)
+            fr = self.read()
+            reads += 1
+            if fr.frame in seen:
+                continue
+            seen.add(fr.frame)
+            order.append(fr.frame)
+            if len(order) > _SEEN_WINDOW:
+                seen.discard(order.popleft())
+            distinct += 1
+            stall.restart()
+            yield fr
+
+    def _check_frame_bounds(self, distinct: int, limit: int | None, reads: int,
+                            max_reads: int | None, total: Deadline, stall: Deadline) -> None:
+        """``DeviceTimeout`` once a bound of ``distinct_frames`` is reached."""
+        if total.expired():
+            why = f"{total.timeout_s:g} s"
+        elif stall.expired():
+            why = f"no new frame for {stall.timeout_s:g} s: frame counter stuck?"
+        elif max_reads is not None and reads >= max_reads:
+            why = "read limit: frame counter stuck?"
+        else:
+            return
+        of = "" if limit is None else f" of {limit}"
+        raise DeviceTimeout(f"{self.name}: tracker delivered only {distinct} distinct frames"
+                            f"{of} in {reads} reads ({why})", device=self.name)
+
+
+#: how many recent distinct frame numbers ``Tracker.distinct_frames`` remembers
+_SEEN_WINDOW = 4096
 
 
 def _limit(name: str, value: Any) -> float | None:
@@ -353,44 +403,21 @@ class Robot(_Device):
     def _stop(self) -> None: ...
 
 
-# --- registry ----------------------------------------------------------------------------------
-
-#: driver name -> "module:Class". A new device family is one folder plus one line here.
-DRIVERS: dict[str, str] = {
-    "ndi": "tmscal.drivers.ndi.tracker:NDITracker",
-    "ur": "tmscal.drivers.ur.robot:URRobot",
-    "denso": "tmscal.drivers.denso.robot:DensoRobot",
-}
-
-
-def driver_class(name: str) -> Callable[..., _Device]:
-    """The driver class registered under ``name``; unknown names raise ``ConfigError`` listing
-    the known ones; a driver whose module cannot be imported raises ``ConfigError`` saying why."""
-    try:
-        target = DRIVERS[name]
-    except KeyError:
-        raise ConfigError(f"unknown driver {name!r}; known drivers: "
-                          f"{', '.join(sorted(DRIVERS))}") from None
-    mod, _, cls = target.partition(":")
-    try:
-        return getattr(importlib.import_module(mod), cls)
-    except ImportError as e:
-        raise ConfigError(f"driver {name!r} cannot be loaded ({e}); is its extra installed? "
-                          f"(e.g. pip install 'tmscal[{name}]')") from e
-
+# --- waiting ------------------------------------------------------------------------------------
 
 def wait_until(pred: Callable[[], bool], timeout_s: float, what: str,
                poll_s: float = 0.002) -> None:
-    """Poll ``pred`` until true; raise ``DeviceTimeout`` naming ``what`` after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
+    """Poll ``pred`` every ``poll_s`` seconds until true; raise ``DeviceTimeout`` naming
+    ``what`` after ``timeout_s`` seconds."""
+    deadline = Deadline(timeout_s)
     while not pred():
-        if time.monotonic() > deadline:
+        if deadline.expired():
             raise DeviceTimeout(f"timed out after {timeout_s:.1f} s waiting for {what}")
         time.sleep(poll_s)
 
 
 __all__ = [
-    "ToolState", "TrackerFrame", "Tracker", "Robot", "Envelope", "DRIVERS", "driver_class",
+    "ToolState", "TrackerFrame", "Tracker", "Robot", "Envelope", "DriverSpec", "driver_class",
     "wait_until", "ConfigError", "ConnectionLost", "DeviceError", "DeviceTimeout",
     "ProtocolError", "RobotFault", "SafetyError", "SessionError", "TmscalError",
 ]

@@ -18,11 +18,6 @@ class Clock:
         """Monotonic time in seconds."""
         return time.monotonic()
 
-    def sleep(self, seconds: float) -> None:
-        """Sleep ``seconds`` on the real-time clock; return at once on the fast clock."""
-        if not self.fast and seconds > 0:
-            time.sleep(seconds)
-
 
 REAL_TIME = Clock(fast=False)
 FAST = Clock(fast=True)

@@ -1,0 +1,207 @@
+"""The one driver registry: driver name → ``DriverSpec`` (what kind of device it is, which
+class drives it, which mock serves it, its default port and its pip extra).
+
+The config parser asks it which names are valid for ``robot.driver`` and ``tracker.driver``;
+``acquisition.devices`` builds drivers from it and ``mocks.rig`` builds mocks from it, so none
+of them names a brand. Classes are given as ``"module:Class"`` strings and imported only when
+used, so a driver whose optional extra is missing costs nothing until a config names it, and
+then is one ``MissingExtraError`` saying which extra to install.
+
+Adding a device family is one folder (``tmscal/drivers/<name>/``) and one line in
+``BUILTIN``. A third-party package registers its own through the entry-point group
+``tmscal.drivers``, each entry point giving a ``DriverSpec`` (or a function returning one)::
+
+    [project.entry-points."tmscal.drivers"]
+    kuka = "tmscal_kuka:SPEC"
+
+Entry points are loaded once, the first time a name is not found among the built-in drivers
+or the whole list is asked for; a broken one is a ``ConfigError`` naming it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import importlib.util
+import threading
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from ..errors import ConfigError, MissingExtraError
+
+__all__ = ["DriverSpec", "BUILTIN", "ENTRY_POINT_GROUP", "KINDS", "register", "get_spec",
+           "driver_names", "driver_class", "alternatives"]
+
+#: the entry-point group third-party drivers register in
+ENTRY_POINT_GROUP = "tmscal.drivers"
+#: the device kinds a driver can be
+KINDS = ("robot", "tracker")
+
+
+def _import(target: str, what: str, extra: str | None) -> Any:
+    """The object named by ``"module:attr"``; an ImportError is a ``MissingExtraError`` when the
+    spec has an extra (else a ``ConfigError``), both naming ``what``."""
+    mod, _, attr = target.partition(":")
+    try:
+        return getattr(importlib.import_module(mod), attr)
+    except ImportError as e:
+        if extra is not None:
+            raise MissingExtraError(what, extra, str(e)) from e
+        raise ConfigError(f"{what} cannot be loaded ({e})") from e
+    except AttributeError:
+        raise ConfigError(f"{what}: module {mod!r} has no {attr!r}") from None
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """How tmscal drives and mocks one device family.
+
+    ``name`` is what ``robot.driver`` / ``tracker.driver`` says in a config; ``kind`` is
+    "robot" or "tracker"; ``cls`` the driver class as ``"module:Class"`` (a ``Robot`` or
+    ``Tracker`` subclass whose ``name`` equals ``name``). ``mock`` is the protocol-level mock
+    class (``"module:Class"``, or None), ``mock_faults`` the dataclass built from the config's
+    ``mock.<kind>.faults`` and ``mock_volume`` (trackers) the one built from
+    ``mock.tracker.volume``. ``default_port`` is the TCP port the driver and mock take when
+    the config gives none (None: the driver takes no ``port``, e.g. UR's fixed RTDE ports).
+    ``extra`` is the pip extra the driver needs and ``requires`` the modules that extra
+    provides (checked when the driver is loaded). ``options``, when given, are the only
+    ``<kind>.options`` names the driver accepts (None: whatever its constructor accepts).
+    """
+
+    name: str
+    kind: str
+    cls: str
+    mock: str | None = None
+    mock_faults: str | None = None
+    mock_volume: str | None = None
+    default_port: int | None = None
+    extra: str | None = None
+    requires: tuple[str, ...] = ()
+    options: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.isidentifier():
+            raise ValueError(f"DriverSpec.name must be an identifier, got {self.name!r}")
+        if self.kind not in KINDS:
+            raise ValueError(f"DriverSpec {self.name!r}: kind must be one of {KINDS}, got "
+                             f"{self.kind!r}")
+        for field in ("cls", "mock", "mock_faults", "mock_volume"):
+            v = getattr(self, field)
+            if v is not None and (not isinstance(v, str) or v.count(":") != 1):
+                raise ValueError(f"DriverSpec {self.name!r}: {field} must be 'module:Class', "
+                                 f"got {v!r}")
+
+    def load(self) -> type:
+        """The driver class. ``MissingExtraError`` when its extra (a module of ``requires``)
+        is not installed; ``ConfigError`` when it cannot be imported otherwise."""
+        what = f"driver {self.name!r}"
+        for mod in self.requires:
+            if importlib.util.find_spec(mod) is None:
+                raise MissingExtraError(what, self.extra or self.name,
+                                        f"no module named {mod!r}")
+        return _import(self.cls, what, self.extra)
+
+    def load_mock(self, part: str = "mock") -> type:
+        """The mock class (``part="mock"``) or one of its option classes (``"mock_faults"``,
+        ``"mock_volume"``); ``ConfigError`` when this driver has none."""
+        target = getattr(self, part)
+        if target is None:
+            raise ConfigError(f"driver {self.name!r} has no {part.replace('_', ' ')}")
+        return _import(target, f"the {self.name!r} {part.replace('_', ' ')}", self.extra)
+
+
+#: the drivers shipped with tmscal; a new device family is one more line here
+BUILTIN: tuple[DriverSpec, ...] = (
+    DriverSpec("ur", "robot", "tmscal.drivers.ur.robot:URRobot", mock="tmscal.mocks.ur:URMock",
+               mock_faults="tmscal.mocks.ur:URFaults", extra="ur",
+               requires=("rtde_control", "rtde_receive")),
+    DriverSpec("denso", "robot", "tmscal.drivers.denso.robot:DensoRobot",
+               mock="tmscal.mocks.denso:DensoMock", mock_faults="tmscal.mocks.denso:DensoFaults",
+               default_port=5007),
+    DriverSpec("ndi", "tracker", "tmscal.drivers.ndi.tracker:NDITracker",
+               mock="tmscal.mocks.polaris:PolarisMock",
+               mock_faults="tmscal.mocks.polaris:PolarisFaults",
+               mock_volume="tmscal.mocks.polaris:MeasurementVolume"),
+)
+
+#: name → spec, in registration order (built-ins first, then entry points)
+SPECS: dict[str, DriverSpec] = {s.name: s for s in BUILTIN}
+_entry_points_loaded = False
+_lock = threading.Lock()
+
+
+def register(spec: DriverSpec, replace: bool = False) -> DriverSpec:
+    """Add ``spec`` to the registry; a name already taken is a ``ConfigError`` unless
+    ``replace``. Returns the spec."""
+    if not isinstance(spec, DriverSpec):
+        raise ConfigError(f"not a DriverSpec: {spec!r}")
+    if spec.name in SPECS and not replace and SPECS[spec.name] != spec:
+        raise ConfigError(f"driver {spec.name!r} is registered twice")
+    SPECS[spec.name] = spec
+    return spec
+
+
+def _spec_from_entry_point(ep: Any) -> DriverSpec:
+    where = f"entry point {ep.name!r} = {ep.value!r} (group {ENTRY_POINT_GROUP!r})"
+    try:
+        obj = ep.load()
+        if callable(obj) and not isinstance(obj, DriverSpec):
+            obj = obj()
+    except Exception as e:
+        raise ConfigError(f"{where} cannot be loaded ({type(e).__name__}: {e})") from e
+    if not isinstance(obj, DriverSpec):
+        raise ConfigError(f"{where} gives {type(obj).__name__}, not a DriverSpec")
+    if obj.name != ep.name:
+        raise ConfigError(f"{where} gives the driver {obj.name!r}; the names must match")
+    return obj
+
+
+def _load_entry_points(entry_points: Callable[..., Iterable[Any]] | None = None) -> None:
+    """Register every spec of the ``tmscal.drivers`` entry points, once."""
+    global _entry_points_loaded
+    with _lock:
+        if _entry_points_loaded:
+            return
+        eps = (entry_points or importlib.metadata.entry_points)(group=ENTRY_POINT_GROUP)
+        specs = [_spec_from_entry_point(ep) for ep in eps]
+        for spec in specs:
+            if spec.name in SPECS and SPECS[spec.name] != spec:
+                raise ConfigError(f"entry point {spec.name!r} (group {ENTRY_POINT_GROUP!r}) "
+                                  "reuses the name of a registered driver")
+        for spec in specs:
+            SPECS[spec.name] = spec
+        _entry_points_loaded = True
+
+
+def driver_names(kind: str | None = None) -> list[str]:
+    """Every registered driver name (entry points included), in registration order; only
+    those of ``kind`` ("robot" or "tracker") when given."""
+    _load_entry_points()
+    return [n for n, s in SPECS.items() if kind is None or s.kind == kind]
+
+
+def alternatives(names: Iterable[str]) -> str:
+    """``'a', 'b' or 'c'`` for messages."""
+    q = [repr(n) for n in names]
+    return " or ".join([", ".join(q[:-1]), q[-1]]) if len(q) > 1 else "".join(q)
+
+
+def get_spec(name: str, kind: str | None = None) -> DriverSpec:
+    """The spec registered under ``name``. An unknown name (or one of another ``kind``) is a
+    ``ConfigError`` listing the known ones."""
+    spec = SPECS.get(name)
+    if spec is None:
+        _load_entry_points()
+        spec = SPECS.get(name)
+    if spec is None or (kind is not None and spec.kind != kind):
+        known = ", ".join(sorted(driver_names(kind)))
+        label = "driver" if kind is None else f"{kind} driver"
+        raise ConfigError(f"unknown {label} {name!r}; known {label}s: {known}")
+    return spec
+
+
+def driver_class(name: str) -> type:
+    """The driver class registered under ``name``; unknown names raise ``ConfigError`` listing
+    the known ones, a missing extra ``MissingExtraError``."""
+    return get_spec(name).load()
