@@ -7,6 +7,7 @@ target clearly inside every limit must get through, one clearly outside must not
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from unittest import mock
 
@@ -17,7 +18,7 @@ from hypothesis import strategies as st
 from tests.fuzz import fuzz_settings
 from tmscal.acquisition.devices import envelope_for, make_robot
 from tmscal.config import parse_config
-from tmscal.drivers import base
+from tmscal.drivers import registry
 from tmscal.drivers.base import Robot
 from tmscal.errors import ConfigError, SafetyError
 
@@ -218,7 +219,9 @@ def test_nothing_outside_the_config_reaches_the_driver(data, seed):
     p0[:3, :3] = random_rotation(rng, 180.0)
     p0[:3, 3] = rng.uniform(lo - 20, hi + 20)
     path = f"{__name__}:RecordingRobot"
-    with mock.patch.dict(base.DRIVERS, {"ur": path, "denso": path}):
+    fakes = {n: dataclasses.replace(registry.SPECS[n], cls=path, requires=())
+             for n in ("ur", "denso")}
+    with mock.patch.dict(registry.SPECS, fakes):
         for centre in (None, p0):  # before P0 is known (caps, box), then around P0
             env = None if centre is None else envelope_for(cfg, centre)
             robot = make_robot(cfg, env)

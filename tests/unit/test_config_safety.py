@@ -4,6 +4,7 @@ file), raised at load, before any device is built or opened."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 import math
 from pathlib import Path
@@ -12,11 +13,10 @@ import numpy as np
 import pytest
 import yaml
 
-from tmscal.acquisition import devices
 from tmscal.acquisition.devices import envelope_for, make_robot, make_tracker
 from tmscal.acquisition.plan import plan_summary
 from tmscal.config import SAFETY_KEYS, load_config, parse_config, tracker_port_problem
-from tmscal.drivers import base
+from tmscal.drivers import registry
 from tmscal.drivers.base import Envelope, Robot
 from tmscal.errors import ConfigError, SafetyError
 
@@ -185,9 +185,15 @@ class FakeRobot(Robot):
         pass
 
 
+def _fake_driver(monkeypatch, name, target):
+    """Register ``target`` ("module:Class") as the driver class of ``name`` for one test."""
+    spec = dataclasses.replace(registry.SPECS[name], cls=target, requires=())
+    monkeypatch.setitem(registry.SPECS, name, spec)
+
+
 @pytest.fixture
 def fake_ur(monkeypatch):
-    monkeypatch.setitem(base.DRIVERS, "ur", f"{__name__}:FakeRobot")
+    _fake_driver(monkeypatch, "ur", f"{__name__}:FakeRobot")
 
 
 def test_make_robot_refuses_options_defensively(fake_ur):
@@ -221,13 +227,16 @@ def test_make_robot_always_carries_the_config_envelope(fake_ur):
             make_robot(cfg, loose)
 
 
-def test_make_robot_refuses_a_driver_that_drops_the_envelope(monkeypatch):
-    class Dropper(FakeRobot):
-        def __init__(self, **kw):
-            kw["envelope"] = None
-            super().__init__(**kw)
+class Dropper(FakeRobot):
+    """A driver that loses the envelope it was given."""
 
-    monkeypatch.setattr(devices, "driver_class", lambda name: Dropper)
+    def __init__(self, **kw):
+        kw["envelope"] = None
+        super().__init__(**kw)
+
+
+def test_make_robot_refuses_a_driver_that_drops_the_envelope(monkeypatch):
+    _fake_driver(monkeypatch, "ur", f"{__name__}:Dropper")
     with pytest.raises(SafetyError, match="did not take"):
         make_robot(parse_config(rig(), "rig.yaml"))
 

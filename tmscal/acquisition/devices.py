@@ -1,4 +1,5 @@
-"""Drivers from a rig config, through the one driver registry (drivers/base.DRIVERS).
+"""Drivers from a rig config, through the one driver registry (``tmscal.drivers.registry``):
+the spec of the configured driver names its class and default port; nothing here names a brand.
 
 Poses and speeds pass through unchanged: mm, mm/s, base_from_flange. Every robot built here
 carries the config's safety envelope (caps, workspace box, tool points) and the config's
@@ -19,7 +20,8 @@ from ..config import (
     construct,
     tracker_port_problem,
 )
-from ..drivers.base import ConfigError, Envelope, Robot, SafetyError, Tracker, driver_class
+from ..drivers.base import ConfigError, Envelope, Robot, SafetyError, Tracker
+from ..drivers.registry import get_spec
 
 __all__ = ["envelope_for", "make_robot", "make_tracker"]
 
@@ -79,14 +81,15 @@ def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
         if weak is not None:
             raise SafetyError(f"{cfg.path}: the robot's envelope is looser than the config's "
                               f"safety section ({weak}); nothing was opened")
-    cls = driver_class(r.driver)
+    spec = get_spec(r.driver, "robot")
+    _check_spec_options(cfg, "robot", r.options, spec.options)
     kw: dict[str, Any] = dict(r.options)
     # the safety and motion arguments come last: nothing in options can override them
     kw.update(host=host or r.host, envelope=envelope, speed_mm_s=r.speed_mm_s,
               accel_mm_s2=r.accel_mm_s2)
-    if r.driver == "denso":
-        kw["port"] = port or r.port or 5007
-    robot = construct(cls, f"{cfg.path}: key 'robot.options'", **kw)
+    if spec.default_port is not None:  # a driver without one takes no port (UR: fixed ports)
+        kw["port"] = port or r.port or spec.default_port
+    robot = construct(spec.load(), f"{cfg.path}: key 'robot.options'", **kw)
     if (robot.envelope is not envelope or robot.speed_mm_s != r.speed_mm_s
             or robot.accel_mm_s2 != r.accel_mm_s2):
         raise SafetyError(f"{cfg.path}: driver {r.driver!r} did not take the config's envelope, "
@@ -111,7 +114,19 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
         if k in TRACKER_RESERVED_OPTIONS:
             raise ConfigError(f"{cfg.path}: key 'tracker.options.{k}': '{k}' cannot be set "
                               f"through options; set tracker.{k} instead")
-    cls = driver_class(t.driver)
+    spec = get_spec(t.driver, "tracker")
+    _check_spec_options(cfg, "tracker", t.options, spec.options)
     kw: dict[str, Any] = dict(t.options)
     kw.update(port=p, tools=t.tools, baud=t.baud, frame_rate_hz=t.frame_rate_hz, reply=t.reply)
-    return construct(cls, f"{cfg.path}: key 'tracker.options'", **kw)
+    return construct(spec.load(), f"{cfg.path}: key 'tracker.options'", **kw)
+
+
+def _check_spec_options(cfg: RigConfig, kind: str, options: dict[str, Any],
+                        accepted: tuple[str, ...] | None) -> None:
+    """Refuse an option the driver's spec does not list (None: the constructor decides)."""
+    if accepted is None:
+        return
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise ConfigError(f"{cfg.path}: key '{kind}.options.{unknown[0]}': unknown option; "
+                          f"expected one of: {', '.join(sorted(accepted))}")

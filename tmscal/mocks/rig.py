@@ -20,9 +20,10 @@ from urllib.parse import urlparse
 import numpy as np
 
 from ..config import RigConfig, construct
+from ..drivers.registry import DriverSpec, get_spec
 from ..errors import ConfigError
 from ..sim import TMS_RIG_P0, Noise, SimRig, Truth, facing_start, tms_rig_truth
-from .clock import FAST, REAL_TIME
+from .clock import FAST, REAL_TIME, Clock
 from .net import loopback_family
 
 log = logging.getLogger(__name__)
@@ -123,59 +124,75 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
         raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig to serve")
     tracker_url = _check_endpoints(cfg, tracker_transport, robot_host)
     clock = FAST if m.clock == "fast" else REAL_TIME
-    rig = build_sim_rig(cfg)
-    mr = MockRig(rig)
+    mr = MockRig(build_sim_rig(cfg))
     try:
         if cfg.tracker is not None:
-            from .polaris import MeasurementVolume, PolarisFaults, PolarisMock
-
-            opts = dict(m.tracker)
-            faults = construct(PolarisFaults, f"{cfg.path}: key 'mock.tracker.faults'",
-                               **(opts.pop("faults", {}) or {}))
-            vol = opts.pop("volume", "default")
-            volume = (MeasurementVolume() if vol == "default" else None if vol is None
-                      else construct(MeasurementVolume, f"{cfg.path}: key 'mock.tracker.volume'",
-                                     **vol))
-            tools = {k: v for k, v in cfg.tracker.tools.items() if v is not None} or None
-            pm = construct(PolarisMock, f"{cfg.path}: key 'mock.tracker'", rig, tools,
-                           clock=clock, faults=faults, volume=volume, seed=m.seed, **opts)
-            mr.devices.append(pm)
+            tm = _tracker_mock(cfg, mr.rig, clock)
+            mr.devices.append(tm)
             if tracker_transport == "pty" or (tracker_transport == "config"
                                               and tracker_url is None):
-                mr.endpoints["tracker"] = pm.start_pty()
-            elif tracker_transport == "tcp":
-                mr.endpoints["tracker"] = pm.start_tcp("127.0.0.1", 0)
+                mr.endpoints["tracker"] = tm.start_pty()
             else:
-                assert tracker_url is not None
-                mr.endpoints["tracker"] = pm.start_tcp(*tracker_url)
+                mr.endpoints["tracker"] = tm.start_tcp(*(tracker_url or ("127.0.0.1", 0)))
         if cfg.robot is not None:
-            opts = dict(m.robot)
-            fault_data = opts.pop("faults", {}) or {}
-            host = robot_host or cfg.robot.host
-            if cfg.robot.driver == "ur":
-                from .ur import URFaults, URMock
-
-                faults = construct(URFaults, f"{cfg.path}: key 'mock.robot.faults'",
-                                   **fault_data)
-                um = construct(URMock, f"{cfg.path}: key 'mock.robot'", rig, host=host,
-                               clock=clock, faults=faults, **opts)
-                mr.devices.append(um)
-                mr.endpoints["robot"] = um.start()
-            else:
-                from .denso import DensoFaults, DensoMock
-
-                faults = construct(DensoFaults, f"{cfg.path}: key 'mock.robot.faults'",
-                                   **fault_data)
-                port = cfg.robot.port if robot_port is None else robot_port
-                dm = construct(DensoMock, f"{cfg.path}: key 'mock.robot'", rig, host=host,
-                               port=5007 if port is None else port, clock=clock,
-                               faults=faults, **opts)
-                mr.devices.append(dm)
-                mr.endpoints["robot"] = dm.start()
+            rm = _robot_mock(cfg, mr.rig, clock, robot_host, robot_port)
+            mr.devices.append(rm)
+            mr.endpoints["robot"] = rm.start()
     except BaseException:
         mr.close()
         raise
     return mr
+
+
+def _faults(cfg: RigConfig, spec: DriverSpec, data: Any) -> Any:
+    """The driver's mock fault settings from ``mock.<kind>.faults`` (empty: none)."""
+    return construct(spec.load_mock("mock_faults"),
+                     f"{cfg.path}: key 'mock.{spec.kind}.faults'", **(data or {}))
+
+
+def _tracker_mock(cfg: RigConfig, rig: SimRig, clock: Clock) -> Any:
+    """The mock serving the configured tracker driver (from the driver registry), not yet
+    started: faults and measurement volume ('default', null or a mapping) from
+    ``mock.tracker``, the tools' ROM files from ``tracker.tools``."""
+    assert cfg.tracker is not None and cfg.mock is not None
+    spec = get_spec(cfg.tracker.driver, "tracker")
+    opts = dict(cfg.mock.tracker)
+    faults = _faults(cfg, spec, opts.pop("faults", {}))
+    vol = opts.pop("volume", "default")
+    volume_cls = spec.load_mock("mock_volume")
+    volume = (volume_cls() if vol == "default" else None if vol is None
+              else construct(volume_cls, f"{cfg.path}: key 'mock.tracker.volume'", **vol))
+    tools = {k: v for k, v in cfg.tracker.tools.items() if v is not None} or None
+    kw = dict(clock=clock, faults=faults, volume=volume, seed=cfg.mock.seed)
+    _not_overriding(cfg, "mock.tracker", opts, kw)
+    return construct(spec.load_mock(), f"{cfg.path}: key 'mock.tracker'", rig, tools, **kw,
+                     **opts)
+
+
+def _robot_mock(cfg: RigConfig, rig: SimRig, clock: Clock, host: str | None,
+                port: int | None) -> Any:
+    """The mock serving the configured robot driver (from the driver registry), not yet
+    started, on ``host`` (default ``robot.host``) and, for a driver with a default port,
+    ``port`` (default ``robot.port``, then the driver's default)."""
+    assert cfg.robot is not None and cfg.mock is not None
+    spec = get_spec(cfg.robot.driver, "robot")
+    opts = dict(cfg.mock.robot)
+    kw: dict[str, Any] = dict(host=host or cfg.robot.host, clock=clock,
+                              faults=_faults(cfg, spec, opts.pop("faults", {})))
+    if spec.default_port is not None:
+        port = cfg.robot.port if port is None else port
+        kw["port"] = spec.default_port if port is None else port
+    _not_overriding(cfg, "mock.robot", opts, kw)
+    return construct(spec.load_mock(), f"{cfg.path}: key 'mock.robot'", rig, **kw, **opts)
+
+
+def _not_overriding(cfg: RigConfig, section: str, opts: dict[str, Any],
+                    given: dict[str, Any]) -> None:
+    """A mock option may not name an argument that comes from elsewhere in the config."""
+    for k in opts:
+        if k in given:
+            raise ConfigError(f"{cfg.path}: key '{section}.{k}': '{k}' cannot be set here; it "
+                              "comes from the rest of the config")
 
 
 class MockProcess:
