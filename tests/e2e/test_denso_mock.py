@@ -251,6 +251,18 @@ def test_client_timeout_names_the_function() -> None:
         with pytest.raises(DeviceTimeout, match="Service_Start") as ei:
             c.service_start("")
         assert isinstance(ei.value, TimeoutError)
+        assert (ei.value.code, ei.value.text, ei.value.device) == (0x80000900, "E_TIMEOUT",
+                                                                   "denso")
+    t.join(5)
+
+
+def test_client_bad_framing_is_a_protocol_error_naming_the_function() -> None:
+    port, t, srv = scripted_server(lambda s: b"\x07" + encode_packet(s, S_OK))
+    with srv, BCAPClient("127.0.0.1", port, timeout_s=5.0) as c:
+        with pytest.raises(ProtocolError, match="Service_Start: b-CAP: wrong SOH") as ei:
+            c.service_start("")
+        assert (ei.value.code, ei.value.text, ei.value.device) == (E_INVALIDPACKET,
+                                                                   "E_INVALIDPACKET", "denso")
     t.join(5)
 
 

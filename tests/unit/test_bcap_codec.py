@@ -22,6 +22,8 @@ from tmscal.drivers.denso.packet import (
     PacketFramer,
     decode_packet,
     encode_packet,
+    frame_serial,
+    function_name,
     next_serial,
 )
 from tmscal.drivers.denso.variant import (
@@ -307,6 +309,18 @@ def test_hresult_names() -> None:
     assert hresult_name(0x84204048) == "J8 acceleration limit"
     assert hresult_name(0x8ABC1234) == "0x8ABC1234"
     assert hresult_name(-0x7EAFEFFD) == "motor off"  # the same code as a signed i32
+    assert hresult_name(0) == "S_OK" and hresult_name(0x900) == "S_EXECUTING"
+
+
+def test_function_names_come_from_fn() -> None:
+    assert function_name(Fn.ROBOT_MOVE) == "Robot_Move" == Fn.ROBOT_MOVE.wire_name
+    assert function_name(9) == "Controller_GetVariable"
+    assert function_name(99) == "function 99"
+    assert Fn(72) is Fn.ROBOT_MOVE and int(Fn.ROBOT_MOVE) == 72
+
+
+def test_frame_serial_reads_a_framed_packet() -> None:
+    assert frame_serial(encode_packet(0x1234, Fn.SERVICE_STOP)) == 0x1234
 
 
 # --- decoder caps (hostile sizes) -------------------------------------------------------------
