@@ -172,8 +172,8 @@ class RunConfig:
 @dataclass
 class MockConfig:
     """The mock rig: clock ("fast" or "real"), RNG seed, truth ("tms" built-in rig,
-    "random" seed-000 truth, or explicit {X, Y, Z} 4×4 mm), noise (``sim.Noise`` fields),
-    per-device options and faults."""
+    "random" truth as in Wang et al. 2018, or explicit {X, Y, Z} 4×4 mm), noise
+    (``sim.Noise`` fields), per-device options and faults."""
 
     clock: str = "fast"
     seed: int = 0
