@@ -3,17 +3,12 @@ the noise-free sim rig.
 
 ur_rtde's constructors hold the GIL while they wait for the controller, so the robot cannot
 share a process with the mock's server threads: this file runs the robot side in a child
-process (``python test_ur_robot.py SCENARIO HOST OUT ARGS``) and checks the rig here.
+process (``tests.child.run_child``) and checks the rig here.
 Each test uses its own loopback address.
 """
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-import tempfile
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,6 +19,7 @@ if __name__ != "__main__":
     pytest.importorskip("rtde_control")
     pytestmark = pytest.mark.e2e
 
+from tests.child import child_main, run_child
 from tmscal.geometry import compose, make_pose, rot_x, rot_y, rot_z
 from tmscal.mocks.clock import FAST
 from tmscal.mocks.ur import URFaults, URMock
@@ -46,21 +42,17 @@ def _targets() -> list[np.ndarray]:
     ]
 
 
-def _run_child(scenario: str, host: str, args: dict[str, Any]) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory() as d:
-        out = Path(d) / "result.json"
-        proc = subprocess.run([sys.executable, __file__, scenario, host, str(out),
-                               json.dumps(args)], capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 0, f"child failed:\n{proc.stdout}\n{proc.stderr}"
-        return json.loads(out.read_text())
+def _moves(mock: URMock, targets: list[np.ndarray], upload_script: bool) -> dict[str, Any]:
+    """URRobot (in a child process) opens on ``mock`` and moves through ``targets``."""
+    return run_child(__file__, "moves", mock.host, {"poses": [t.tolist() for t in targets],
+                                                    "upload_script": upload_script})
 
 
 def test_urrobot_moves_rig_to_commanded_poses() -> None:
     rig = _rig()
     targets = _targets()
     with URMock(rig, host="127.0.0.21", clock=FAST) as mock:
-        res = _run_child("moves", mock.host, {"poses": [t.tolist() for t in targets],
-                                              "upload_script": True})
+        res = _moves(mock, targets, upload_script=True)
     assert res["error"] is None, res["error"]
     # the rig received exactly the commanded flange poses (through metres and rotvecs)
     assert len(rig.moves) == len(targets)
@@ -84,8 +76,7 @@ def test_protective_stop_raises_robot_fault() -> None:
     targets = _targets()
     with URMock(rig, host="127.0.0.22", clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
-        res = _run_child("moves", mock.host, {"poses": [t.tolist() for t in targets],
-                                              "upload_script": False})
+        res = _moves(mock, targets, upload_script=False)
         assert mock.protective_stopped
     err = res["error"]
     assert err is not None and err["type"] == "RobotFault"
@@ -103,9 +94,8 @@ def test_dropped_connection_raises_connection_lost() -> None:
     rig = _rig()
     targets = _targets()
     with URMock(rig, host="127.0.0.23", clock=FAST,
-                faults=URFaults(drop_connection_at_move=2)) as mock:
-        res = _run_child("moves", mock.host, {"poses": [t.tolist() for t in targets],
-                                              "upload_script": False})
+                faults=URFaults(drop_at_move=2)) as mock:
+        res = _moves(mock, targets, upload_script=False)
     err = res["error"]
     assert err is not None and err["type"] == "ConnectionLost"
     assert "ConnectionError" in err["mro"] and "DeviceError" in err["mro"]
@@ -118,30 +108,27 @@ def test_dropped_connection_raises_connection_lost() -> None:
 
 # --- child process ------------------------------------------------------------------------------
 
-def _child(scenario: str, host: str, out: str, args: dict[str, Any]) -> None:
+def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
     from tmscal.drivers.ur.robot import URRobot
 
-    res: dict[str, Any] = {"error": None, "reported": []}
+    res.update({"error": None, "reported": []})
     assert scenario == "moves"
     robot = URRobot(host, upload_script=args["upload_script"], speed_mm_s=100.0,
                     timeout_s=10.0)
-    try:
-        with robot:
-            res["identity"] = robot.identity()
-            res["initial"] = robot.flange_pose().tolist()
-            for i, pose in enumerate(args["poses"]):
-                try:
-                    robot.move_to(np.array(pose))
-                except Exception as e:  # reported to the parent, which checks the type
-                    res["error"] = {"type": type(e).__name__, "message": str(e), "at": i,
-                                    "mro": [c.__name__ for c in type(e).__mro__],
-                                    "code": getattr(e, "code", None),
-                                    "text": getattr(e, "text", None)}
-                    break
-                res["reported"].append(robot.flange_pose().tolist())
-    finally:
-        Path(out).write_text(json.dumps(res))
+    with robot:
+        res["identity"] = robot.identity()
+        res["initial"] = robot.flange_pose().tolist()
+        for i, pose in enumerate(args["poses"]):
+            try:
+                robot.move_to(np.array(pose))
+            except Exception as e:  # reported to the parent, which checks the type
+                res["error"] = {"type": type(e).__name__, "message": str(e), "at": i,
+                                "mro": [c.__name__ for c in type(e).__mro__],
+                                "code": getattr(e, "code", None),
+                                "text": getattr(e, "text", None)}
+                break
+            res["reported"].append(robot.flange_pose().tolist())
 
 
 if __name__ == "__main__":
-    _child(sys.argv[1], sys.argv[2], sys.argv[3], json.loads(sys.argv[4]))
+    child_main(_child)

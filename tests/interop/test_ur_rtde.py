@@ -3,21 +3,16 @@ DashboardClient) against tmscal's UR mock.
 
 ur_rtde's constructors hold the GIL while they wait for the controller, so the library cannot
 share a process with the mock's server threads: each scenario runs ur_rtde in a child process
-(``python test_ur_rtde.py SCENARIO HOST OUT ARGS``) and the checks against the sim rig run
-here. Each test uses its own loopback address. Robustness of the mock's parsers against
-arbitrary bytes is checked with plain sockets (hypothesis).
+(``tests.child.run_child``) and the checks against the sim rig run here. Each test uses its
+own loopback address. Robustness of the mock's parsers against arbitrary bytes is checked with
+plain sockets (hypothesis).
 """
 
 from __future__ import annotations
 
-import json
 import socket
 import struct
-import subprocess
-import sys
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,24 +24,17 @@ if __name__ != "__main__":
     pytest.importorskip("rtde_control")
     pytestmark = pytest.mark.interop
 
+from tests.child import child_main, run_child
 from tmscal.geometry import compose, make_pose, pose_from_rotvec, rot_z, rotvec_pose_from_matrix
 from tmscal.mocks.clock import FAST, REAL_TIME
 from tmscal.mocks.ur import URFaults, URMock
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
+from tmscal.timing import Deadline
 
 
 def _rig() -> SimRig:
     """A noise-free TMS rig; ``rig.moves`` records what the mock commanded."""
     return SimRig(tms_rig_truth(), noise=Noise.none(), start=TMS_RIG_P0)
-
-
-def _run_child(scenario: str, host: str, args: dict[str, Any]) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory() as d:
-        out = Path(d) / "result.json"
-        proc = subprocess.run([sys.executable, __file__, scenario, host, str(out),
-                               json.dumps(args)], capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 0, f"child failed:\n{proc.stdout}\n{proc.stderr}"
-        return json.loads(out.read_text())
 
 
 # Two targets near P0 as UR pose vectors (metres, rotation vector), built by hand from
@@ -70,8 +58,8 @@ def test_default_flags_upload_script_and_move_sync_and_async() -> None:
     rig = _rig()
     t1, t2 = rotvec_pose_from_matrix(_T1).tolist(), rotvec_pose_from_matrix(_T2).tolist()
     with URMock(rig, host="127.0.0.31", clock=REAL_TIME) as mock:
-        res = _run_child("moves", mock.host, {"flags": None, "t1": t1, "t2": t2,
-                                              "speed": 0.05, "async_speed": 0.04})
+        res = run_child(__file__, "moves", mock.host,
+                        {"flags": None, "t1": t1, "t2": t2, "speed": 0.05, "async_speed": 0.04})
         assert mock.scripts_received == 1
         assert mock.last_script is not None and mock.last_script.startswith("def rtde_control")
         # ur_rtde asked these on the dashboard (version ≥ 5.6, host not 127.0.0.1)
@@ -107,9 +95,9 @@ def test_flags_zero_without_upload() -> None:
     rig = _rig()
     t1, t2 = rotvec_pose_from_matrix(_T1).tolist(), rotvec_pose_from_matrix(_T2).tolist()
     with URMock(rig, host="127.0.0.32", clock=FAST) as mock:
-        res = _run_child("moves", mock.host, {"flags": 0, "t1": t1, "t2": t2,
-                                              "speed": 0.25, "async_speed": 0.25,
-                                              "variables": ["timestamp", "actual_TCP_pose"]})
+        res = run_child(__file__, "moves", mock.host,
+                        {"flags": 0, "t1": t1, "t2": t2, "speed": 0.25, "async_speed": 0.25,
+                         "variables": ["timestamp", "actual_TCP_pose"]})
         assert mock.scripts_received == 0
         assert "stop" not in mock.dashboard_log
         final = rig.reported_flange()
@@ -125,7 +113,7 @@ def test_protective_stop_fails_move_and_unlock_clears_it() -> None:
     t1, t2 = rotvec_pose_from_matrix(_T1).tolist(), rotvec_pose_from_matrix(_T2).tolist()
     with URMock(rig, host="127.0.0.33", clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
-        res = _run_child("protective", mock.host, {"t1": t1, "t2": t2})
+        res = run_child(__file__, "protective", mock.host, {"t1": t1, "t2": t2})
         assert "unlock protective stop" in mock.dashboard_log
         assert not mock.protective_stopped
     assert res["first_ok"] is True
@@ -203,92 +191,101 @@ def test_dashboard_answers_every_line(bare_mock: URMock, lines: list[str]) -> No
 
 # --- child process ------------------------------------------------------------------------------
 
+def _wait_while(pred: Any, timeout_s: float, period_s: float) -> None:
+    """Poll ``pred()`` every ``period_s`` while it is true, for at most ``timeout_s``."""
+    deadline = Deadline(timeout_s)
+    while pred() and not deadline.expired():
+        time.sleep(period_s)
+
+
 def _wait_fresh(r: Any) -> None:
     """Wait for two new data packages (bounded), so the next read postdates the last event."""
     last, seen = r.getTimestamp(), 0
-    deadline = time.monotonic() + 5.0
-    while seen < 2 and time.monotonic() < deadline:
+    deadline = Deadline(5.0)
+    while seen < 2 and not deadline.expired():
         t = r.getTimestamp()
         if t != last:
             seen, last = seen + 1, t
         time.sleep(0.0005)
 
 
-def _child(scenario: str, host: str, out: str, args: dict[str, Any]) -> None:
+def _receive_values(r: Any) -> dict[str, Any]:
+    """The default receive recipe's values, through ur_rtde's getters."""
+    return {
+        "robot_mode": r.getRobotMode(), "safety_mode": r.getSafetyMode(),
+        "runtime_state": r.getRuntimeState(), "safety_status_bits": r.getSafetyStatusBits(),
+        "robot_status": r.getRobotStatus(), "joint_mode": list(r.getJointMode()),
+        "joint_temperatures": list(r.getJointTemperatures()),
+        "main_voltage": r.getActualMainVoltage(), "speed_scaling": r.getSpeedScaling(),
+        "accelerometer": list(r.getActualToolAccelerometer()),
+        "actual_q": list(r.getActualQ()), "timestamp": r.getTimestamp()}
+
+
+def _moves(host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
+    """A synchronous and an asynchronous moveL, with the poses and progress seen."""
+    import rtde_control
+    import rtde_receive
+
+    variables = args.get("variables") or []
+    r = rtde_receive.RTDEReceiveInterface(host, -1.0, variables)
+    if args["flags"] is None:
+        c = rtde_control.RTDEControlInterface(host)
+    else:
+        c = rtde_control.RTDEControlInterface(host, -1.0, args["flags"])
+    res["initial_pose"] = list(r.getActualTCPPose())
+    if not variables:
+        res["values"] = _receive_values(r)
+        res["tcp_offset"] = list(c.getTCPOffset())
+    res["sync_ok"] = c.moveL(args["t1"], args["speed"], 1.2)
+    _wait_fresh(r)
+    res["pose_after_sync"] = list(r.getActualTCPPose())
+    res["async_ok"] = c.moveL(args["t2"], args["async_speed"], 1.2, True)
+    st0 = c.getAsyncOperationProgressEx()
+    res["async_running_at_start"] = st0.isAsyncOperationRunning()
+    res["async_op_id_start"] = st0.operationId()
+    _wait_while(lambda: c.getAsyncOperationProgressEx().isAsyncOperationRunning(), 10.0, 0.01)
+    st1 = c.getAsyncOperationProgressEx()
+    res["async_finished"] = not st1.isAsyncOperationRunning()
+    res["async_op_id_end"] = st1.operationId()
+    _wait_fresh(r)
+    res["pose_after_async"] = list(r.getActualTCPPose())
+    c.disconnect()
+    r.disconnect()
+
+
+def _protective(host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
+    """The second moveL meets a protective stop; the dashboard unlocks it."""
     import dashboard_client
     import rtde_control
     import rtde_receive
 
-    res: dict[str, Any] = {}
+    r = rtde_receive.RTDEReceiveInterface(host, -1.0, [])
+    c = rtde_control.RTDEControlInterface(host, -1.0, 0)
+    res["first_ok"] = c.moveL(args["t1"], 0.25, 1.2)
+    res["second_ok"] = c.moveL(args["t2"], 0.25, 1.2)
+    _wait_while(lambda: not r.isProtectiveStopped(), 5.0, 0.002)
+    _wait_fresh(r)
+    res["protective_stopped"] = r.isProtectiveStopped()
+    res["safety_mode"] = r.getSafetyMode()
+    res["safety_status_bits"] = r.getSafetyStatusBits()
+    res["runtime_state"] = r.getRuntimeState()
+    db = dashboard_client.DashboardClient(host)
+    db.connect()
     try:
-        if scenario == "moves":
-            variables = args.get("variables") or []
-            r = rtde_receive.RTDEReceiveInterface(host, -1.0, variables)
-            if args["flags"] is None:
-                c = rtde_control.RTDEControlInterface(host)
-            else:
-                c = rtde_control.RTDEControlInterface(host, -1.0, args["flags"])
-            res["initial_pose"] = list(r.getActualTCPPose())
-            if not variables:
-                res["values"] = {
-                    "robot_mode": r.getRobotMode(), "safety_mode": r.getSafetyMode(),
-                    "runtime_state": r.getRuntimeState(),
-                    "safety_status_bits": r.getSafetyStatusBits(),
-                    "robot_status": r.getRobotStatus(), "joint_mode": list(r.getJointMode()),
-                    "joint_temperatures": list(r.getJointTemperatures()),
-                    "main_voltage": r.getActualMainVoltage(),
-                    "speed_scaling": r.getSpeedScaling(),
-                    "accelerometer": list(r.getActualToolAccelerometer()),
-                    "actual_q": list(r.getActualQ()), "timestamp": r.getTimestamp()}
-                res["tcp_offset"] = list(c.getTCPOffset())
-            res["sync_ok"] = c.moveL(args["t1"], args["speed"], 1.2)
-            _wait_fresh(r)
-            res["pose_after_sync"] = list(r.getActualTCPPose())
-            res["async_ok"] = c.moveL(args["t2"], args["async_speed"], 1.2, True)
-            st0 = c.getAsyncOperationProgressEx()
-            res["async_running_at_start"] = st0.isAsyncOperationRunning()
-            res["async_op_id_start"] = st0.operationId()
-            deadline = time.monotonic() + 10.0
-            st1 = c.getAsyncOperationProgressEx()
-            while st1.isAsyncOperationRunning() and time.monotonic() < deadline:
-                time.sleep(0.01)
-                st1 = c.getAsyncOperationProgressEx()
-            res["async_finished"] = not st1.isAsyncOperationRunning()
-            res["async_op_id_end"] = st1.operationId()
-            _wait_fresh(r)
-            res["pose_after_async"] = list(r.getActualTCPPose())
-            c.disconnect()
-            r.disconnect()
-        elif scenario == "protective":
-            r = rtde_receive.RTDEReceiveInterface(host, -1.0, [])
-            c = rtde_control.RTDEControlInterface(host, -1.0, 0)
-            res["first_ok"] = c.moveL(args["t1"], 0.25, 1.2)
-            res["second_ok"] = c.moveL(args["t2"], 0.25, 1.2)
-            deadline = time.monotonic() + 5.0
-            while not r.isProtectiveStopped() and time.monotonic() < deadline:
-                time.sleep(0.002)
-            _wait_fresh(r)
-            res["protective_stopped"] = r.isProtectiveStopped()
-            res["safety_mode"] = r.getSafetyMode()
-            res["safety_status_bits"] = r.getSafetyStatusBits()
-            res["runtime_state"] = r.getRuntimeState()
-            db = dashboard_client.DashboardClient(host)
-            db.connect()
-            try:
-                db.unlockProtectiveStop()
-                res["unlock_error"] = None
-            except RuntimeError as e:
-                res["unlock_error"] = str(e)
-            db.disconnect()
-            deadline = time.monotonic() + 5.0
-            while r.isProtectiveStopped() and time.monotonic() < deadline:
-                time.sleep(0.002)
-            res["protective_after_unlock"] = r.isProtectiveStopped()
-            c.disconnect()
-            r.disconnect()
-    finally:
-        Path(out).write_text(json.dumps(res))
+        db.unlockProtectiveStop()
+        res["unlock_error"] = None
+    except RuntimeError as e:
+        res["unlock_error"] = str(e)
+    db.disconnect()
+    _wait_while(r.isProtectiveStopped, 5.0, 0.002)
+    res["protective_after_unlock"] = r.isProtectiveStopped()
+    c.disconnect()
+    r.disconnect()
+
+
+def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
+    {"moves": _moves, "protective": _protective}[scenario](host, args, res)
 
 
 if __name__ == "__main__":
-    _child(sys.argv[1], sys.argv[2], sys.argv[3], json.loads(sys.argv[4]))
+    child_main(_child)

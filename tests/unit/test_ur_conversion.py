@@ -1,6 +1,7 @@
 """UR pose vectors [x, y, z (m), rx, ry, rz (rotation vector, rad)] ↔ 4×4 poses in mm, against
 hand-computed poses; the URRobot TCP-offset conversion; the mock's RTDE type table and
-async-progress register against ur_rtde's documented bit layout."""
+async-progress register against ur_rtde's documented bit layout; the RTDE codec's package
+letters and recipes; the fault names."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from hypothesis import strategies as st
 from tmscal.drivers.ur.robot import base_from_flange_from_tcp, tcp_pose_from_base_from_flange
 from tmscal.errors import ConfigError
 from tmscal.geometry import pose_from_rotvec, rotvec_pose_from_matrix
-from tmscal.mocks.ur import URMock, rtde_type
+from tmscal.mocks.ur import PackageType, Recipe, URFaults, URMock, rtde_type
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
 
 S2 = np.sqrt(0.5)
@@ -109,3 +110,33 @@ def test_async_progress_register_layout() -> None:
 def test_mock_refuses_non_loopback() -> None:
     with pytest.raises(ConfigError, match="loopback"):
         URMock(SimRig(tms_rig_truth()), host="0.0.0.0")
+
+
+def test_rtde_package_letters() -> None:
+    # the letters on the wire, as in UR's RTDE guide
+    assert [chr(t) for t in (PackageType.RTDE_REQUEST_PROTOCOL_VERSION,
+                             PackageType.RTDE_GET_URCONTROL_VERSION,
+                             PackageType.RTDE_TEXT_MESSAGE, PackageType.RTDE_DATA_PACKAGE,
+                             PackageType.RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS,
+                             PackageType.RTDE_CONTROL_PACKAGE_SETUP_INPUTS,
+                             PackageType.RTDE_CONTROL_PACKAGE_START,
+                             PackageType.RTDE_CONTROL_PACKAGE_PAUSE)] == list("VvMUOISP")
+
+
+def test_recipe_packs_and_unpacks_in_order() -> None:
+    r = Recipe.from_names(["timestamp", "actual_TCP_pose", "output_int_register_0",
+                           "input_bit_register_64"])
+    assert r.setup_reply(3) == b"\x03DOUBLE,VECTOR6D,INT32,BOOL"
+    data = r.pack(3, [1.5, [0.5, 0.0, 0.4, 3.0, 0.0, 0.0], -7, True])
+    assert len(data) == 1 + 8 + 48 + 4 + 1 and data[0] == 3
+    assert r.unpack(data) == [("timestamp", [1.5]),
+                              ("actual_TCP_pose", [0.5, 0.0, 0.4, 3.0, 0.0, 0.0]),
+                              ("output_int_register_0", [-7]),
+                              ("input_bit_register_64", [True])]
+
+
+def test_ur_faults_earlier_name_still_accepted() -> None:
+    assert URFaults(drop_connection_at_move=2) == URFaults(drop_at_move=2)
+    assert URFaults(drop_at_move=4).drop_connection_at_move == 4
+    with pytest.raises(ValueError, match="disagree"):
+        URFaults(drop_at_move=2, drop_connection_at_move=3)
