@@ -13,7 +13,7 @@ X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -52,7 +52,6 @@ class Calibration:
     Z_probe: np.ndarray | None = None
     Z_probe_raw: np.ndarray | None = None
     applied: str = "raw"
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def used(self) -> dict[str, np.ndarray | None]:
         """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal)."""

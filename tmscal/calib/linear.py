@@ -22,7 +22,7 @@ leaves 12 unknowns, whose normal equations are sums of 4×4 and 12×12 terms
 (K_iᵀK_i = (N_i N_iᵀ) ⊗ I₃ because R_i is orthonormal). An exact change of variables
 (centring the flange and tracker translations) keeps those normal equations well
 conditioned, so the result matches the dense QR to rounding (checked in the tests) at a
-small fraction of its cost; optional iterative refinement is available.
+small fraction of its cost.
 """
 
 from __future__ import annotations
@@ -128,20 +128,7 @@ def _body_terms(R: np.ndarray, t: np.ndarray, N: np.ndarray):
     return Kbar, rbar, G, h
 
 
-def _gradient(R: np.ndarray, t: np.ndarray, N: np.ndarray, Z: np.ndarray, X: np.ndarray,
-              Kbar: np.ndarray) -> np.ndarray:
-    """Σ (K_i − K̄)ᵀ e_i for the residuals e_i = −vec((A_i⁻¹ Z N_i)_top − X_top), computed
-    from the matrices themselves (accurate; used for iterative refinement)."""
-    E = (R @ (Z[:3, :] @ N)) + t[:, :, None] * np.array([0.0, 0.0, 0.0, 1.0]) - X[:3, :]
-    E = -E
-    KtE = np.swapaxes(R, 1, 2) @ E @ np.swapaxes(N, 1, 2)
-    g = np.swapaxes(KtE, 1, 2).reshape(len(R), 12).sum(axis=0)
-    ebar = np.swapaxes(E, 1, 2).reshape(len(R), 12).sum(axis=0)
-    return g - Kbar.T @ ebar
-
-
-def solve_linear(A: np.ndarray, *bodies: np.ndarray, refine: int = 0
-                 ) -> tuple[np.ndarray, list[np.ndarray]]:
+def solve_linear(A: np.ndarray, *bodies: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
     """Least-squares Z and one X per body (general 3×4, as 4×4 with last row 0001).
 
     ``A`` (n, 4, 4) base_from_flange; ``bodies`` one or two arrays (n, 4, 4) of
@@ -151,9 +138,8 @@ def solve_linear(A: np.ndarray, *bodies: np.ndarray, refine: int = 0
     X (and Y) are projected out in closed form; the remaining 12 unknowns of Z come from the
     column-scaled normal equations of the projected system, after an exact change of variables
     that centres the flange and tracker translations (so the ~1.5 m tracker distance does not
-    enter the normal equations). ``refine`` optional steps of iterative refinement evaluate
-    the residuals from the pose matrices themselves. The result agrees with a dense
-    Householder QR of D to rounding (the tests check this).
+    enter the normal equations). The result agrees with a dense Householder QR of D to
+    rounding (the tests check this).
     """
     n = A.shape[0]
     if n < 3:
@@ -181,15 +167,7 @@ def solve_linear(A: np.ndarray, *bodies: np.ndarray, refine: int = 0
         raise CalibrationError("the linear system is rank deficient (degenerate poses: too "
                                "little rotation or translation diversity)")
 
-    def gsolve(v: np.ndarray) -> np.ndarray:
-        return np.linalg.solve(Gs, v / d) / d
-
-    z = gsolve(h)
-    for _ in range(refine):
-        Z = unvec34(z)
-        g = sum(_gradient(R, t, N, Z, unvec34(tm[0] @ z - tm[1]), tm[0])
-                for N, tm in zip(bodies, terms))
-        z = z + gsolve(g)
+    z = np.linalg.solve(Gs, h / d) / d
     Xs = [unvec34(Kbar @ z - rbar) for Kbar, rbar, _, _ in terms]
     Z = unvec34(z)
     Z[:3, 3] += s0 - Z[:3, :3] @ t0  # Z = S0 Z' T0⁻¹
@@ -204,14 +182,12 @@ def _shifted(N: np.ndarray, t0: np.ndarray) -> np.ndarray:
 
 
 def resolve_translations(A: np.ndarray, bodies: list[np.ndarray], R_Z: np.ndarray,
-                         R_bodies: list[np.ndarray], refine: int = 0
-                         ) -> tuple[np.ndarray, list[np.ndarray]]:
+                         R_bodies: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
     """Orthonormal variant: with rotations fixed (R_Z and one R per body, 3×3), solve the
     translations t_Z, t_X(, t_Y) in mm by linear least squares over
     R_Ai t_X − t_Z = R_Z t_Bi − t_Ai (one 3-row block per pose and body).
-    Returns rigid (Z, [X, (Y)]) 4×4 mm. Normal equations (3(m+1) unknowns) with iterative
-    refinement (``refine`` steps); the blocks R_Aiᵀ R_Ai = I keep them small and well
-    conditioned."""
+    Returns rigid (Z, [X, (Y)]) 4×4 mm. Normal equations (3(m+1) unknowns); the blocks
+    R_Aiᵀ R_Ai = I keep them small and well conditioned."""
     n = A.shape[0]
     m = len(bodies)
     RA = A[:, :3, :3]
@@ -235,10 +211,6 @@ def resolve_translations(A: np.ndarray, bodies: list[np.ndarray], R_Z: np.ndarra
         return v
 
     u = np.linalg.solve(G, normal_rhs(rhs_b))
-    for _ in range(refine):
-        res = [b - (RA @ u[3 * (j + 1):3 * (j + 2)] - u[:3])
-               for j, b in enumerate(rhs_b)]
-        u = u + np.linalg.solve(G, normal_rhs(res))
     Z = make_pose(R_Z, u[:3])
     Xs = [make_pose(R_bodies[j], u[3 * (j + 1):3 * (j + 2)]) for j in range(m)]
     return Z, Xs
