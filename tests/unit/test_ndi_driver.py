@@ -229,8 +229,8 @@ def test_ir_interference_is_flagged(rig: SimRig) -> None:
     with fault_mock(rig, ir_interference_fraction=1.0) as m:
         with NDITracker(m.start_pty(), ROMS, reply="tx", **FAST_OPTS) as tr:
             f = tr.read()
-    assert f.system_status & p.SYS_TOO_MUCH_IR
-    assert all(s.port_status & p.PORT_IR_INTERFERENCE for s in f.tools.values())
+    assert f.system_status & p.SystemStatus.TOO_MUCH_EXTERNAL_INFRARED
+    assert all(s.port_status & p.PortStatus.IR_INTERFERENCE for s in f.tools.values())
     assert all(s.pose is not None for s in f.tools.values())
 
 

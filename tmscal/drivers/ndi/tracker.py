@@ -27,8 +27,11 @@ import serial
 
 from ...config import tracker_port_problem
 from ...errors import ConfigError, ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
+from ...timing import Deadline
 from ..base import ToolState, Tracker, TrackerFrame
 from . import protocol as p
+from .codes import ErrorCode, HandleStatus, PortStatus, SystemStatus, flag_names
+from .replies import ReplyKind
 
 log = logging.getLogger(__name__)
 
@@ -36,11 +39,14 @@ _PHRQ_PASSIVE = "*********1****"
 _READ_SLICE_S = 0.05
 #: errors that, on a re-sent command, mean the first (unanswered) attempt already worked.
 #: PHRQ is not idempotent: a lost PHRQ reply leaves an empty handle behind (harmless).
-_DONE_ON_RETRY: dict[str, tuple[int, ...]] = {"TSTART": (0x0C,), "TSTOP": (0x0C,),
-                                              "PHF": (0x08, 0x2B)}
-
-
+_DONE_ON_RETRY: dict[str, tuple[int, ...]] = {
+    "TSTART": (ErrorCode.INVALID_MODE,), "TSTOP": (ErrorCode.INVALID_MODE,),
+    "PHF": (ErrorCode.INVALID_PORT_HANDLE, ErrorCode.HANDLE_NOT_ALLOCATED)}
+#: every reply is ≥ 6 bytes (BX header; shortest text: "0" + CRC + CR)
 _MIN_REPLY = 6
+#: port status bits a ToolState carries; the driver logs the others when they change
+_TOOL_STATE_BITS = int(PortStatus.OCCUPIED | PortStatus.INITIALIZED | PortStatus.ENABLED
+                       | PortStatus.OUT_OF_VOLUME | PortStatus.PARTIALLY_OUT_OF_VOLUME)
 
 
 class NDITracker(Tracker):
@@ -94,29 +100,26 @@ class NDITracker(Tracker):
         self._ser: Any = None
         self._tracking = False
         self._identity: dict[str, Any] = {}
+        #: status bits last logged, per "system" / tool name (see ``_log_status``)
+        self._status_seen: dict[str, int] = {}
 
     # --- lifecycle ---------------------------------------------------------------------------
     def _open(self) -> None:
-        roms: dict[str, bytes] = {}
-        for tool, path in self.rom_paths.items():
-            if path is None:
-                continue
-            try:
-                roms[tool] = path.read_bytes()
-            except OSError as e:
-                raise ConfigError(f"tool {tool!r}: cannot read ROM file {path}: {e}") from e
+        roms = self._read_roms()
         # defence in depth (the config refuses these first): pyserial's other URL handlers
         # (spy://…?file=, loop://, rfc2217:// …) can open or write files named in the URL
         problem = tracker_port_problem(self.port)
         if problem:
-            raise ConfigError(f"ndi: port {self.port!r} refused: {problem}")
+            raise ConfigError(f"{self.name}: port {self.port!r} refused: {problem}")
         try:
             self._ser = serial.serial_for_url(self.port, baudrate=9600, bytesize=8,
                                               parity="N", stopbits=1, timeout=_READ_SLICE_S,
                                               write_timeout=self.timeout_s)
         except (serial.SerialException, OSError, ValueError) as e:
-            raise ConnectionLost(f"ndi: cannot open {self.port}: {e}", device=self.name) from e
+            raise ConnectionLost(f"{self.name}: cannot open {self.port}: {e}",
+                                 device=self.name) from e
         self._ser.reset_input_buffer()
+        self._status_seen.clear()
         do_reset = self.reset if self.reset is not None else all(
             v is not None for v in self.rom_paths.values())
         if do_reset:
@@ -130,7 +133,20 @@ class NDITracker(Tracker):
         self._load_tools(roms)
         self._command("TSTART")
         self._tracking = True
-        log.info("ndi: tracking on %s, handles %s", self.port, self.handles)
+        log.info("%s: tracking on %s, handles %s", self.name, self.port, self.handles)
+
+    def _read_roms(self) -> dict[str, bytes]:
+        """The tool definitions of the tools that have a .rom file (ConfigError if one cannot
+        be read)."""
+        roms: dict[str, bytes] = {}
+        for tool, path in self.rom_paths.items():
+            if path is None:
+                continue
+            try:
+                roms[tool] = path.read_bytes()
+            except OSError as e:
+                raise ConfigError(f"tool {tool!r}: cannot read ROM file {path}: {e}") from e
+        return roms
 
     def _close(self) -> None:
         ser = self._ser
@@ -141,26 +157,26 @@ class NDITracker(Tracker):
                 try:
                     self._command("TSTOP")
                 except DeviceError as e:
-                    log.warning("ndi: TSTOP failed on close: %s", e)
+                    log.warning("%s: TSTOP failed on close: %s", self.name, e)
         finally:
             self._tracking = False
             self._ser = None
             try:
                 ser.close()
             except Exception:  # pragma: no cover - best effort
-                log.debug("ndi: closing the port raised", exc_info=True)
+                log.debug("%s: closing the port raised", self.name, exc_info=True)
 
     def _break_reset(self) -> None:
         try:
             self._ser.send_break(0.25)
         except (serial.SerialException, OSError, NotImplementedError) as e:
-            log.debug("ndi: send_break not possible (%s); INIT only", e)
+            log.debug("%s: send_break not possible (%s); INIT only", self.name, e)
             return
         raw = self._read_reply(self.reset_wait_s)
         if raw == p.RESET_REPLY:
-            log.info("ndi: device reset")
+            log.info("%s: device reset", self.name)
         else:
-            log.debug("ndi: no RESET answer to the break (%r); INIT only", raw[:20])
+            log.debug("%s: no RESET answer to the break (%r); INIT only", self.name, raw[:20])
         self._ser.reset_input_buffer()
 
     def _init(self) -> None:
@@ -170,11 +186,11 @@ class NDITracker(Tracker):
             if self.baud == 9600:
                 raise
             # a device left at the working rate by an earlier session without reset
-            log.info("ndi: no answer at 9600 baud; trying INIT at %d", self.baud)
+            log.info("%s: no answer at 9600 baud; trying INIT at %d", self.name, self.baud)
             self._ser.baudrate = self.baud
             self._init_tracking_aware()
         except DeviceError as e:
-            if e.code != 0x0C:
+            if e.code != ErrorCode.INVALID_MODE:
                 raise
             self._stop_then_init()
 
@@ -182,14 +198,14 @@ class NDITracker(Tracker):
         try:
             self._command("INIT")
         except DeviceError as e:
-            if isinstance(e, DeviceTimeout) or e.code != 0x0C:
+            if isinstance(e, DeviceTimeout) or e.code != ErrorCode.INVALID_MODE:
                 raise
             self._stop_then_init()
 
     def _stop_then_init(self) -> None:
         """INIT was refused in tracking mode (ERROR0C): an earlier host died without TSTOP and
         no break reached the device (pty, TCP). Stop tracking, then initialise."""
-        log.info("ndi: INIT refused in tracking mode; sending TSTOP first")
+        log.info("%s: INIT refused in tracking mode; sending TSTOP first", self.name)
         self._command("TSTOP")
         self._command("INIT")
 
@@ -198,7 +214,7 @@ class NDITracker(Tracker):
         try:
             ver = p.parse_ver(self._command("VER", "4").text)
         except DeviceError as e:
-            log.debug("ndi: VER:4 refused (%s); trying VER:0", e)
+            log.debug("%s: VER:4 refused (%s); trying VER:0", self.name, e)
             ver = p.parse_ver(self._command("VER", "0").text)
         tag = ver.get("Freeze Tag", "")
         ident["model"] = tag.rsplit(" Rev", 1)[0].strip() if " Rev" in tag \
@@ -209,7 +225,7 @@ class NDITracker(Tracker):
             info = self._command("GETINFO", "Features.Firmware.Version").text
             ident["firmware_version"] = info.partition("=")[2].split(";")[0] or info
         except DeviceError as e:
-            log.debug("ndi: GETINFO unavailable: %s", e)
+            log.debug("%s: GETINFO unavailable: %s", self.name, e)
         self._identity = ident
 
     def identity(self) -> dict[str, Any]:
@@ -218,13 +234,16 @@ class NDITracker(Tracker):
         return {"driver": self.name, "port": self.port, **self._identity,
                 "handles": dict(self.handles)}
 
-    def _load_tools(self, roms: Mapping[str, bytes]) -> None:
-        for h, _ in p.decode_phsr(self._command("PHSR", "01").text):
+    def _free_handles(self, which: str) -> None:
+        """PHF every handle PHSR lists for ``which`` ("00": all, "01": to be freed)."""
+        for h, _ in p.decode_phsr(self._command("PHSR", which).text):
             self._command("PHF", f"{h:02X}")
+
+    def _load_tools(self, roms: Mapping[str, bytes]) -> None:
+        self._free_handles("01")
         preloaded = [t for t, path in self.rom_paths.items() if path is None]
         if not preloaded:  # we load every tool: free whatever an earlier session left
-            for h, _ in p.decode_phsr(self._command("PHSR", "00").text):
-                self._command("PHF", f"{h:02X}")
+            self._free_handles("00")
         for tool, rom in roms.items():
             h = p.decode_phrq(self._command("PHRQ", _PHRQ_PASSIVE).text)
             for addr, chunk in p.rom_chunks(rom):
@@ -233,40 +252,38 @@ class NDITracker(Tracker):
             self._command("PENA", f"{h:02X}D")
             self.handles[tool] = h
         if preloaded:
-            ours = set(self.handles.values())
-            avail = [(h, s) for h, s in p.decode_phsr(self._command("PHSR", "00").text)
-                     if h not in ours and s & p.HANDLE_OCCUPIED]
-            if len(avail) < len(preloaded):
-                raise DeviceError(f"ndi: {len(preloaded)} tools {preloaded} should be loaded "
-                                  f"on the device, but only {len(avail)} occupied handles "
-                                  f"are free", device=self.name)
-            for tool, (h, s) in zip(preloaded, sorted(avail), strict=False):
-                if not s & p.HANDLE_INITIALIZED:
-                    self._command("PINIT", f"{h:02X}")
-                if not s & p.HANDLE_ENABLED:
-                    self._command("PENA", f"{h:02X}D")
-                self.handles[tool] = h
+            self._adopt_loaded_tools(preloaded)
+
+    def _adopt_loaded_tools(self, preloaded: list[str]) -> None:
+        """Give the tools without a .rom file the occupied handles not loaded by us, in
+        handle order, initialising and enabling them where needed."""
+        ours = set(self.handles.values())
+        avail = [(h, s) for h, s in p.decode_phsr(self._command("PHSR", "00").text)
+                 if h not in ours and s & HandleStatus.OCCUPIED]
+        if len(avail) < len(preloaded):
+            raise DeviceError(f"{self.name}: {len(preloaded)} tools {preloaded} should be "
+                              f"loaded on the device, but only {len(avail)} occupied handles "
+                              f"are free", device=self.name)
+        for tool, (h, s) in zip(preloaded, sorted(avail), strict=False):
+            if not s & HandleStatus.INITIALIZED:
+                self._command("PINIT", f"{h:02X}")
+            if not s & HandleStatus.ENABLED:
+                self._command("PENA", f"{h:02X}D")
+            self.handles[tool] = h
 
     # --- reading -----------------------------------------------------------------------------
     def _read(self) -> TrackerFrame:
-        opts = f"{self.options:04X}"
-        if self.reply == "bx":
-            raw, _ = self._transact("BX", opts)
-            if raw[:2] != b"\xc4\xa5":
-                p.raise_for_error(self._parse_text(raw, "BX"), f"BX:{opts}")
-                raise ProtocolError(f"ndi: BX answered with text {raw[:40]!r}",
-                                    device=self.name)
-            data = p.decode_bx(raw)
-        else:
-            data = p.decode_tx(self._command("TX", opts).text)
+        data = self._request_tracking()
         host_time = time.monotonic()
         by_handle = data.by_handle()
+        self._log_status("system", int(data.system_status), SystemStatus)
         tools: dict[str, ToolState] = {}
         for tool in self.tools:
             rec = by_handle.get(self.handles.get(tool, -1))
             if rec is None:
                 tools[tool] = ToolState(pose=None, missing=True)
                 continue
+            self._log_status(tool, int(rec.port_status) & ~_TOOL_STATE_BITS, PortStatus)
             tools[tool] = ToolState(
                 pose=rec.pose if not rec.missing else None, missing=rec.missing,
                 out_of_volume=rec.out_of_volume,
@@ -276,88 +293,122 @@ class NDITracker(Tracker):
         return TrackerFrame(frame=frame if frame is not None else -1, host_time=host_time,
                             tools=tools, system_status=data.system_status)
 
+    def _request_tracking(self) -> p.TrackingReply:
+        """Send BX (or TX) with our reply options and decode the answer."""
+        opts = f"{self.options:04X}"
+        if self.reply == "tx":
+            return p.decode_tx(self._command("TX", opts).text)
+        raw, _ = self._transact("BX", opts)
+        if not p.is_bx(raw):
+            p.raise_for_error(self._parse_text(raw, "BX"), f"BX:{opts}", self.name)
+            raise ProtocolError(f"{self.name}: BX answered with text {raw[:40]!r}",
+                                device=self.name)
+        return p.decode_bx(raw)
+
+    def _log_status(self, where: str, bits: int, flags: type[PortStatus | SystemStatus]
+                    ) -> None:
+        """Log status ``bits`` that a TrackerFrame does not spell out (the system status;
+        port status bits beyond the ToolState fields) when they change, not every frame:
+        HARDWARE_FAILURE as an error, the others as warnings."""
+        if bits == self._status_seen.get(where, 0):
+            return
+        self._status_seen[where] = bits
+        if not bits:
+            log.info("%s: %s status clear again", self.name, where)
+            return
+        level = logging.ERROR if flags is SystemStatus \
+            and bits & SystemStatus.HARDWARE_FAILURE else logging.WARNING
+        log.log(level, "%s: %s status %s", self.name, where, flag_names(flags(bits)))
+
     # --- command / reply ---------------------------------------------------------------------
     def _command(self, name: str, params: str = "") -> p.Reply:
         """Send a text command and return its (non-error) reply; ERRORxx → DeviceError."""
         raw, attempts = self._transact(name, params)
         reply = self._parse_text(raw, name)
-        if attempts > 1 and reply.kind == "error" and reply.code in _DONE_ON_RETRY.get(name, ()):
+        if attempts > 1 and reply.kind == ReplyKind.ERROR \
+                and reply.code in _DONE_ON_RETRY.get(name, ()):
             # the first attempt was executed but its reply was lost or corrupt
-            log.info("ndi: %s already done before the retry (ERROR%02X)", name, reply.code)
-            return p.classify_reply("OKAY")
-        return p.raise_for_error(reply, f"{name}:{params}"[:40])
+            log.info("%s: %s already done before the retry (ERROR%02X)", self.name, name,
+                     reply.code)
+            return p.Reply(ReplyKind.OKAY, "OKAY")
+        return p.raise_for_error(reply, f"{name}:{params}"[:40], self.name)
 
     def _parse_text(self, raw: bytes, name: str) -> p.Reply:
         reply = p.parse_reply(raw)
-        if reply.kind == "warning":
-            log.warning("ndi %s: WARNING%02X (%s)", name, reply.code, reply.meaning)
+        if reply.kind == ReplyKind.WARNING:
+            log.warning("%s %s: WARNING%02X (%s)", self.name, name, reply.code, reply.meaning)
         return reply
 
     def _transact(self, name: str, params: str = "") -> tuple[bytes, int]:
         """Send ``name:params`` with CRC and return (raw reply, attempts used), re-sending
         after corrupt, torn or missing replies up to ``retries`` times."""
         if self._ser is None:
-            raise DeviceError(f"ndi: {name} on a closed port", device=self.name)
+            raise DeviceError(f"{self.name}: {name} on a closed port", device=self.name)
         cmd = p.encode_command(name, params)
         last: DeviceError | None = None
         for attempt in range(self.retries + 1):
             if attempt:
-                log.info("ndi: retrying %s (attempt %d): %s", name, attempt + 1, last)
+                log.info("%s: retrying %s (attempt %d): %s", self.name, name, attempt + 1, last)
                 self._ser.reset_input_buffer()
             try:
                 self._ser.write(cmd)
             except (serial.SerialException, OSError) as e:
-                raise ConnectionLost(f"ndi: writing {name} failed: {e}",
+                raise ConnectionLost(f"{self.name}: writing {name} failed: {e}",
                                      device=self.name) from e
-            try:
-                raw = self._read_reply(self.timeout_s)
-            except ProtocolError as e:
-                last = ProtocolError(f"ndi {name}: {e}", device=self.name)
-                continue
-            if not raw:
-                last = DeviceTimeout(f"ndi: no reply to {name} within {self.timeout_s:g} s",
-                                     device=self.name)
-                continue
-            need = p.reply_length(raw)
-            if need is None or len(raw) < need:
-                last = ProtocolError(f"ndi {name}: torn reply {raw[:60]!r} (timed out after "
-                                     f"{self.timeout_s:g} s)", device=self.name)
-                continue
-            if raw[:2] == b"\xc4\xa5":
-                try:
-                    p.check_bx(raw)  # CRC check here so a corrupt BX is retried
-                except ProtocolError as e:
-                    last = ProtocolError(f"ndi {name}: {e}", device=self.name)
-                    continue
+            raw, last = self._receive(name)
+            if last is None:
                 return raw, attempt + 1
-            try:
-                p.split_reply(raw)
-            except ProtocolError as e:
-                last = ProtocolError(f"ndi {name}: {e}", device=self.name)
-                continue
-            return raw, attempt + 1
         assert last is not None
-        raise type(last)(f"{last} (after {self.retries + 1} attempts)", device=self.name)
+        raise type(last)(f"{last} (after {self.retries + 1} attempts)", code=last.code,
+                         text=last.text, device=self.name)
+
+    def _receive(self, name: str) -> tuple[bytes, DeviceError | None]:
+        """One reply to ``name`` with its framing and CRC checked, or the problem (a corrupt,
+        torn or missing reply) that makes re-sending the command worth it."""
+        try:
+            raw = self._read_reply(self.timeout_s)
+        except ProtocolError as e:
+            return b"", self._protocol_error(name, e)
+        if not raw:
+            return raw, DeviceTimeout(f"{self.name}: no reply to {name} within "
+                                      f"{self.timeout_s:g} s", device=self.name)
+        need = p.reply_length(raw)
+        if need is None or len(raw) < need:
+            return raw, ProtocolError(f"{self.name} {name}: torn reply {raw[:60]!r} (timed out "
+                                      f"after {self.timeout_s:g} s)", device=self.name)
+        try:
+            if p.is_bx(raw):
+                p.check_bx(raw)  # CRC check here so a corrupt BX is retried
+            else:
+                p.split_reply(raw)
+        except ProtocolError as e:
+            return raw, self._protocol_error(name, e)
+        return raw, None
+
+    def _protocol_error(self, name: str, e: ProtocolError) -> ProtocolError:
+        """``e`` naming this device and the command ``name``, its code and text kept."""
+        return ProtocolError(f"{self.name} {name}: {e}", code=e.code, text=e.text,
+                             device=self.name)
 
     def _read_reply(self, timeout_s: float) -> bytes:
         """Bytes of one reply, or what arrived before ``timeout_s`` (possibly empty)."""
         ser = self._ser
         buf = bytearray()
-        deadline = time.monotonic() + timeout_s
+        deadline = Deadline(timeout_s)
         while True:
             need = p.reply_length(buf)
             if need is not None and len(buf) >= need:
                 return bytes(buf[:need])
-            if time.monotonic() > deadline:
+            if deadline.expired():
                 return bytes(buf)
-            # every reply is ≥ 6 bytes (BX header; shortest text: "0" + CRC + CR), so ask
-            # for 6 at once, then exactly the rest of a BX, or what is waiting of a text
+            # ask for 6 bytes at once, then exactly the rest of a BX, or what is waiting of a
+            # text reply
             want = (need - len(buf)) if need is not None else \
                 max(_MIN_REPLY - len(buf), ser.in_waiting, 1)
             try:
                 chunk = ser.read(want)
             except (serial.SerialException, OSError) as e:
-                raise ConnectionLost(f"ndi: reading from {self.port} failed: {e}",
+                raise ConnectionLost(f"{self.name}: reading from {self.port} failed: {e}",
                                      device=self.name) from e
             buf += chunk
 

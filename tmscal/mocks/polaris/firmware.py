@@ -1,130 +1,44 @@
-"""A protocol-level NDI Polaris (Spectra / Vicra) mock serving a :class:`~tmscal.sim.rig.SimRig`.
+"""The Polaris mock's firmware: the NDI Combined API command interpreter, transport-free.
 
-It speaks the NDI Combined API (NDI's Polaris API Guide) over a Linux pty
-(:meth:`PolarisMock.start_pty`, returns the ``/dev/pts/N`` path that ndicapi,
-scikit-surgerynditracker or our driver open as a serial port) or TCP on loopback
-(:meth:`PolarisMock.start_tcp`, returns ``socket://127.0.0.1:PORT`` for pyserial's
-``serial_for_url``). All encoding and decoding goes through
-:mod:`tmscal.drivers.ndi.protocol`, the same codec the driver uses.
-
-What it models:
-
-* the setup / initialised / tracking state machine with NDI error codes for commands in the
-  wrong state (e.g. TX/BX before TSTART → ERROR0C, tool commands before INIT → ERROR10,
-  unknown or unallocated port handles → ERROR08, PENA on an uninitialised handle → ERROR0E,
-  PINIT with no tool data → ERROR0D, bad CRC → ERROR04, unknown command → ERROR01);
-* passive tools loaded from .rom files (PHRQ, PVWR, PINIT, PENA, PHSR, PHF, PHINF). A loaded
-  definition is matched to a rig body by comparing its bytes (zero padding stripped) with the
-  configured ROM files; unmatched definitions take the remaining bodies in order of loading;
-* VER (multi-line, with ``Freeze Tag:``), GETINFO (simplified ``name=value``), COMM (baud
-  changes are acknowledged and ignored), BEEP, APIREV, TSTART (``TSTART:80`` resets the frame
-  counter), TSTOP, TX and BX (options 0001 and 0800) with a CRC on every reply;
-* the frame counter: on the real-time clock it advances at the model's rate (Spectra 60 Hz,
-  Vicra 20 Hz); on the fast clock once per TX/BX request. A new noisy observation
-  (``rig.observe``) is taken only when the frame number changes;
-* a measurement volume (:class:`MeasurementVolume`, a Spectra-like pyramid in tracker
-  coordinates): a tool with all spheres inside is healthy, some inside → partially out of
-  volume (0x80, pose reported), none inside → out of volume (0x40; reported MISSING unless
-  the request has option 0800). Line of sight and marker orientation are not modelled;
-* faults (:class:`PolarisFaults`): corrupted reply CRCs, dropped replies, tools missing in a
-  fraction of frames, IR interference; all from one seeded RNG so tests are reproducible.
-
-Threads: one daemon thread per transport (and per TCP connection); every loop polls a stop
-flag with a short timeout, so ``close()`` returns promptly. Binds to loopback only.
+:class:`PolarisFirmware` answers one command line at a time (:meth:`~PolarisFirmware.
+handle_line`) through a table from command name to handler. It models the setup /
+initialised / tracking state machine with NDI's error codes for commands in the wrong state,
+the port handles and the tool definitions loaded into them, identity (VER, GETINFO) and
+tracking (TX, BX; the frames come from :class:`~.frames.FrameSource`), and injects reply
+faults (:class:`~.model.PolarisFaults`). Encoding and decoding go through
+:mod:`tmscal.drivers.ndi.protocol`, the codec the driver uses.
 """
 
 from __future__ import annotations
 
-import errno
 import logging
 import os
-import select
-import socket
 import threading
-import tty
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
-from ..drivers.ndi import protocol as p
-from ..errors import ProtocolError
-from ..sim.rig import SimRig
-from .clock import REAL_TIME, Clock
-from .net import loopback_family, url_host
+from ...drivers.ndi import protocol as p
+from ...drivers.ndi.codes import ErrorCode, HandleStatus, ReplyOption, ToolInfoStatus
+from ...errors import ProtocolError
+from ...sim.rig import SimRig
+from ..clock import REAL_TIME, Clock
+from .frames import FrameSource
+from .model import MODELS, MeasurementVolume, PolarisFaults
 
 log = logging.getLogger(__name__)
 
-MODELS: dict[str, dict[str, object]] = {
-    "spectra": {"rate_hz": 60.0, "title": "Polaris Spectra Control Firmware",
-                "freeze_tag": "Polaris Spectra Rev 007", "serial": "P6-00001"},
-    "vicra": {"rate_hz": 20.0, "title": "Polaris Vicra Control Firmware",
-              "freeze_tag": "Polaris Vicra Rev 007", "serial": "P5-00001"},
-}
+__all__ = ["PolarisFirmware", "MAX_HANDLES"]
+
 MAX_HANDLES = 12
 _FIRST_HANDLE = 0x01
 _MAX_ROM_BYTES = 0x10000
 _MAX_LINE = 4096
-_OBS_BATCH = 32
-
-
-@dataclass(frozen=True)
-class MeasurementVolume:
-    """A frustum-shaped (pyramid) measurement volume in tracker coordinates, mm.
-
-    The tracker looks along −z: a point (x, y, z) is inside when ``z_far_mm <= z <=
-    z_near_mm`` and |x|, |y| are within half-widths that grow linearly from the near plane
-    (``half_x_near_mm``, ``half_y_near_mm``) to the far plane (``half_x_far_mm``,
-    ``half_y_far_mm``). Defaults resemble a Polaris Spectra pyramid, with generous widths.
-    """
-
-    z_near_mm: float = -950.0
-    z_far_mm: float = -2400.0
-    half_x_near_mm: float = 500.0
-    half_x_far_mm: float = 900.0
-    half_y_near_mm: float = 450.0
-    half_y_far_mm: float = 800.0
-
-    def __post_init__(self) -> None:
-        if not self.z_far_mm < self.z_near_mm:
-            raise ValueError(f"z_far_mm ({self.z_far_mm}) must be < z_near_mm "
-                             f"({self.z_near_mm})")
-
-    def contains(self, points_mm: np.ndarray) -> np.ndarray:
-        """Boolean per point (k, 3) in tracker coordinates (mm): inside the volume?"""
-        pts = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
-        z = pts[:, 2]
-        s = (self.z_near_mm - z) / (self.z_near_mm - self.z_far_mm)  # 0 near .. 1 far
-        hx = self.half_x_near_mm + s * (self.half_x_far_mm - self.half_x_near_mm)
-        hy = self.half_y_near_mm + s * (self.half_y_far_mm - self.half_y_near_mm)
-        return ((z <= self.z_near_mm) & (z >= self.z_far_mm)
-                & (np.abs(pts[:, 0]) <= hx) & (np.abs(pts[:, 1]) <= hy))
-
-
-@dataclass(frozen=True)
-class PolarisFaults:
-    """Injected faults (all probabilities in [0, 1], drawn from the mock's seeded RNG).
-
-    ``crc_error_prob``: a reply goes out with a corrupted CRC. ``drop_reply_prob``: a reply
-    is not sent at all. Both apply to TX/BX replies only unless ``tracking_only`` is False
-    (then to every reply). ``missing_fraction``: per frame and tool, the tool is reported
-    MISSING. ``ir_interference_fraction``: per frame, every tool's port status gets 0x200
-    (IR interference) and the system status 0x02 (too much IR); poses are still reported.
-    """
-
-    crc_error_prob: float = 0.0
-    drop_reply_prob: float = 0.0
-    missing_fraction: float = 0.0
-    ir_interference_fraction: float = 0.0
-    tracking_only: bool = True
-
-    def __post_init__(self) -> None:
-        for name in ("crc_error_prob", "drop_reply_prob", "missing_fraction",
-                     "ir_interference_fraction"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 1.0:
-                raise ValueError(f"PolarisFaults.{name} must be in [0, 1], got {v}")
+_TRACKING_COMMANDS = ("TX", "BX")
+_MODELLED_OPTIONS = ReplyOption.TRANSFORMS | ReplyOption.OUT_OF_VOLUME
 
 
 class _Handle:
@@ -139,10 +53,20 @@ class _Handle:
         self.body: str | None = None
 
     @property
-    def status(self) -> int:
-        return ((p.HANDLE_OCCUPIED if self.occupied else 0)
-                | (p.HANDLE_INITIALIZED if self.initialized else 0)
-                | (p.HANDLE_ENABLED if self.enabled else 0))
+    def status(self) -> HandleStatus:
+        return ((HandleStatus.OCCUPIED if self.occupied else HandleStatus(0))
+                | (HandleStatus.INITIALIZED if self.initialized else 0)
+                | (HandleStatus.ENABLED if self.enabled else 0))
+
+
+#: PHSR reply option → which handles it lists
+_PHSR_SELECT: dict[str, Callable[[_Handle], bool]] = {
+    "00": lambda h: True,
+    "01": lambda h: False,  # the mock never marks handles to be freed
+    "02": lambda h: h.occupied and not h.initialized,
+    "03": lambda h: h.initialized and not h.enabled,
+    "04": lambda h: h.enabled,
+}
 
 
 class _Reply(Exception):
@@ -150,18 +74,30 @@ class _Reply(Exception):
 
     def __init__(self, code: int) -> None:
         super().__init__(code)
-        self.code = code
+        self.code = int(code)
 
 
-class PolarisMock:
-    """An NDI Polaris serving ``rig`` over a pty and/or loopback TCP.
+@dataclass(frozen=True)
+class _Spec:
+    """A command: its handler, whether it is allowed before INIT (else ERROR10) and whether
+    it is refused while tracking (ERROR0C, checked before the parameters)."""
+
+    handler: Callable[[PolarisFirmware, str], bytes]
+    in_setup: bool = False
+    not_tracking: bool = False
+
+
+class PolarisFirmware:
+    """An NDI Polaris's command interpreter serving ``rig`` (transport-free).
 
     Parameters (keyword-only after ``rig``):
 
     * ``rig``: the :class:`SimRig` whose bodies are tracked (poses tracker_from_body, mm).
     * ``tools``: our tool/body name → path of the .rom file that identifies it (e.g.
       ``{"marker": "configs/tools/marker-8700340.rom", "probe": ...}``); every name must be a
-      rig body. ``None``: the rig's bodies, matched in order of loading.
+      rig body. ``None``: the rig's bodies, matched in order of loading. A loaded definition
+      is matched to a body by comparing its bytes (zero padding stripped) with these files;
+      unmatched definitions take the remaining bodies in order of loading.
     * ``model``: ``"spectra"`` (60 Hz) or ``"vicra"`` (20 Hz).
     * ``clock``: :data:`~tmscal.mocks.clock.REAL_TIME` or :data:`~tmscal.mocks.clock.FAST`.
     * ``volume``: :class:`MeasurementVolume` (default Spectra-like) or None for no limits.
@@ -197,16 +133,11 @@ class PolarisMock:
                 self._roms[body] = Path(path).read_bytes().rstrip(b"\0")
             except OSError as e:
                 raise ValueError(f"cannot read ROM file for tool {body!r}: {e}") from e
-        seq = np.random.SeedSequence(seed)
-        s_frame, s_reply = seq.spawn(2)
-        self._frame_rng = np.random.default_rng(s_frame)
+        s_frame, s_reply = np.random.SeedSequence(seed).spawn(2)
         self._reply_rng = np.random.default_rng(s_reply)
+        self._frames = FrameSource(rig, clock, self.rate_hz, volume, self.faults,
+                                   np.random.default_rng(s_frame), self.error_mm)
         self._lock = threading.RLock()
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
-        self._fds: list[int] = []
-        self._sockets: list[socket.socket] = []
-        self.endpoints: dict[str, str] = {}
         #: every command line received (decoded, CRC stripped), for tests asserting sequences
         self.commands: list[str] = []
         self._power_up()
@@ -217,11 +148,7 @@ class PolarisMock:
             self.state = "setup"  # "setup" → INIT → "ready" → TSTART → "tracking"
             self._handles: dict[int, _Handle] = {}
             self._alloc_count = 0
-            self._t0 = self.clock.now()
-            self._fast_frame = 0
-            self._obs_cache: dict[str, tuple[np.ndarray, list[np.ndarray]]] = {}
-            self._frame_cache: tuple[int, dict[int, tuple[str, np.ndarray | None, int]],
-                                     int] | None = None
+            self._frames.restart()
 
     def reset(self) -> None:
         """Device reset (what a serial break does on real hardware): handles freed, back to
@@ -234,147 +161,10 @@ class PolarisMock:
         with self._lock:
             return {h.number: h.body for h in self._handles.values()}
 
-    # --- transports --------------------------------------------------------------------------
-    def start(self, *, pty: bool = True, tcp: bool = False, host: str = "127.0.0.1",
-              port: int = 0) -> dict[str, str]:
-        """Start the requested transports; returns {"pty": path, "tcp": url} for those
-        started."""
-        if pty and "pty" not in self.endpoints:
-            self.start_pty()
-        if tcp and "tcp" not in self.endpoints:
-            self.start_tcp(host, port)
-        return dict(self.endpoints)
-
-    def start_pty(self) -> str:
-        """Serve on a new pty; returns the slave path (``/dev/pts/N``) clients open."""
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        os.set_blocking(master, False)
-        path = os.ttyname(slave)
-        self._fds += [master, slave]  # the slave stays open: the master reads EIO otherwise
-        t = threading.Thread(target=self._serve_pty, args=(master,), daemon=True,
-                             name=f"polaris-mock-pty{path}")
-        self._threads.append(t)
-        t.start()
-        self.endpoints["pty"] = path
-        log.info("Polaris mock (%s) on %s", self.model, path)
-        return path
-
-    def start_tcp(self, host: str = "127.0.0.1", port: int = 0) -> str:
-        """Serve on TCP ``host:port`` (loopback only: 127.0.0.0/8, ::1 or localhost, else
-        ``ConfigError``; port 0 picks a free one); returns ``socket://HOST:PORT`` for
-        ``serial.serial_for_url``."""
-        family = loopback_family(host, "Polaris mock TCP host")
-        srv = socket.create_server((host, port), family=family)
-        srv.settimeout(0.1)
-        self._sockets.append(srv)
-        real_port = srv.getsockname()[1]
-        t = threading.Thread(target=self._serve_tcp, args=(srv,), daemon=True,
-                             name=f"polaris-mock-tcp{real_port}")
-        self._threads.append(t)
-        t.start()
-        url = f"socket://{url_host(host)}:{real_port}"
-        self.endpoints["tcp"] = url
-        log.info("Polaris mock (%s) on %s", self.model, url)
-        return url
-
-    def close(self) -> None:
-        """Stop serving and release the pty / sockets; safe to call twice."""
-        self._stop.set()
-        for t in self._threads:
-            t.join(timeout=2.0)
-        self._threads.clear()
-        for s in self._sockets:
-            try:
-                s.close()
-            except OSError:
-                pass
-        self._sockets.clear()
-        for fd in self._fds:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._fds.clear()
-
-    def __enter__(self) -> PolarisMock:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def _serve_pty(self, master: int) -> None:
-        buf = bytearray()
-        while not self._stop.is_set():
-            try:
-                r, _, _ = select.select([master], [], [], 0.05)
-            except (OSError, ValueError):
-                return
-            if not r:
-                continue
-            try:
-                data = os.read(master, 4096)
-            except BlockingIOError:
-                continue
-            except OSError as e:  # EIO while no client has the slave open (should not happen)
-                if e.errno == errno.EIO:
-                    self._stop.wait(0.01)
-                    continue
-                return
-            if not data:
-                continue
-            for reply in self._feed(buf, data):
-                self._write_fd(master, reply)
-
-    def _write_fd(self, fd: int, data: bytes) -> None:
-        view = memoryview(data)
-        for _ in range(1000):  # bounded: give up on a reader that never drains
-            if not view:
-                return
-            try:
-                n = os.write(fd, view)
-                view = view[n:]
-            except BlockingIOError:
-                select.select([], [fd], [], 0.01)
-            except OSError:
-                return
-        log.warning("Polaris mock: pty reader not draining; reply dropped")
-
-    def _serve_tcp(self, srv: socket.socket) -> None:
-        while not self._stop.is_set():
-            try:
-                conn, _ = srv.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            t = threading.Thread(target=self._serve_conn, args=(conn,), daemon=True,
-                                 name="polaris-mock-conn")
-            self._threads.append(t)
-            t.start()
-
-    def _serve_conn(self, conn: socket.socket) -> None:
-        conn.settimeout(0.05)
-        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        buf = bytearray()
-        with conn:
-            while not self._stop.is_set():
-                try:
-                    data = conn.recv(4096)
-                except TimeoutError:
-                    continue
-                except OSError:
-                    return
-                if not data:
-                    return
-                for reply in self._feed(buf, data):
-                    try:
-                        conn.sendall(reply)
-                    except OSError:
-                        return
-
+    # --- lines in, replies out ---------------------------------------------------------------
     def _feed(self, buf: bytearray, data: bytes) -> list[bytes]:
-        """Append received bytes; answer every complete command line."""
+        """Append received bytes to a connection's ``buf``; answer every complete command
+        line (a line longer than the device accepts is answered ERROR02 and dropped)."""
         buf += data
         out = []
         while True:
@@ -382,7 +172,7 @@ class PolarisMock:
             if i < 0:
                 if len(buf) > _MAX_LINE:
                     buf.clear()
-                    out.append(p.encode_error(0x02))
+                    out.append(p.encode_error(ErrorCode.COMMAND_TOO_LONG))
                 break
             line = bytes(buf[:i])
             del buf[:i + 1]
@@ -394,7 +184,6 @@ class PolarisMock:
                 out.append(reply)
         return out
 
-    # --- commands ----------------------------------------------------------------------------
     def handle_line(self, line: bytes) -> bytes | None:
         """Answer one command line (without ``\\r``); None means the reply is dropped (fault
         injection). Transport-independent; thread-safe."""
@@ -406,12 +195,11 @@ class PolarisMock:
                 return self._maybe_fault(p.encode_error(int(e.code or 1)), tracking=False)
             self.commands.append(f"{cmd.name}:{cmd.params}" if cmd.had_crc
                                  else f"{cmd.name} {cmd.params}".rstrip())
-            tracking = cmd.name in ("TX", "BX")
             try:
                 reply = self._dispatch(cmd)
             except _Reply as r:
                 reply = p.encode_error(r.code)
-            return self._maybe_fault(reply, tracking)
+            return self._maybe_fault(reply, cmd.name in _TRACKING_COMMANDS)
 
     def _maybe_fault(self, reply: bytes, tracking: bool) -> bytes | None:
         f = self.faults
@@ -422,7 +210,7 @@ class PolarisMock:
             return None
         if f.crc_error_prob > 0 and self._reply_rng.random() < f.crc_error_prob:
             b = bytearray(reply)
-            if b[:2] == b"\xc4\xa5":
+            if p.is_bx(b):
                 b[-1] ^= 0x5A  # body CRC (header stays exact so the length is readable)
             else:
                 k = len(b) - 2  # last CRC digit, kept a hex digit
@@ -431,31 +219,31 @@ class PolarisMock:
         return reply
 
     def _dispatch(self, cmd: p.Command) -> bytes:
-        name, prm = cmd.name, cmd.params.strip()
-        handler = getattr(self, f"_cmd_{name.lower()}", None)
-        if handler is None:
-            raise _Reply(0x01)
-        if name not in ("INIT", "COMM", "VER", "GETINFO", "BEEP", "APIREV", "RESET") \
-                and self.state == "setup":
-            raise _Reply(0x10)
-        return handler(prm)
+        spec = self._COMMANDS.get(cmd.name)
+        if spec is None:
+            raise _Reply(ErrorCode.INVALID_COMMAND)
+        if self.state == "setup" and not spec.in_setup:
+            raise _Reply(ErrorCode.SYSTEM_NOT_INITIALIZED)
+        if spec.not_tracking and self.state == "tracking":
+            raise _Reply(ErrorCode.INVALID_MODE)
+        return spec.handler(self, cmd.params.strip())
 
     def _handle(self, text: str) -> _Handle:
         try:
             h = int(text, 16)
         except ValueError:
-            raise _Reply(0x08) from None
+            raise _Reply(ErrorCode.INVALID_PORT_HANDLE) from None
         if len(text) != 2 or h not in self._handles:
-            raise _Reply(0x08)
+            raise _Reply(ErrorCode.INVALID_PORT_HANDLE)
         return self._handles[h]
 
-    def _not_tracking(self) -> None:
-        if self.state == "tracking":
-            raise _Reply(0x0C)
+    @staticmethod
+    def _need_length(prm: str, *lengths: int) -> None:
+        if len(prm) not in lengths:
+            raise _Reply(ErrorCode.WRONG_PARAMETER_COUNT)
 
-    # system
+    # --- system ------------------------------------------------------------------------------
     def _cmd_init(self, prm: str) -> bytes:
-        self._not_tracking()
         self.state = "ready"
         return p.OKAY_REPLY
 
@@ -466,7 +254,7 @@ class PolarisMock:
     def _cmd_comm(self, prm: str) -> bytes:
         if len(prm) != 5 or prm[0].upper() not in p.BAUD_FROM_CODE or prm[1] not in "01" \
                 or prm[2] not in "012" or prm[3] not in "01" or prm[4] not in "01":
-            raise _Reply(0x06)
+            raise _Reply(ErrorCode.BAD_COMM_PARAMETERS)
         return p.OKAY_REPLY  # the line rate is ignored (pty / TCP)
 
     def _ver_text(self) -> str:
@@ -483,7 +271,7 @@ class PolarisMock:
 
     def _cmd_ver(self, prm: str) -> bytes:
         if prm not in ("", "0", "1", "2", "3", "4", "5"):
-            raise _Reply(0x23)
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         return p.frame_reply(self._ver_text())
 
     def _cmd_getinfo(self, prm: str) -> bytes:
@@ -495,45 +283,41 @@ class PolarisMock:
             "Config.Type Of System": "Polaris " + self.model.capitalize(),
         }
         if prm not in info:
-            raise _Reply(0x23)
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         return p.frame_reply(f"{prm}={info[prm]}")
 
     def _cmd_beep(self, prm: str) -> bytes:
         if prm not in tuple("123456789"):
-            raise _Reply(0x23)
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         return p.frame_reply("1")
 
     def _cmd_apirev(self, prm: str) -> bytes:
         return p.frame_reply("G.001.005")
 
-    # handles
+    # --- port handles ------------------------------------------------------------------------
     def _cmd_phrq(self, prm: str) -> bytes:
-        self._not_tracking()
-        if len(prm) != 14:
-            raise _Reply(0x07)
+        self._need_length(prm, 14)
         free = [n for n in range(_FIRST_HANDLE, _FIRST_HANDLE + MAX_HANDLES)
                 if n not in self._handles]
         if not free:
-            raise _Reply(0x2D)
+            raise _Reply(ErrorCode.NO_MORE_HANDLES)
         self._alloc_count += 1
         h = _Handle(free[0], self._alloc_count)
         self._handles[h.number] = h
         return p.frame_reply(f"{h.number:02X}")
 
     def _cmd_pvwr(self, prm: str) -> bytes:
-        self._not_tracking()
-        if len(prm) != 2 + 4 + 128:
-            raise _Reply(0x07)
+        self._need_length(prm, 2 + 4 + 128)
         h = self._handle(prm[:2])
         try:
             addr = int(prm[2:6], 16)
             chunk = bytes.fromhex(prm[6:])
         except ValueError:
-            raise _Reply(0x23) from None
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE) from None
         if addr % 64 or addr + 64 > _MAX_ROM_BYTES:
-            raise _Reply(0x23)
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         if h.initialized:
-            raise _Reply(0x0C)
+            raise _Reply(ErrorCode.INVALID_MODE)
         if len(h.rom) < addr + 64:
             h.rom.extend(bytes(addr + 64 - len(h.rom)))
         h.rom[addr:addr + 64] = chunk
@@ -554,12 +338,10 @@ class PolarisMock:
         return None
 
     def _cmd_pinit(self, prm: str) -> bytes:
-        self._not_tracking()
-        if len(prm) != 2:
-            raise _Reply(0x07)
+        self._need_length(prm, 2)
         h = self._handle(prm)
         if not h.occupied:
-            raise _Reply(0x0D)
+            raise _Reply(ErrorCode.NO_TOOL)
         if not h.initialized:
             h.body = self._identify(h)
             h.initialized = True
@@ -567,176 +349,106 @@ class PolarisMock:
         return p.OKAY_REPLY
 
     def _cmd_pena(self, prm: str) -> bytes:
-        self._not_tracking()
-        if len(prm) != 3:
-            raise _Reply(0x07)
+        self._need_length(prm, 3)
         h = self._handle(prm[:2])
         if prm[2].upper() not in "SDB":
-            raise _Reply(0x09)
+            raise _Reply(ErrorCode.INVALID_PRIORITY)
         if not h.initialized:
-            raise _Reply(0x0E)
+            raise _Reply(ErrorCode.HANDLE_NOT_INITIALIZED)
         h.enabled = True
         h.priority = prm[2].upper()
         return p.OKAY_REPLY
 
     def _cmd_pdis(self, prm: str) -> bytes:
-        self._not_tracking()
         h = self._handle(prm[:2])
         if not h.enabled:
-            raise _Reply(0x0F)
+            raise _Reply(ErrorCode.HANDLE_NOT_ENABLED)
         h.enabled = False
         return p.OKAY_REPLY
 
     def _cmd_phf(self, prm: str) -> bytes:
-        self._not_tracking()
-        if len(prm) != 2:
-            raise _Reply(0x07)
+        self._need_length(prm, 2)
         h = self._handle(prm)
         del self._handles[h.number]
         return p.OKAY_REPLY
 
     def _cmd_phsr(self, prm: str) -> bytes:
-        self._not_tracking()
-        opt = prm or "00"
+        select = _PHSR_SELECT.get(prm or "00")
+        if select is None:
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         hs = sorted(self._handles.values(), key=lambda h: h.number)
-        if opt == "00":
-            sel = hs
-        elif opt == "01":
-            sel = []  # the mock never marks handles to be freed
-        elif opt == "02":
-            sel = [h for h in hs if h.occupied and not h.initialized]
-        elif opt == "03":
-            sel = [h for h in hs if h.initialized and not h.enabled]
-        elif opt == "04":
-            sel = [h for h in hs if h.enabled]
-        else:
-            raise _Reply(0x23)
-        return p.frame_reply(p.encode_phsr([(h.number, h.status) for h in sel]))
+        return p.frame_reply(p.encode_phsr([(h.number, h.status) for h in hs if select(h)]))
 
     def _cmd_phinf(self, prm: str) -> bytes:
-        self._not_tracking()
-        if len(prm) not in (2, 6):
-            raise _Reply(0x07)
+        self._need_length(prm, 2, 6)
         h = self._handle(prm[:2])
         if not h.occupied:
             return p.frame_reply("UNOCCUPIED")
-        status = p.PORT_OCCUPIED | (p.PORT_INITIALIZED if h.initialized else 0) \
-            | (p.PORT_ENABLED if h.enabled else 0)
+        status = ToolInfoStatus.OCCUPIED \
+            | (ToolInfoStatus.INITIALIZED if h.initialized else 0) \
+            | (ToolInfoStatus.ENABLED if h.enabled else 0)
         text = ("0A000000" + "NDI".ljust(12) + "000" + f"{0x8700340 + h.number:08X}"
                 + f"{status:02X}")
         return p.frame_reply(text)
 
-    # tracking
+    # --- tracking ----------------------------------------------------------------------------
     def _cmd_tstart(self, prm: str) -> bytes:
-        if self.state == "tracking":
-            raise _Reply(0x0C)
         if prm not in ("", "80"):
-            raise _Reply(0x23)
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         if prm == "80":
-            self._t0 = self.clock.now()
-            self._fast_frame = 0
-            self._frame_cache = None
+            self._frames.restart(observations=False)
         self.state = "tracking"
         return p.OKAY_REPLY
 
     def _cmd_tstop(self, prm: str) -> bytes:
         if self.state != "tracking":
-            raise _Reply(0x0C)
+            raise _Reply(ErrorCode.INVALID_MODE)
         self.state = "ready"
         return p.OKAY_REPLY
 
     def _options(self, prm: str) -> int:
         if prm == "":
-            return p.OPT_TRANSFORMS
+            return ReplyOption.TRANSFORMS
         try:
             opt = int(prm, 16)
         except ValueError:
-            raise _Reply(0x23) from None
-        if len(prm) != 4 or opt & ~(p.OPT_TRANSFORMS | p.OPT_OUT_OF_VOLUME) \
-                or not opt & p.OPT_TRANSFORMS:
-            raise _Reply(0x23)  # other reply options are not modelled
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE) from None
+        if len(prm) != 4 or opt & ~_MODELLED_OPTIONS or not opt & ReplyOption.TRANSFORMS:
+            raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)  # other options are not modelled
         return opt
 
-    def _cmd_tx(self, prm: str) -> bytes:
+    def _tracking_records(self, prm: str) -> tuple[list[p.HandleRecord], int]:
         opt = self._options(prm)
         if self.state != "tracking":
-            raise _Reply(0x0C)
-        recs, sys_status = self._records(opt)
-        return p.frame_reply(p.encode_tx(recs, sys_status))
+            raise _Reply(ErrorCode.INVALID_MODE)
+        enabled = [(h.number, h.body)
+                   for h in sorted(self._handles.values(), key=lambda h: h.number) if h.enabled]
+        return self._frames.records(enabled, opt)
+
+    def _cmd_tx(self, prm: str) -> bytes:
+        return p.frame_reply(p.encode_tx(*self._tracking_records(prm)))
 
     def _cmd_bx(self, prm: str) -> bytes:
-        opt = self._options(prm)
-        if self.state != "tracking":
-            raise _Reply(0x0C)
-        recs, sys_status = self._records(opt)
-        return p.encode_bx(recs, sys_status)
+        return p.encode_bx(*self._tracking_records(prm))
 
-    # --- frames ------------------------------------------------------------------------------
-    def _current_frame(self) -> int:
-        if self.clock.fast:
-            self._fast_frame += 1
-            return self._fast_frame
-        return int((self.clock.now() - self._t0) * self.rate_hz) & 0xFFFFFFFF
-
-    def _frame_state(self, frame: int) -> tuple[dict[int, tuple[str, np.ndarray | None, int]],
-                                                 int]:
-        """Per enabled handle: (kind, pose, port status) for this frame, computed once per
-        frame number (same frame → same observation)."""
-        if self._frame_cache is not None and self._frame_cache[0] == frame:
-            return self._frame_cache[1], self._frame_cache[2]
-        f = self.faults
-        rng = self._frame_rng
-        ir = f.ir_interference_fraction > 0 and rng.random() < f.ir_interference_fraction
-        sys_status = p.SYS_TOO_MUCH_IR if ir else 0
-        out: dict[int, tuple[str, np.ndarray | None, int]] = {}
-        for h in sorted(self._handles.values(), key=lambda h: h.number):
-            if not h.enabled:
-                continue
-            status = p.PORT_HEALTHY | (p.PORT_IR_INTERFERENCE if ir else 0)
-            if h.body is None:
-                out[h.number] = ("missing", None, status)
-                continue
-            if f.missing_fraction > 0 and rng.random() < f.missing_fraction:
-                out[h.number] = ("missing", None, status)
-                continue
-            pose = self._observe(h.body)
-            kind = "valid"
-            if self.volume is not None:
-                spheres = np.asarray((self.rig.tools or {}).get(h.body, np.zeros((1, 3))))
-                world = spheres @ pose[:3, :3].T + pose[:3, 3]
-                inside = self.volume.contains(world)
-                if not inside.any():
-                    status |= p.PORT_OUT_OF_VOLUME
-                    kind = "oov"
-                elif not inside.all():
-                    status |= p.PORT_PARTIALLY_OUT_OF_VOLUME
-            out[h.number] = (kind, pose, status)
-        self._frame_cache = (frame, out, sys_status)
-        return out, sys_status
-
-    def _observe(self, body: str) -> np.ndarray:
-        """One noisy ``rig.observe(body)`` (tracker_from_body, 4×4 mm). Observations are
-        drawn from the rig in batches of ``_OBS_BATCH`` at the current true pose and used one
-        per frame; a batch is discarded as soon as the true pose changes (the robot moved),
-        so each frame still gets an independent observation of where the body is now."""
-        true = self.rig.true_body(body)
-        cached = self._obs_cache.get(body)
-        if cached is None or not np.array_equal(cached[0], true) or not cached[1]:
-            batch = self.rig.observe(body, _OBS_BATCH)
-            cached = (true, list(batch[::-1]))
-            self._obs_cache[body] = cached
-        return cached[1].pop()
-
-    def _records(self, options: int) -> tuple[list[p.HandleRecord], int]:
-        frame = self._current_frame()
-        state, sys_status = self._frame_state(frame)
-        seen = [(number, pose, self.error_mm, status, frame)
-                for number, (kind, pose, status) in state.items()
-                if kind == "valid" or (kind == "oov" and options & p.OPT_OUT_OF_VOLUME)]
-        valid = {r.handle: r for r in p.records_from_poses(seen)}  # type: ignore[arg-type]
-        recs = [valid.get(number) or p.HandleRecord.missing_tool(number, status, frame)
-                for number, (_, _, status) in state.items()]
-        return recs, sys_status
-
-
-__all__ = ["PolarisMock", "PolarisFaults", "MeasurementVolume", "MODELS"]
+    _COMMANDS: ClassVar[dict[str, _Spec]] = {
+        "INIT": _Spec(_cmd_init, in_setup=True, not_tracking=True),
+        "RESET": _Spec(_cmd_reset, in_setup=True),
+        "COMM": _Spec(_cmd_comm, in_setup=True),
+        "VER": _Spec(_cmd_ver, in_setup=True),
+        "GETINFO": _Spec(_cmd_getinfo, in_setup=True),
+        "BEEP": _Spec(_cmd_beep, in_setup=True),
+        "APIREV": _Spec(_cmd_apirev, in_setup=True),
+        "PHRQ": _Spec(_cmd_phrq, not_tracking=True),
+        "PVWR": _Spec(_cmd_pvwr, not_tracking=True),
+        "PINIT": _Spec(_cmd_pinit, not_tracking=True),
+        "PENA": _Spec(_cmd_pena, not_tracking=True),
+        "PDIS": _Spec(_cmd_pdis, not_tracking=True),
+        "PHF": _Spec(_cmd_phf, not_tracking=True),
+        "PHSR": _Spec(_cmd_phsr, not_tracking=True),
+        "PHINF": _Spec(_cmd_phinf, not_tracking=True),
+        "TSTART": _Spec(_cmd_tstart, not_tracking=True),
+        "TSTOP": _Spec(_cmd_tstop),
+        "TX": _Spec(_cmd_tx),
+        "BX": _Spec(_cmd_bx),
+    }
