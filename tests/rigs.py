@@ -7,6 +7,8 @@ Frames and units as everywhere: 4×4 poses in mm (``docs/conventions.md``).
 
 from __future__ import annotations
 
+import subprocess
+import time
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +16,7 @@ import numpy as np
 import yaml
 
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, Truth, simulate, tms_rig_truth
+from tmscal.timing import Deadline
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
@@ -74,3 +77,18 @@ def simulated(n: int, seed: int = 0, plan: str = "eq14", noise: Noise | None = N
     paper's); returns (truth, {"A", "commanded", "marker"[, "probe"]}) in mm."""
     return simulate(n, np.random.default_rng(seed), plan=plan,
                     noise=Noise() if noise is None else noise, **kw)
+
+
+def wait_for_lines(path: Path, lines: int, proc: subprocess.Popen, timeout_s: float = 60.0,
+                   poll_s: float = 0.01) -> int:
+    """Wait until the file at ``path`` holds at least ``lines`` complete lines, the process
+    ends, or ``timeout_s`` passes; returns the lines counted last (0 if the file is absent)."""
+    deadline = Deadline(timeout_s)
+    count = 0
+    while not deadline.expired() and proc.poll() is None:
+        if path.exists():
+            count = path.read_bytes().count(b"\n")
+            if count >= lines:
+                break
+        time.sleep(poll_s)
+    return count

@@ -8,7 +8,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,12 @@ from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.report.evaluate import solve_session
 from tmscal.session import read_session
 
-from ..rigs import endpoints_kwargs, point_config, write_config  # noqa: F401 (re-exported)
+from ..rigs import (  # noqa: F401 (write_config re-exported for older importers)
+    endpoints_kwargs,
+    point_config,
+    wait_for_lines,
+    write_config,
+)
 
 
 def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
@@ -70,14 +74,7 @@ def test_kill_9_then_resume_loses_and_duplicates_nothing(tmp_path, mock_config):
         proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg),
                                  "-o", str(out)], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE)
-        deadline = time.monotonic() + 60
-        lines = 0
-        while time.monotonic() < deadline and proc.poll() is None:
-            if out.exists():
-                lines = out.read_bytes().count(b"\n")
-                if lines >= 12:
-                    break
-            time.sleep(0.01)
+        wait_for_lines(out, 12, proc)
         assert proc.poll() is None, "the run ended before it could be killed"
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
@@ -255,11 +252,7 @@ def test_ctrl_c_finishes_the_pose_and_exits_130(tmp_path, mock_config):
         proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg),
                                  "-o", str(out)], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and proc.poll() is None:
-            if out.exists() and out.read_bytes().count(b"\n") >= 3:  # header + 2 poses
-                break
-            time.sleep(0.02)
+        wait_for_lines(out, 3, proc, poll_s=0.02)  # header + 2 poses
         proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr[-1000:]
