@@ -320,6 +320,8 @@ def _check_driver(src: str, kind: str, name: str) -> None:
     """``name`` is a registered driver of ``kind`` (the driver registry is the one list)."""
     from .drivers import registry
 
+    if registry.is_registered(name, kind):  # built-ins need no entry point loaded
+        return
     known = registry.driver_names(kind)
     if name not in known:
         raise err(src, f"{kind}.driver", f"expected {registry.alternatives(known)}, got "

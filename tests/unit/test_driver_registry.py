@@ -152,3 +152,18 @@ def test_robot_refuses_before_sending(monkeypatch):
         near[0, 3] = 9
         r.move_to(near)
     assert len(sent) == 1 and sent[0][1] == 20
+
+
+def test_config_accepts_an_entry_point_driver_and_builtins_despite_a_broken_one(entry_points):
+    from tmscal.config import parse_config
+
+    safety = {"max_offset_mm": 100, "max_rotation_deg": 10, "workspace_min_mm": [-1, -1, -1],
+              "workspace_max_mm": [1, 1, 1], "max_speed_mm_s": 100, "max_accel_mm_s2": 500}
+    entry_points.append(_ep("kuka", f"{__name__}:KUKA"))
+    assert parse_config({"robot": {"driver": "kuka"}, "safety": safety}).robot.driver == "kuka"
+    entry_points[:] = [_ep("broken", "no_such_module_xyz:SPEC")]
+    registry._entry_points_loaded = False
+    registry.SPECS.pop("kuka")
+    assert parse_config({"robot": {"driver": "ur"}, "safety": safety}).robot.driver == "ur"
+    with pytest.raises(ConfigError, match="entry point 'broken'"):
+        parse_config({"robot": {"driver": "kuka"}, "safety": safety})

@@ -31,7 +31,7 @@ from typing import Any
 from ..errors import ConfigError, MissingExtraError
 
 __all__ = ["DriverSpec", "BUILTIN", "ENTRY_POINT_GROUP", "KINDS", "register", "get_spec",
-           "driver_names", "driver_class", "alternatives"]
+           "driver_names", "driver_class", "alternatives", "is_registered"]
 
 #: the entry-point group third-party drivers register in
 ENTRY_POINT_GROUP = "tmscal.drivers"
@@ -179,6 +179,15 @@ def driver_names(kind: str | None = None) -> list[str]:
     those of ``kind`` ("robot" or "tracker") when given."""
     _load_entry_points()
     return [n for n, s in SPECS.items() if kind is None or s.kind == kind]
+
+
+def is_registered(name: str, kind: str | None = None) -> bool:
+    """True when ``name`` is registered (of ``kind``, when given). Entry points are loaded
+    only when the name is not among the drivers registered so far."""
+    if name not in SPECS:
+        driver_names()
+    spec = SPECS.get(name)
+    return spec is not None and (kind is None or spec.kind == kind)
 
 
 def alternatives(names: Iterable[str]) -> str:
