@@ -27,6 +27,17 @@ from . import (
 
 # --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
 
+def _split_endpoint(ep: str) -> tuple[str, int | None]:
+    """"host", "host:port", "[v6]" or "[v6]:port" → (host, port or None)."""
+    if ep.startswith("["):
+        host, _, rest = ep[1:].partition("]")
+        return host, int(rest[1:]) if rest.startswith(":") else None
+    if ep.count(":") == 1:
+        host, _, port = ep.partition(":")
+        return host, int(port)
+    return ep, None
+
+
 def _default_demo_config() -> Path:
     return Path(__file__).resolve().parents[2] / "configs" / "mock-ur-polaris.yaml"
 
@@ -365,10 +376,10 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
                 bar = tqdm(total=total, initial=done, desc="acquiring", unit="pose",
                            file=sys.stderr, disable=None)
 
-            host, _, port = ep["robot"].partition(":")
+            host, port = _split_endpoint(ep["robot"])
             res = run_acquire(cfg, output, poses=poses, samples=samples,
                               tracker_port=ep["tracker"], robot_host=host,
-                              robot_port=int(port) if port else None,
+                              robot_port=port,
                               on_start=on_start, on_pose=lambda d, t, r: bar.update(1))
             if bar is not None:
                 bar.close()
