@@ -234,6 +234,18 @@ def test_ir_interference_is_flagged(rig: SimRig) -> None:
     assert all(s.pose is not None for s in f.tools.values())
 
 
+def test_status_bits_are_logged_once_per_change(rig: SimRig, caplog) -> None:
+    with fault_mock(rig, ir_interference_fraction=1.0) as m:
+        with NDITracker(m.start_pty(), ROMS, **FAST_OPTS) as tr:
+            with caplog.at_level("WARNING", logger="tmscal.drivers.ndi.tracker"):
+                for _ in range(5):
+                    tr.read()
+    msgs = [r.getMessage() for r in caplog.records]
+    assert msgs.count("ndi: system status TOO_MUCH_EXTERNAL_INFRARED") == 1
+    assert msgs.count("ndi: marker status IR_INTERFERENCE") == 1
+    assert msgs.count("ndi: probe status IR_INTERFERENCE") == 1
+
+
 def test_out_of_volume(rig: SimRig) -> None:
     # move the flange 1 m up: tools at z ≈ -500 mm, in front of the near plane (-950)
     rig.move_flange(make_pose(np.diag([1.0, -1.0, -1.0]), [500.0, -1000.0, 400.0]))

@@ -42,14 +42,12 @@ _MODELLED_OPTIONS = ReplyOption.TRANSFORMS | ReplyOption.OUT_OF_VOLUME
 
 
 class _Handle:
-    def __init__(self, number: int, order: int) -> None:
+    def __init__(self, number: int) -> None:
         self.number = number
-        self.order = order  # order of allocation, for the fallback body match
         self.rom = bytearray()
         self.occupied = False
         self.initialized = False
         self.enabled = False
-        self.priority = ""
         self.body: str | None = None
 
     @property
@@ -147,7 +145,6 @@ class PolarisFirmware:
         with self._lock:
             self.state = "setup"  # "setup" → INIT → "ready" → TSTART → "tracking"
             self._handles: dict[int, _Handle] = {}
-            self._alloc_count = 0
             self._frames.restart()
 
     def reset(self) -> None:
@@ -301,8 +298,7 @@ class PolarisFirmware:
                 if n not in self._handles]
         if not free:
             raise _Reply(ErrorCode.NO_MORE_HANDLES)
-        self._alloc_count += 1
-        h = _Handle(free[0], self._alloc_count)
+        h = _Handle(free[0])
         self._handles[h.number] = h
         return p.frame_reply(f"{h.number:02X}")
 
@@ -356,7 +352,6 @@ class PolarisFirmware:
         if not h.initialized:
             raise _Reply(ErrorCode.HANDLE_NOT_INITIALIZED)
         h.enabled = True
-        h.priority = prm[2].upper()
         return p.OKAY_REPLY
 
     def _cmd_pdis(self, prm: str) -> bytes:
