@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..drivers.base import DeviceTimeout, Robot, Tracker
+from ..drivers.base import Robot, Tracker
 from ..geometry import angle_between, pose_mean
 
 log = logging.getLogger(__name__)
@@ -66,31 +66,20 @@ def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float 
     got: dict[str, list[np.ndarray]] = {b: [] for b in names}
     flags: dict[str, int] = {b: 0 for b in names}
     A_reads: list[np.ndarray] = []
-    seen: set[int] = set()
-    first = last = -1
-    reads = 0
-    max_reads = int(max(n_samples * max_frames_factor, n_samples + 10)) * 50
+    frames: list[int] = []
     rate = max(tracker.frame_rate_hz, 1.0)
-    deadline = time.monotonic() + max_frames_factor * n_samples / rate + 5.0
-    while len(seen) < n_samples:
-        fr = tracker.read()
-        reads += 1
-        if fr.frame not in seen:
-            seen.add(fr.frame)
-            if first < 0:
-                first = fr.frame
-            last = fr.frame
-            if (len(seen) - 1) % every == 0:
-                A_reads.append(robot.flange_pose())
-            for b in names:
-                st = fr.tools[b]
-                if st.usable and st.pose is not None:
-                    got[b].append(st.pose)
-                else:
-                    flags[b] += 1
-        if reads >= max_reads or time.monotonic() > deadline:
-            raise DeviceTimeout(f"tracker delivered only {len(seen)} distinct frames of "
-                                f"{n_samples} in {reads} reads (frame counter stuck?)")
+    for fr in tracker.distinct_frames(
+            n_samples, timeout_s=max_frames_factor * n_samples / rate + 5.0,
+            max_reads=int(max(n_samples * max_frames_factor, n_samples + 10)) * 50):
+        if len(frames) % every == 0:
+            A_reads.append(robot.flange_pose())
+        frames.append(fr.frame)
+        for b in names:
+            st = fr.tools[b]
+            if st.usable and st.pose is not None:
+                got[b].append(st.pose)
+            else:
+                flags[b] += 1
     A = pose_mean(np.stack(A_reads))
     out_bodies: dict[str, np.ndarray | None] = {}
     samples: dict[str, int] = {"A": len(A_reads)}
@@ -111,5 +100,5 @@ def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float 
         out_bodies[b] = m
         spread[b] = spread_of(P, m)
     return PoseSample(A=A, bodies=out_bodies, samples=samples, spread=spread, share=share,
-                      frames=len(seen), first_frame=first, last_frame=last,
+                      frames=len(frames), first_frame=frames[0], last_frame=frames[-1],
                       problem="; ".join(problems) or None, flags=flags)
