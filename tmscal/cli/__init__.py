@@ -68,11 +68,11 @@ def _write_atomic(path: Path, text: str) -> None:
 
 def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
     """Call a report plotting function; a missing matplotlib is one clear error."""
-    from ..errors import CalibrationError
+    from ..errors import MissingExtraError
     try:
         fn(*args, **kwargs)
-    except ImportError:
-        raise CalibrationError("--plot needs matplotlib: pip install 'tmscal[plot]'") from None
+    except ImportError as e:
+        raise MissingExtraError("--plot", "plot", str(e)) from None
 
 
 def _json_default(o: Any) -> Any:

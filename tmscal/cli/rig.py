@@ -123,7 +123,6 @@ def track(config: Path, port: str | None, frames: int | None) -> None:
     """Connect to the tracker, list the tools and print live poses, quality and flags."""
     from ..acquisition.devices import make_tracker
     from ..config import load_config
-    from ..drivers.ndi.tracker import iter_frames
 
     cfg = load_config(config)
     with make_tracker(cfg, port) as tr:
@@ -134,7 +133,7 @@ def track(config: Path, port: str | None, frames: int | None) -> None:
             h = handles.get(name)
             click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
         try:
-            for fr in iter_frames(tr, frames):
+            for fr in tr.distinct_frames(frames, stall_s=5.0):
                 parts = [f"frame {fr.frame:>8}"]
                 for name, st in fr.tools.items():
                     if st.pose is None:

@@ -27,7 +27,14 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError, RobotFault
+from ...errors import (
+    ConnectionLost,
+    DeviceError,
+    DeviceTimeout,
+    MissingExtraError,
+    ProtocolError,
+    RobotFault,
+)
 from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
 from ...timing import Deadline
 from ..base import Envelope, Robot
@@ -124,8 +131,7 @@ class URRobot(Robot):
             import rtde_control
             import rtde_receive
         except ImportError as e:  # pragma: no cover - the ur extra is missing
-            raise DeviceError(f"ur {self.host}: the ur_rtde library is not installed ({e}); "
-                              "pip install 'tmscal[ur]'", device=self.name) from e
+            raise MissingExtraError(f"ur {self.host}", "ur", str(e)) from e
         freq = -1.0 if self.frequency_hz is None else float(self.frequency_hz)
         flags = (rtde_control.RTDEControlInterface.Flags.FLAG_UPLOAD_SCRIPT
                  if self.upload_script else 0)
