@@ -36,7 +36,7 @@ def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
     assert [p.index for p in s.poses] == list(range(n))
     s.header["truth"] = {"X": truth.X.tolist(), "Y": truth.Y.tolist(), "Z": truth.Z.tolist()}
     _, res = solve_session(s, "qr36")
-    t = res["truth"]
+    t = res.truth
     # noise: 0.05 mm fiducials, 0.05 mm / 0.05° robot; averaged frames; n poses ±100 mm/±10°
     assert t["X"]["trans_mm"] < 0.5 and t["Y"]["trans_mm"] < 0.5, t
     assert t["X"]["rot_deg"] < 0.1 and t["Y"]["rot_deg"] < 0.1, t

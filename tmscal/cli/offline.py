@@ -116,10 +116,10 @@ def solve(session_file: Path, method: str, train: int | None, orthonormal: bool,
     if output is not None:
         _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
     if plot is not None:
-        _plot(plot_residuals, pose_residuals(session, cal), res["n_solve"], str(plot),
-              f"{session_file.name}: {res['method']} per-pose errors")
+        _plot(plot_residuals, pose_residuals(session, cal), res.n_solve, str(plot),
+              f"{session_file.name}: {res.method} per-pose errors")
     if as_json:
-        _print_json(res)
+        _print_json(res.to_json())
     else:
         click.echo(format_result(res))
         for f in (output, plot):

@@ -386,7 +386,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
         session.header["truth"] = truth.as_dict()
         _, result = solve_session(session, "qr36")
         if as_json:
-            _print_json(result)
+            _print_json(result.to_json())
             return
         click.echo(f"acquired {res.recorded} poses ({res.skipped} skipped) in "
                    f"{res.elapsed_s:.1f} s through the wire protocols\n")

@@ -6,6 +6,7 @@ X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -16,7 +17,7 @@ from ..calib.study import convergence, summarize, threshold_n
 from ..errors import CalibrationError
 from ..session import Session
 
-__all__ = ["solve_session", "study_session", "session_arrays", "pose_residuals"]
+__all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -36,15 +37,51 @@ def _mat(M: np.ndarray | None) -> list | None:
     return None if M is None else np.asarray(M, dtype=float).tolist()
 
 
+@dataclass(frozen=True)
+class SolveResult:
+    """What ``tmscal solve`` reports. ``method`` and ``applied`` ("raw" or "orthonormal"
+    matrices); the poses solved on (``n_solve``) and evaluated on (``n_test``), ``errors_on``
+    ("held-out" or "in-sample"), poses skipped at acquisition (``n_skipped``); X =
+    flange_from_marker, Y = flange_from_probe (None for marker-only), Z = base_from_tracker
+    (orthonormal 4×4 mm) and ``raw`` (the solver's matrices by name); ``errors`` (e_t_mm,
+    theta_t_deg, per body trans_mm/rot_deg, e_z_mm/theta_z_deg for QR24 with a probe);
+    ``truth`` ({X, Y, Z: {trans_mm, rot_deg}}, coil_placement_mm, coil_placement_max_mm) when
+    the session knows the truth. ``to_json()`` is the ``--json`` object."""
+
+    method: str
+    applied: str
+    n_solve: int
+    n_test: int
+    errors_on: str
+    n_skipped: int
+    X: np.ndarray | None
+    Y: np.ndarray | None
+    Z: np.ndarray | None
+    raw: dict[str, np.ndarray | None]
+    errors: dict[str, Any]
+    Z_probe: np.ndarray | None = None
+    truth: dict[str, Any] | None = field(default=None)
+
+    def to_json(self) -> dict[str, Any]:
+        """The result as plain JSON types (matrices as nested lists, mm)."""
+        out: dict[str, Any] = {
+            "method": self.method, "applied": self.applied, "n_solve": self.n_solve,
+            "n_test": self.n_test, "errors_on": self.errors_on, "n_skipped": self.n_skipped,
+            "X": _mat(self.X), "Y": _mat(self.Y), "Z": _mat(self.Z),
+            "raw": {k: _mat(v) for k, v in self.raw.items()}, "errors": self.errors,
+        }
+        if self.Z_probe is not None:
+            out["Z_probe"] = _mat(self.Z_probe)
+        if self.truth is not None:
+            out["truth"] = self.truth
+        return out
+
+
 def solve_session(session: Session, method: str = "qr36", train: int | None = None,
-                  orthonormal: bool = False) -> tuple[Calibration, dict[str, Any]]:
+                  orthonormal: bool = False) -> tuple[Calibration, SolveResult]:
     """Solve on poses [0, train) (default: all) and evaluate on the rest (in-sample when
-    nothing is left). Returns the Calibration and the result object: method, n_solve,
-    n_test, errors_on ("held-out" or "in-sample"), X, Y, Z (orthonormal 4×4 mm lists),
-    raw matrices, errors {e_t_mm, theta_t_deg, bodies…, e_z_mm, theta_z_deg}, and truth
-    {X/Y/Z: {trans_mm, rot_deg}, coil_placement_mm (mean over the evaluated poses),
-    coil_placement_max_mm} when the session has truth.
-    """
+    nothing is left). Returns the Calibration and a ``SolveResult`` (errors, the matrices,
+    and the errors against the truth when the session has one)."""
     A, B, C = session_arrays(session, method)
     n = len(A)
     if n == 0:
@@ -60,30 +97,33 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     held_out = train < n
     sl = slice(train, n) if held_out else slice(0, n)
     errors = cal.errors(A[sl], B[sl], None if C is None else C[sl])
-    res: dict[str, Any] = {
-        "method": cal.method,
-        "applied": cal.applied,
-        "n_solve": int(train),
-        "n_test": int(n - train) if held_out else int(n),
-        "errors_on": "held-out" if held_out else "in-sample",
-        "n_skipped": sum(p.skipped is not None for p in session.poses),
-        "X": _mat(cal.X), "Y": _mat(cal.Y), "Z": _mat(cal.Z),
-        "raw": {"X": _mat(cal.X_raw), "Y": _mat(cal.Y_raw), "Z": _mat(cal.Z_raw)},
-        "errors": _flat_errors(errors),
-    }
+    raw = {"X": cal.X_raw, "Y": cal.Y_raw, "Z": cal.Z_raw}
     if cal.Z_probe is not None:
-        res["Z_probe"] = _mat(cal.Z_probe)
-        res["raw"]["Z_probe"] = _mat(cal.Z_probe_raw)
-    truth = session.truth
-    if truth:
-        te = truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth)
-        res["truth"] = dict(te)
-        if C is not None and cal.Y is not None and "Y" in truth:
-            u = cal.used()
-            coil = coil_placement_errors(C[sl], u["Y"], u["Z"], truth["Y"], truth["Z"])
-            res["truth"]["coil_placement_mm"] = float(coil.mean())
-            res["truth"]["coil_placement_max_mm"] = float(coil.max())
+        raw["Z_probe"] = cal.Z_probe_raw
+    res = SolveResult(
+        method=cal.method, applied=cal.applied, n_solve=int(train),
+        n_test=int(n - train) if held_out else int(n),
+        errors_on="held-out" if held_out else "in-sample",
+        n_skipped=sum(p.skipped is not None for p in session.poses),
+        X=cal.X, Y=cal.Y, Z=cal.Z, raw=raw, errors=_flat_errors(errors),
+        Z_probe=cal.Z_probe, truth=_truth_errors(session, cal, C, sl))
     return cal, res
+
+
+def _truth_errors(session: Session, cal: Calibration, C: np.ndarray | None,
+                  sl: slice) -> dict[str, Any] | None:
+    """Errors of X, Y, Z against a session's truth, and the coil placement error (mean and
+    max over the evaluated poses, mm); None without truth."""
+    truth = session.truth
+    if not truth:
+        return None
+    out: dict[str, Any] = dict(truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth))
+    if C is not None and cal.Y is not None and "Y" in truth:
+        u = cal.used()
+        coil = coil_placement_errors(C[sl], u["Y"], u["Z"], truth["Y"], truth["Z"])
+        out["coil_placement_mm"] = float(coil.mean())
+        out["coil_placement_max_mm"] = float(coil.max())
+    return out
 
 
 def _flat_errors(err: dict[str, Any]) -> dict[str, Any]:

@@ -6,10 +6,13 @@ Units: mm and degrees, named in every column header.
 from __future__ import annotations
 
 import datetime as _dt
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
+
+if TYPE_CHECKING:
+    from .evaluate import SolveResult
 
 __all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "plot_residuals",
            "format_matrix"]
@@ -21,14 +24,14 @@ def format_matrix(M: Any, indent: str = "    ") -> str:
     return "\n".join(indent + "  ".join(f"{v:>11.5f}" for v in row) for row in A)
 
 
-def format_result(res: dict[str, Any], show_matrices: bool = True) -> str:
+def format_result(res: SolveResult, show_matrices: bool = True) -> str:
     """The ``tmscal solve`` human output: a short aligned table."""
-    lines = [f"method {res['method']} ({res['applied']} matrices applied), solved on "
-             f"{res['n_solve']} poses, errors {res['errors_on']} on {res['n_test']} poses"]
-    if res.get("n_skipped"):
-        lines.append(f"({res['n_skipped']} poses of the session were skipped at acquisition "
+    lines = [f"method {res.method} ({res.applied} matrices applied), solved on "
+             f"{res.n_solve} poses, errors {res.errors_on} on {res.n_test} poses"]
+    if res.n_skipped:
+        lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "
                      "and are not used)")
-    e = res["errors"]
+    e = res.errors
     lines.append("")
     lines.append(f"  {'error':<26}{'translation mm':>16}{'rotation deg':>15}")
     for b in ("marker", "probe"):
@@ -38,24 +41,25 @@ def format_result(res: dict[str, Any], show_matrices: bool = True) -> str:
     if "e_z_mm" in e:
         lines.append(f"  {'Z_P vs Z_M (e_z)':<26}{e['e_z_mm']:>16.4f}{e['theta_z_deg']:>15.4f}")
     lines.append(f"  {'total (e_t, θ_t)':<26}{e['e_t_mm']:>16.4f}{e['theta_t_deg']:>15.4f}")
-    if "truth" in res:
+    if res.truth is not None:
         lines.append("")
         lines.append(f"  {'against the truth':<26}{'translation mm':>16}{'rotation deg':>15}")
         for k in ("X", "Y", "Z"):
-            if k in res["truth"]:
-                t = res["truth"][k]
+            if k in res.truth:
+                t = res.truth[k]
                 lines.append(f"  {k:<26}{t['trans_mm']:>16.4f}{t['rot_deg']:>15.4f}")
-        if "coil_placement_mm" in res["truth"]:
-            t = res["truth"]
+        if "coil_placement_mm" in res.truth:
+            t = res.truth
             lines.append(f"  {'coil placement (mean/max)':<26}{t['coil_placement_mm']:>16.4f}"
                          f"{t['coil_placement_max_mm']:>15.4f} mm")
     if show_matrices:
         for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
                         ("Z", "base_from_tracker")):
-            if res.get(k) is not None:
+            M = getattr(res, k)
+            if M is not None:
                 lines.append("")
                 lines.append(f"  {k} = {name} (orthonormal, mm)")
-                lines.append(format_matrix(res[k]))
+                lines.append(format_matrix(M))
     return "\n".join(lines)
 
 
@@ -83,9 +87,10 @@ def format_study(study: dict[str, Any], paper: dict[str, Any] | None = None) -> 
     return "\n".join(out)
 
 
-def calibration_yaml(res: dict[str, Any], session_path: str, session_sha256: str) -> str:
+def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -> str:
     """The calibration YAML (docs/conventions.md): X, Y, Z orthonormal, raw matrices, method, poses
     used, held-out errors, and the session's SHA-256. Units mm."""
+    j = res.to_json()
     doc = {
         "format": "tmscal-calibration",
         "version": 1,
@@ -93,17 +98,17 @@ def calibration_yaml(res: dict[str, Any], session_path: str, session_sha256: str
         "units": {"length": "mm", "angles": "deg"},
         "frames": {"X": "flange_from_marker", "Y": "flange_from_probe",
                    "Z": "base_from_tracker"},
-        "method": res["method"],
-        "applied": res["applied"],
+        "method": j["method"],
+        "applied": j["applied"],
         "session": {"path": session_path, "sha256": session_sha256},
-        "poses": {"solve": res["n_solve"], "test": res["n_test"],
-                  "errors_on": res["errors_on"]},
-        "X": res["X"], "Y": res["Y"], "Z": res["Z"],
-        "raw": res["raw"],
-        "errors": res["errors"],
+        "poses": {"solve": j["n_solve"], "test": j["n_test"],
+                  "errors_on": j["errors_on"]},
+        "X": j["X"], "Y": j["Y"], "Z": j["Z"],
+        "raw": j["raw"],
+        "errors": j["errors"],
     }
-    if "truth" in res:
-        doc["truth_errors"] = res["truth"]
+    if res.truth is not None:
+        doc["truth_errors"] = res.truth
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
 
 
