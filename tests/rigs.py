@@ -92,3 +92,12 @@ def wait_for_lines(path: Path, lines: int, proc: subprocess.Popen, timeout_s: fl
                 break
         time.sleep(poll_s)
     return count
+
+
+def wait_until(pred: Any, timeout_s: float, what: str, poll_s: float = 0.002) -> None:
+    """Poll ``pred()`` until true; AssertionError naming ``what`` after ``timeout_s`` s (a
+    guard against a hang, not a timing assertion)."""
+    deadline = Deadline(timeout_s)
+    while not pred():
+        assert not deadline.expired(), f"timed out after {timeout_s:.1f} s waiting for {what}"
+        time.sleep(poll_s)

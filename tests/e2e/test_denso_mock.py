@@ -353,7 +353,7 @@ def test_mock_serves_on_every_loopback_spelling(rig: SimRig, host: str) -> None:
 
 
 def test_denso_robot_stop_halts_a_blocking_move(rig: SimRig) -> None:
-    from tmscal.drivers.base import wait_until
+    from tests.rigs import wait_until
 
     with DensoMock(rig, clock=REAL_TIME, motion_time_s=60.0) as m, \
             DensoRobot(port=port_of(m.start()), timeout_s=30.0) as robot:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tmscal.drivers.base import wait_until
+from tests.rigs import wait_until
 from tmscal.drivers.denso.hresult import (
     E_INVALIDARG,
     S_EXECUTING,

@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -403,21 +402,8 @@ class Robot(_Device):
     def _stop(self) -> None: ...
 
 
-# --- waiting ------------------------------------------------------------------------------------
-
-def wait_until(pred: Callable[[], bool], timeout_s: float, what: str,
-               poll_s: float = 0.002) -> None:
-    """Poll ``pred`` every ``poll_s`` seconds until true; raise ``DeviceTimeout`` naming
-    ``what`` after ``timeout_s`` seconds."""
-    deadline = Deadline(timeout_s)
-    while not pred():
-        if deadline.expired():
-            raise DeviceTimeout(f"timed out after {timeout_s:.1f} s waiting for {what}")
-        time.sleep(poll_s)
-
-
 __all__ = [
     "ToolState", "TrackerFrame", "Tracker", "Robot", "Envelope", "DriverSpec", "driver_class",
-    "wait_until", "ConfigError", "ConnectionLost", "DeviceError", "DeviceTimeout",
+    "ConfigError", "ConnectionLost", "DeviceError", "DeviceTimeout",
     "ProtocolError", "RobotFault", "SafetyError", "SessionError", "TmscalError",
 ]
