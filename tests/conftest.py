@@ -27,6 +27,13 @@ def pytest_configure(config) -> None:
     fuzz.LONG = bool(config.getoption("--fuzz-long"))
 
 
+def pytest_collection_modifyitems(config, items) -> None:
+    """Under ``--fuzz-long`` the per-test timeout is lifted (10⁵ examples take minutes)."""
+    if config.getoption("--fuzz-long"):
+        for item in items:
+            item.add_marker(pytest.mark.timeout(0))
+
+
 @pytest.fixture
 def configs_dir() -> Path:
     """The shipped ``configs/`` directory."""
