@@ -11,6 +11,7 @@ Program Interface Guide, TX and BX (reply options 0001 and 0801).
 from __future__ import annotations
 
 import enum
+import functools
 import math
 import re
 import struct
@@ -41,6 +42,13 @@ class RecordStatus(enum.StrEnum):
 
 
 VALID, MISSING, DISABLED = RecordStatus.VALID, RecordStatus.MISSING, RecordStatus.DISABLED
+_OUT_OF_VOLUME = int(PortStatus.OUT_OF_VOLUME)
+_PARTIALLY_OUT_OF_VOLUME = int(PortStatus.PARTIALLY_OUT_OF_VOLUME)
+_IR_INTERFERENCE = int(PortStatus.IR_INTERFERENCE)
+
+# constructing an IntFlag costs about a microsecond; every record and reply needs one
+_port_status = functools.lru_cache(maxsize=1024)(PortStatus)
+_system_status = functools.lru_cache(maxsize=1024)(SystemStatus)
 
 
 @dataclass(frozen=True)
@@ -69,15 +77,15 @@ class HandleRecord:
 
     @property
     def out_of_volume(self) -> bool:
-        return bool(self.port_status & PortStatus.OUT_OF_VOLUME)
+        return bool(int(self.port_status) & _OUT_OF_VOLUME)
 
     @property
     def partially_out_of_volume(self) -> bool:
-        return bool(self.port_status & PortStatus.PARTIALLY_OUT_OF_VOLUME)
+        return bool(int(self.port_status) & _PARTIALLY_OUT_OF_VOLUME)
 
     @property
     def ir_interference(self) -> bool:
-        return bool(self.port_status & PortStatus.IR_INTERFERENCE)
+        return bool(int(self.port_status) & _IR_INTERFERENCE)
 
     @classmethod
     def valid(cls, handle: int, quaternion: Sequence[float], translation_mm: Sequence[float],
@@ -99,7 +107,7 @@ class HandleRecord:
             pose = make_pose(matrix_from_quaternion(np.array(q)), np.array(t))
         elif pose is _DEFERRED:
             pose = None  # filled in by _fill_poses (batched conversion)
-        return cls(handle, VALID, PortStatus(int(port_status)), int(frame),
+        return cls(handle, VALID, _port_status(int(port_status)), int(frame),
                    q, t,  # type: ignore[arg-type]
                    float(error_mm), pose)
 
@@ -115,7 +123,7 @@ class HandleRecord:
     @classmethod
     def missing_tool(cls, handle: int, port_status: int, frame: int) -> HandleRecord:
         """A record for a tool that is enabled but not seen."""
-        return cls(handle, MISSING, PortStatus(int(port_status)), int(frame))
+        return cls(handle, MISSING, _port_status(int(port_status)), int(frame))
 
 
 _DEFERRED = np.empty((0,))
@@ -215,7 +223,7 @@ def decode_tx(payload: str) -> TrackingReply:
     if len(tail) != 4:
         raise ProtocolError(f"TX system status {tail!r} is not 4 hex digits", device=DEVICE)
     return TrackingReply(tuple(_fill_poses(records)),
-                         SystemStatus(parse_hex(tail, "TX system status")))
+                         _system_status(parse_hex(tail, "TX system status")))
 
 
 def _signed(value: float, scale: float, digits: int) -> str:
@@ -325,4 +333,4 @@ def decode_bx(raw: bytes | bytearray) -> TrackingReply:
     if pos != len(body):
         raise ProtocolError(f"BX body has {len(body) - pos} unexplained trailing bytes",
                             device=DEVICE)
-    return TrackingReply(tuple(_fill_poses(records)), SystemStatus(system_status))
+    return TrackingReply(tuple(_fill_poses(records)), _system_status(system_status))
