@@ -11,7 +11,7 @@ import pytest
 
 from tmscal.drivers.base import driver_class
 from tmscal.drivers.ndi import protocol as p
-from tmscal.drivers.ndi.tracker import NDITracker, iter_frames
+from tmscal.drivers.ndi.tracker import NDITracker
 from tmscal.errors import ConfigError, DeviceError, DeviceTimeout, ProtocolError
 from tmscal.geometry import make_pose, rotation_angle
 from tmscal.mocks.clock import FAST
@@ -135,9 +135,9 @@ def test_tools_already_loaded_on_the_device(mock: PolarisMock, rig: SimRig) -> N
             pass
 
 
-def test_iter_frames_distinct(mock: PolarisMock) -> None:
+def test_distinct_frames_skip_repeats_on_the_real_driver(mock: PolarisMock) -> None:
     with NDITracker(mock.start_pty(), ROMS, **FAST_OPTS) as tr:
-        frames = list(iter_frames(tr, 5))
+        frames = list(tr.distinct_frames(5))
     nums = [f.frame for f in frames]
     assert len(set(nums)) == 5 and nums == sorted(nums)
 

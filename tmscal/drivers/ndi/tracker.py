@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -413,26 +413,4 @@ class NDITracker(Tracker):
             buf += chunk
 
 
-def iter_frames(tracker: Tracker, n: int | None = None, *, distinct: bool = True,
-                stall_timeout_s: float = 5.0) -> Iterator[TrackerFrame]:
-    """Yield frames from an open ``tracker`` (poses tracker_from_tool, 4×4 mm): ``n`` of them,
-    or forever when ``n`` is None (the caller stops iterating). With ``distinct`` a frame
-    number already seen is skipped (polling faster than the frame rate repeats frames);
-    ``DeviceTimeout`` if no new frame comes within ``stall_timeout_s`` seconds."""
-    count = 0
-    last: int | None = None
-    stall_since = time.monotonic()
-    while n is None or count < n:
-        frame = tracker.read()
-        if distinct and frame.frame == last:
-            if time.monotonic() - stall_since > stall_timeout_s:
-                raise DeviceTimeout(f"no new tracker frame within {stall_timeout_s:g} s "
-                                    f"(stuck at {last})")
-            continue
-        last = frame.frame
-        stall_since = time.monotonic()
-        count += 1
-        yield frame
-
-
-__all__ = ["NDITracker", "iter_frames"]
+__all__ = ["NDITracker"]

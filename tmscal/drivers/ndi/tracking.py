@@ -16,7 +16,7 @@ import math
 import re
 import struct
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -90,9 +90,10 @@ class HandleRecord:
     @classmethod
     def valid(cls, handle: int, quaternion: Sequence[float], translation_mm: Sequence[float],
               error_mm: float, port_status: int, frame: int,
-              pose: np.ndarray | None = None) -> HandleRecord:
+              pose: np.ndarray | None = None, batched: bool = False) -> HandleRecord:
         """A valid record; the pose is computed from the quaternion and translation unless
-        given. Raises ``ProtocolError`` for a non-finite or zero-length quaternion."""
+        given, or left to ``_fill_poses`` (one vectorised conversion per reply) when
+        ``batched``. Raises ``ProtocolError`` for a non-finite or zero-length quaternion."""
         q = tuple(float(v) for v in quaternion)
         t = tuple(float(v) for v in translation_mm)
         if len(q) != 4 or len(t) != 3:
@@ -103,10 +104,8 @@ class HandleRecord:
                                 device=DEVICE)
         if math.sqrt(sum(v * v for v in q)) < 1e-6:
             raise ProtocolError(f"handle {handle:02X}: zero-length quaternion", device=DEVICE)
-        if pose is None:
+        if pose is None and not batched:
             pose = make_pose(matrix_from_quaternion(np.array(q)), np.array(t))
-        elif pose is _DEFERRED:
-            pose = None  # filled in by _fill_poses (batched conversion)
         return cls(handle, VALID, _port_status(int(port_status)), int(frame),
                    q, t,  # type: ignore[arg-type]
                    float(error_mm), pose)
@@ -126,18 +125,17 @@ class HandleRecord:
         return cls(handle, MISSING, _port_status(int(port_status)), int(frame))
 
 
-_DEFERRED = np.empty((0,))
-
-
 def _fill_poses(records: list[HandleRecord]) -> list[HandleRecord]:
-    """Compute the poses of valid records whose pose was deferred, in one batched call."""
+    """The records, with the poses of valid records built with ``batched=True`` computed in
+    one vectorised conversion (new records; the dataclass stays frozen)."""
     idx = [i for i, r in enumerate(records) if r.status == VALID and r.pose is None]
     if idx:
         q = np.array([records[i].quaternion for i in idx], dtype=np.float64)
         t = np.array([records[i].translation_mm for i in idx], dtype=np.float64)
         poses = make_pose(matrix_from_quaternion(q), t)
+        records = list(records)
         for k, i in enumerate(idx):
-            object.__setattr__(records[i], "pose", poses[k])
+            records[i] = replace(records[i], pose=poses[k])
     return records
 
 
@@ -207,7 +205,7 @@ def decode_tx(payload: str) -> TrackingReply:
             q = [int(v) * 1e-4 for v in g[0:4]]
             t = [int(v) * 0.01 for v in g[4:7]]
             records.append(HandleRecord.valid(handle, q, t, int(g[7]) * 1e-4, int(g[8], 16),
-                                              int(g[9], 16), pose=_DEFERRED))
+                                              int(g[9], 16), batched=True))
             continue
         m = _TX_MISSING_RE.fullmatch(body)
         if m:
@@ -315,7 +313,7 @@ def decode_bx(raw: bytes | bytearray) -> TrackingReply:
                 port, frame = struct.unpack_from("<II", body, pos)
                 pos += 8
                 records.append(HandleRecord.valid(handle, vals[0:4], vals[4:7], vals[7], port,
-                                                  frame, pose=_DEFERRED))
+                                                  frame, batched=True))
             elif status == BxStatus.MISSING:
                 port, frame = struct.unpack_from("<II", body, pos)
                 pos += 8
