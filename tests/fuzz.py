@@ -1,16 +1,19 @@
 """Hypothesis budgets for the fuzz and property tests.
 
 CI runs a small budget; ``pytest --fuzz-long`` (see ``tests/conftest.py``) raises every fuzz
-test to at least 100,000 examples for a long hunt before a release.
+test to at least 100,000 examples for a long hunt before a release (``TMSCAL_FUZZ_EXAMPLES``
+sets another number).
 """
 
 from __future__ import annotations
+
+import os
 
 from hypothesis import HealthCheck, settings
 
 #: set by ``tests/conftest.py`` from ``--fuzz-long`` before the test modules are collected
 LONG = False
-LONG_EXAMPLES = 100_000
+LONG_EXAMPLES = int(os.environ.get("TMSCAL_FUZZ_EXAMPLES", "100000"))
 
 
 def fuzz_settings(examples: int = 200, **kw) -> settings:
