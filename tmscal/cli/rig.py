@@ -39,7 +39,19 @@ def _split_endpoint(ep: str) -> tuple[str, int | None]:
 
 
 def _default_demo_config() -> Path:
-    return Path(__file__).resolve().parents[2] / "configs" / "mock-ur-polaris.yaml"
+    """The built-in mock rig, ``mock-ur-polaris.yaml`` of the package data
+    (``tmscal/data/configs/``), loaded through importlib.resources so it works from an
+    installed wheel. Its ROM paths are relative to it: the whole folder must be on disk."""
+    import atexit
+    import contextlib
+    from importlib.resources import as_file, files
+
+    configs = files("tmscal.data") / "configs"
+    if not isinstance(configs, Path):  # e.g. a zipped install: extract for this process
+        stack = contextlib.ExitStack()
+        atexit.register(stack.close)
+        configs = stack.enter_context(as_file(configs))
+    return Path(configs) / "mock-ur-polaris.yaml"
 
 
 def _matrix_text(T: np.ndarray) -> str:
