@@ -10,7 +10,7 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     sampling: {samples, settle_s, min_share, max_frames_factor, robot_reads}
     safety:   {max_offset_mm, max_rotation_deg, workspace_min_mm, workspace_max_mm,
                max_speed_mm_s, max_accel_mm_s2}
-    run:      {retries, reconnect_wait_s}
+    run:      {retries, reconnect_wait_s, warn_skip_share, stop_skip_share, skip_window}
     mock:     {clock: fast|real, seed, truth: tms|random|{X, Y, Z}, noise: {...},
                tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...}}
 
@@ -163,10 +163,16 @@ class SafetyConfig:
 
 @dataclass
 class RunConfig:
-    """Device-fault handling: reconnect attempts per fault, wait between them (s)."""
+    """Device-fault handling: reconnect attempts per fault, wait between them (s). Skipped
+    poses: over the last ``skip_window`` poses of a run, a share of skipped poses above
+    ``warn_skip_share`` warns once (naming the reason), above ``stop_skip_share`` stops the
+    run resumably (``AcquisitionStopped``). Shares are of the window's full length."""
 
     retries: int = 3
     reconnect_wait_s: float = 1.0
+    warn_skip_share: float = 0.10
+    stop_skip_share: float = 0.5
+    skip_window: int = 20
 
 
 @dataclass
@@ -398,11 +404,20 @@ def _parse_sampling(data: Any, src: str) -> SamplingConfig:
 
 
 def _parse_run(data: Any, src: str) -> RunConfig:
-    """The run section: reconnect attempts and the wait between them."""
+    """The run section: reconnect attempts and the wait between them; the skip shares that
+    warn and stop (in [0, 1], warn ≤ stop) and the window they are counted over (poses)."""
     run = build(RunConfig, data, src, "run")
     in_range(src, "run.retries", run.retries, 0, 1000)
     positive(src, "run.reconnect_wait_s", run.reconnect_wait_s, allow_zero=True,
              at_most=3600.0)
+    in_range(src, "run.skip_window", run.skip_window, 1, 100_000)
+    for key in ("warn_skip_share", "stop_skip_share"):
+        v = getattr(run, key)
+        if not 0 <= v <= 1:
+            raise err(src, f"run.{key}", f"must be in [0, 1], got {v}")
+    if run.warn_skip_share > run.stop_skip_share:
+        raise err(src, "run.warn_skip_share", f"{run.warn_skip_share} is above "
+                  f"run.stop_skip_share {run.stop_skip_share}: the warning must come first")
     return run
 
 

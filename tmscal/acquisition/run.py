@@ -10,6 +10,10 @@
   resumable.
 * ``should_stop()`` is polled between poses (the CLI sets it on Ctrl-C): the pose in flight
   is finished, the robot stopped, and the session left valid.
+* Skipped poses are watched over the last ``run.skip_window`` poses (``skips.SkipWatch``): too
+  many warn once, far too many stop the run (``AcquisitionStopped``) naming the reason.
+* ``on_phase(i, phase)`` reports what pose i is doing: "moving", "settling", "sampling" (and
+  "reconnecting" after a device fault), for a progress display.
 
 Poses: base_from_flange (A), tracker_from_marker (B), tracker_from_probe (C); 4×4 mm.
 """
@@ -40,6 +44,7 @@ from ..session import PoseRecord, SessionWriter, make_header, validate_record
 from .devices import envelope_for, make_robot, make_tracker
 from .plan import PlanSpec, check_plan
 from .sample import PoseSample, sample_pose
+from .skips import SkipWatch
 
 log = logging.getLogger(__name__)
 
@@ -296,14 +301,17 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
             tracker_port: str | None = None, robot_host: str | None = None,
             robot_port: int | None = None,
             on_pose: Callable[[int, int, PoseRecord], None] | None = None,
-            on_start: Callable[[int, int], None] | None = None,
+            on_start: Callable[[int, int, int], None] | None = None,
+            on_phase: Callable[[int, str], None] | None = None,
             should_stop: Callable[[], bool] = lambda: False,
             sleep: Callable[[float], None] = time.sleep) -> AcquireResult:
     """Run (or resume) an acquisition into session file ``output``.
 
     ``poses``/``samples`` override the config (on a resume, the session header's settings
-    are used unless overridden; ``AcquireResult.notes`` says so). ``on_start(done, total)`` is
-    called once the plan is known; ``on_pose(done, total, record)`` after each pose is saved.
+    are used unless overridden; ``AcquireResult.notes`` says so). ``on_start(done, total,
+    skipped)`` is called once the plan is known (poses already in the session, of them
+    skipped); ``on_phase(i, phase)`` as pose i moves, settles and samples; ``on_pose(done,
+    total, record)`` after each pose is saved.
     ``run.retries`` bounds the reconnects for one fault: the count starts again after a pose
     succeeds. Raises SafetyError (nothing moved), ConfigError, SessionError, or
     AcquisitionStopped (session intact, resumable; the message says how)."""
@@ -328,7 +336,9 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
         t_offset = max((p.time for p in writer.session.poses), default=0.0)
         total = len(plan)
         if on_start:
-            on_start(len(done & set(range(total))), total)
+            on_start(len(done & set(range(total))), total,
+                     sum(p.skipped is not None for p in writer.session.poses if p.index < total))
+        watch = SkipWatch(cfg.run)
         for i in range(total):
             if i in done:
                 continue
@@ -339,12 +349,19 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
                 dev, cfg, envelope, i, plan[i], st, sleep,
                 lambda: t_offset + time.monotonic() - t_start,
                 lambda: (f"The session {out} holds {len(writer.session.poses)} poses; "
-                         f"{hint}"))
+                         f"{hint}"), on_phase)
             faults += n_faults
-            writer.append(_valid_or_skipped(rec))
+            rec = _valid_or_skipped(rec)
+            writer.append(rec)
             new += 1
             if on_pose:
                 on_pose(len(writer.session.indices() & set(range(total))), total, rec)
+            warning, stop_reason = watch.add(rec)
+            if warning:
+                log.warning("pose %d: %s", i, warning)
+            if stop_reason:
+                raise AcquisitionStopped(f"pose {i}: {stop_reason}. The session {out} holds "
+                                         f"{len(writer.session.poses)} poses; {hint}")
         clean = True
         recs = [p for p in writer.session.poses if p.index < total]
         return AcquireResult(path=out, recorded=sum(p.skipped is None for p in recs),
@@ -397,7 +414,8 @@ def resume_command(config: str | Path | None, out: str | Path,
 
 def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: int,
                          P: np.ndarray, st: _Settings, sleep: Callable[[float], None],
-                         now: Callable[[], float], state: Callable[[], str]
+                         now: Callable[[], float], state: Callable[[], str],
+                         on_phase: Callable[[int, str], None] | None = None
                          ) -> tuple[PoseRecord, int]:
     """One plan pose, reconnecting after device faults: at most ``run.retries`` reconnects
     for this pose (the count is per fault, not per run). Returns the record and the number
@@ -407,7 +425,7 @@ def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: i
     faults = 0
     while True:
         try:
-            return _one_pose(dev, i, P, st, sleep, now()), faults
+            return _one_pose(dev, i, P, st, sleep, now(), on_phase), faults
         except RobotFault as e:
             raise AcquisitionStopped(f"pose {i}: robot fault: {e}. {state()} (clear the "
                                      "fault at the robot first)") from e
@@ -418,6 +436,8 @@ def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: i
                                          f"reconnects). {state()}") from e
             log.warning("pose %d: %s; reconnecting (%d of %d)", i, e, faults,
                         cfg.run.retries)
+            if on_phase:
+                on_phase(i, "reconnecting")
             dev.close(stop_robot=True)
             sleep(cfg.run.reconnect_wait_s)
             try:
@@ -428,15 +448,21 @@ def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: i
 
 
 def _one_pose(dev: _Devices, i: int, P: np.ndarray, st: _Settings,
-              sleep: Callable[[float], None], t: float) -> PoseRecord:
+              sleep: Callable[[float], None], t: float,
+              on_phase: Callable[[int, str], None] | None = None) -> PoseRecord:
     """Move to plan pose i, settle and sample; a pose whose bodies were not seen well enough
-    is sampled once more (moving again), then recorded as skipped with the reason."""
+    is sampled once more (moving again), then recorded as skipped with the reason.
+    ``on_phase(i, phase)`` hears "moving", "settling" and "sampling"."""
     assert dev.robot is not None and dev.tracker is not None
     s: PoseSample | None = None
+    phase = (lambda name: on_phase(i, name)) if on_phase else None
     for attempt in range(2):
+        if phase:
+            phase("moving")
         dev.robot.move_to(P)
         s = sample_pose(dev.robot, dev.tracker, st.samples, st.settle_s, st.min_share,
-                        st.max_frames_factor, sleep=sleep, robot_reads=st.robot_reads)
+                        st.max_frames_factor, sleep=sleep, robot_reads=st.robot_reads,
+                        on_phase=phase)
         if s.problem is None:
             break
         log.info("pose %d attempt %d: %s", i, attempt + 1, s.problem)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,17 +52,22 @@ def spread_of(poses: np.ndarray, mean: np.ndarray) -> dict[str, float]:
 
 def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float = 1.0,
                 min_share: float = 0.8, max_frames_factor: float = 3.0,
-                sleep: Any = time.sleep, robot_reads: int = 10) -> PoseSample:
+                sleep: Any = time.sleep, robot_reads: int = 10,
+                on_phase: Callable[[str], None] | None = None) -> PoseSample:
     """Wait ``settle_s`` seconds, then read tracker frames until ``n_samples`` distinct frame
     numbers were seen (bounded: at most ``max_frames_factor``·n reads per distinct frame
     budget and a wall-time limit from the frame rate), reading the robot's flange pose
     alongside ``robot_reads`` of those frames, spread evenly (the robot holds still; every
     read is a round trip on some controllers). Each body keeps the frames in which it is
     usable; a body with fewer than ``min_share``·n usable frames makes the sample a problem
-    (named)."""
+    (named). ``on_phase`` hears "settling" before the wait and "sampling" after it."""
     every = max(1, n_samples // max(1, robot_reads))
+    if on_phase:
+        on_phase("settling")
     if settle_s > 0:
         sleep(settle_s)
+    if on_phase:
+        on_phase("sampling")
     names = list(tracker.tools)
     got: dict[str, list[np.ndarray]] = {b: [] for b in names}
     flags: dict[str, int] = {b: 0 for b in names}

@@ -59,11 +59,39 @@ def _matrix_text(T: np.ndarray) -> str:
     return format_matrix(T)
 
 
+#: how the roll/pitch/yaw angles printed by _pose_line compose (DENSO's P-type; --move-to)
+RPY_CONVENTION = "R = Rz(yaw)·Ry(pitch)·Rx(roll), fixed base axes, as DENSO's P-type"
+
+
 def _pose_line(T: np.ndarray) -> str:
+    """Position (mm) and roll/pitch/yaw (deg, ``RPY_CONVENTION``) of a 4×4 pose in mm; the
+    labels never reuse a UR pendant's rx ry rz, which there mean a rotation vector."""
     from ..geometry import denso_p_from_matrix
     p = denso_p_from_matrix(T)
     return (f"x {p[0]:9.2f}  y {p[1]:9.2f}  z {p[2]:9.2f} mm   "
-            f"rx {p[3]:8.3f}  ry {p[4]:8.3f}  rz {p[5]:8.3f} deg")
+            f"roll/pitch/yaw {p[3]:.3f} {p[4]:.3f} {p[5]:.3f} deg")
+
+
+def _pendant_line(T: np.ndarray, rb: Any) -> str | None:
+    """For a UR: the TCP pose as its teach pendant shows it (X Y Z mm, RX RY RZ the rotation
+    vector in rad; Universal Robots, PolyScope manual, Move screen), else None."""
+    from ..geometry import rotvec_pose_from_matrix
+    tcp = getattr(rb, "flange_from_tcp", None)
+    if tcp is None:
+        return None
+    v = rotvec_pose_from_matrix(T @ np.asarray(tcp, dtype=float))
+    return (f"UR pendant (TCP): X {v[0] * 1000:.2f}  Y {v[1] * 1000:.2f}  Z {v[2] * 1000:.2f} "
+            f"mm   RX {v[3]:.4f}  RY {v[4]:.4f}  RZ {v[5]:.4f} rad (rotation vector)")
+
+
+def _echo_pose(label: str, T: np.ndarray, rb: Any = None) -> None:
+    """``label`` and the pose on one line, the angle convention (and, for a UR, the pendant's
+    view) indented below."""
+    click.echo(f"{label}: {_pose_line(T)}")
+    click.echo(f"  angles: {RPY_CONVENTION}")
+    pendant = _pendant_line(T, rb) if rb is not None else None
+    if pendant:
+        click.echo("  " + pendant)
 
 
 class _StopFlag:
@@ -166,10 +194,12 @@ def track(config: Path, port: str | None, frames: int | None) -> None:
 @main.command()
 @click.argument("config", type=INPUT_FILE)
 @click.option("--host", default=None, help="Robot address (overrides the config).")
-@click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,RX,RY,RZ",
-              help="Jog the flange to this pose (mm, deg; R = Rz·Ry·Rx, base frame) after a "
-                   "confirmation. The config's safety envelope applies around the current "
-                   "pose.")
+@click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
+              help="Jog the flange to this pose after a confirmation: x, y, z in mm and "
+                   "roll, pitch, yaw in degrees with R = Rz(yaw)·Ry(pitch)·Rx(roll) about the "
+                   "fixed base axes (DENSO's P-type; NOT a UR pendant's rotation vector), in "
+                   "the robot base frame. The config's safety envelope applies around the "
+                   "current pose.")
 @click.option("--speed", type=_Finite(0, lo_open=True), default=None,
               help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
@@ -189,26 +219,27 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
                 raise ValueError
         except ValueError:
             raise click.BadParameter(f"{move_to!r}: expected 6 finite numbers "
-                                     "X,Y,Z,RX,RY,RZ (mm, deg)", param_hint="--move-to") \
-                from None
+                                     "X,Y,Z,ROLL,PITCH,YAW (mm, deg)",
+                                     param_hint="--move-to") from None
         target = matrix_from_denso_p(vals)
     cfg = load_config(config)
     with make_robot(cfg, envelope_for(cfg, None), host) as rb:
         click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
         here = rb.flange_pose()
-        click.echo("flange (base ← flange): " + _pose_line(here))
+        _echo_pose("flange (base ← flange)", here, rb)
         click.echo(_matrix_text(here))
         if target is None:
             return
         rb.envelope = envelope_for(cfg, here)
         rb.envelope.check_pose(target, "--move-to target")
         v = speed if speed is not None else rb.speed_mm_s
-        if not yes and not click.confirm(f"move the flange to {_pose_line(target)} at "
-                                         f"{v} mm/s?", default=False):
+        _echo_pose("target", target, rb)
+        if not yes and not click.confirm(f"move the flange to the target at {v} mm/s?",
+                                         default=False):
             click.echo("not moved")
             return
         rb.move_to(target, v)
-        click.echo("arrived: " + _pose_line(rb.flange_pose()))
+        _echo_pose("arrived", rb.flange_pose(), rb)
 
 
 @main.command()
@@ -235,11 +266,10 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     alongside), append one fsynced line. Ctrl-C finishes the pose in flight and leaves a
     resumable session; device faults are retried with a reconnect.
     """
-    from tqdm import tqdm
-
     from ..acquisition.run import AcquisitionStopped
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
+    from .live import AcquireProgress, stderr_to_log
 
     if _same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
@@ -250,39 +280,15 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         return
     stop = _StopFlag()
     stop.install()
-    bar: Any = None
-    skipped = [0]
-
-    def on_start(done: int, total: int) -> None:
-        nonlocal bar
-        bar = tqdm(total=total, initial=done, desc="poses", unit="pose", file=sys.stderr,
-                   dynamic_ncols=True)
-
-    def on_pose(done: int, total: int, rec: Any) -> None:
-        post = {}
-        for b in ("marker", "probe"):
-            sp = rec.spread.get(b)
-            if sp:
-                post[b] = f"{sp['trans_mm']:.3f}mm/{sp['rot_deg']:.3f}°"
-        if rec.skipped:
-            skipped[0] += 1
-        if skipped[0]:
-            post["skipped"] = str(skipped[0])
-        bar.set_postfix(post, refresh=False)
-        bar.update(1)
-
     try:
-        res = run_acquire(cfg, output, resume=resume, poses=poses, samples=samples,
-                          tracker_port=tracker_port, robot_host=robot_host, on_pose=on_pose,
-                          on_start=on_start, should_stop=stop)
+        with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
+            res = run_acquire(cfg, output, resume=resume, poses=poses, samples=samples,
+                              tracker_port=tracker_port, robot_host=robot_host,
+                              on_pose=bar.pose, on_start=bar.start, on_phase=bar.phase,
+                              should_stop=stop)
     except AcquisitionStopped as e:
-        if bar is not None:
-            bar.close()
         _fail(f"acquisition stopped: {e}")
         return
-    finally:
-        if bar is not None:
-            bar.close()
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
@@ -312,6 +318,7 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
     click.echo(f"plan {d.spec.kind}: {d.spec.n} poses, seed {d.spec.seed}, around P0 "
                f"({d.p0_source}):")
     click.echo("  P0 " + _pose_line(d.spec.p0))
+    click.echo(f"     angles: {RPY_CONVENTION}")
     click.echo(f"  offsets from P0: x {s['x_range_mm'][0]:.1f}…{s['x_range_mm'][1]:.1f}, "
                f"y {s['y_range_mm'][0]:.1f}…{s['y_range_mm'][1]:.1f}, "
                f"z {s['z_range_mm'][0]:.1f}…{s['z_range_mm'][1]:.1f} mm; "
@@ -355,14 +362,13 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
          transport: str, as_json: bool, force: bool) -> None:
     """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth."""
-    from tqdm import tqdm
-
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
     from ..mocks.rig import build_sim_rig, spawn_mock_rig
     from ..report.evaluate import solve_session
     from ..report.text import format_result
     from ..session import read_session
+    from .live import AcquireProgress, stderr_to_log
 
     cfg_path = config or _default_demo_config()
     check_outputs({"--output": output}, [cfg_path], force)
@@ -380,20 +386,12 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
             ep = mp.endpoints
             if not as_json:
                 click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
-            bar: Any = None
-
-            def on_start(done: int, total: int) -> None:
-                nonlocal bar
-                bar = tqdm(total=total, initial=done, desc="acquiring", unit="pose",
-                           file=sys.stderr, disable=None)
-
             host, port = _split_endpoint(ep["robot"])
-            res = run_acquire(cfg, output, poses=poses, samples=samples,
-                              tracker_port=ep["tracker"], robot_host=host,
-                              robot_port=port,
-                              on_start=on_start, on_pose=lambda d, t, r: bar.update(1))
-            if bar is not None:
-                bar.close()
+            with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
+                res = run_acquire(cfg, output, poses=poses, samples=samples,
+                                  tracker_port=ep["tracker"], robot_host=host,
+                                  robot_port=port, on_start=bar.start, on_pose=bar.pose,
+                                  on_phase=bar.phase)
         session = read_session(output)
         session.header["truth"] = truth.as_dict()
         _, result = solve_session(session, "qr36")

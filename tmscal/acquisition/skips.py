@@ -1,0 +1,65 @@
+"""Watching the skipped poses of a run: a share of skips above ``run.warn_skip_share`` over
+the last ``run.skip_window`` poses warns once (until the share falls back), a share above
+``run.stop_skip_share`` stops the run, which the session leaves resumable. Both messages name
+the commonest reason, e.g. "probe not seen (missing or out of volume) in 12 of the last 20
+poses". Shares are of the window's full length, so the first skips of a run count as much as
+later ones and a single early skip does not read as 100 %.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter, deque
+
+from ..config import RunConfig
+from ..session import PoseRecord
+
+__all__ = ["SkipWatch", "skip_cause"]
+
+#: the wording of ``sample_pose``'s problem for a body with too few usable frames
+_UNSEEN = re.compile(r"(\w+) usable in \d+ of \d+ frames")
+
+
+def skip_cause(reason: str) -> str:
+    """A short cause for a skipped pose's ``reason``: the bodies not seen well enough
+    ("probe not seen (missing or out of volume)"), else the reason up to its first
+    parenthesis (e.g. "invalid measurement")."""
+    bodies = _UNSEEN.findall(reason)
+    if bodies:
+        return f"{' and '.join(bodies)} not seen (missing or out of volume)"
+    return reason.split(" (", 1)[0].strip() or "skipped"
+
+
+class SkipWatch:
+    """Feed it every pose record of a run (``add``); it says when to warn and when to stop."""
+
+    def __init__(self, run: RunConfig) -> None:
+        self.window = run.skip_window
+        self.warn_share = run.warn_skip_share
+        self.stop_share = run.stop_skip_share
+        self._last: deque[str | None] = deque(maxlen=self.window)
+        self._warned = False
+
+    def add(self, rec: PoseRecord) -> tuple[str | None, str | None]:
+        """(warning, stop reason) after pose ``rec``: each None or one line naming the
+        commonest cause of the skips in the window and how many poses it hit."""
+        self._last.append(skip_cause(rec.skipped) if rec.skipped else None)
+        causes = Counter(c for c in self._last if c is not None)
+        k = sum(causes.values())
+        if k == 0:
+            self._warned = False
+            return None, None
+        cause, n = causes.most_common(1)[0]
+        what = f"{cause} in {n} of the last {len(self._last)} poses"
+        if n != k:
+            what += f" ({k} skipped in all)"
+        if k > self.stop_share * self.window:
+            return None, f"{what}, above run.stop_skip_share {self.stop_share:g}"
+        if k > self.warn_share * self.window:
+            if self._warned:
+                return None, None
+            self._warned = True
+            return (f"{what}, above run.warn_skip_share {self.warn_share:g}; check the "
+                    "tools' line of sight"), None
+        self._warned = False
+        return None, None
