@@ -1,6 +1,7 @@
 """Convergence study (Wang et al. 2018, Tables 1 and 3, Figure 3; docs/methods.md): train on
 the first n poses for n = n_min … n_max, test on the poses after n_max, and summarise the
-error curve.
+error curve; and k-fold cross-validation (:func:`cross_validate`), the default hold-out
+estimate of ``tmscal solve``.
 
 Frames as everywhere: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe;
 (n, 4, 4) mm. Errors in mm and degrees.
@@ -16,7 +17,7 @@ import numpy as np
 from ..errors import CalibrationError
 from . import solve
 
-__all__ = ["convergence", "summarize", "threshold_n"]
+__all__ = ["convergence", "summarize", "threshold_n", "cross_validate"]
 
 
 def convergence(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
@@ -97,3 +98,48 @@ def threshold_n(values: Sequence[float], ns: Sequence[int], threshold: float) ->
         return None
     idx = np.nonzero(above)[0]
     return int(ns[0] if len(idx) == 0 else ns[idx[-1] + 1])
+
+
+def cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: str = "qr36",
+                   k: int = 5, orthonormal: bool = False) -> dict[str, Any]:
+    """k-fold cross-validated hold-out errors (docs/methods.md). The poses, in their order,
+    are cut into ``k`` contiguous folds of near-equal size (``numpy.array_split``: no seed, the
+    same folds every run); each fold is held out in turn, the calibration solved on the other
+    poses, and the errors of Wang et al. (2018) computed on the held-out fold. Contiguous
+    folds also expose drift during a session (a block of late poses is tested against a
+    calibration that did not see them).
+
+    Returns {"folds": k, "split": "contiguous", "fold_sizes": [..], "per_fold": [{flat
+    errors}], "mean": {flat errors}, "sd": {flat errors}}; flat keys as in :func:`convergence`
+    ("e_t_mm", "theta_t_deg", "<body>_trans_mm", "<body>_rot_deg", "e_z_mm", "theta_z_deg"),
+    mm and degrees; "sd" is the sample standard deviation over folds (ddof = 1).
+    Raises CalibrationError when a fold would train on fewer than 3 poses or a fold's solve
+    fails (naming the fold and its poses)."""
+    n = len(A)
+    k = int(k)
+    if k < 2:
+        raise CalibrationError(f"cross-validation needs at least 2 folds, got {k}")
+    k = min(k, n)
+    folds = np.array_split(np.arange(n), k)
+    if n - max(len(f) for f in folds) < 3:
+        raise CalibrationError(f"{n} poses are too few for {k}-fold cross-validation (each "
+                               "fold must be solved on at least 3 poses); use --in-sample or "
+                               "--train")
+    rows = []
+    for j, test in enumerate(folds):
+        train = np.setdiff1d(np.arange(n), test)
+        Ct = None if C is None else C[test]
+        try:
+            cal = solve(A[train], B[train], None if C is None else C[train], method=method,
+                        orthonormal=orthonormal)
+        except CalibrationError as e:
+            raise CalibrationError(f"cross-validation fold {j + 1} of {k} (poses "
+                                   f"{test[0]}–{test[-1]} held out): {e}; use --in-sample or "
+                                   "--train") from None
+        rows.append(_flatten(cal.errors(A[test], B[test], Ct)))
+    keys = list(rows[0])
+    vals = {key: np.array([r[key] for r in rows]) for key in keys}
+    return {"folds": k, "split": "contiguous", "fold_sizes": [len(f) for f in folds],
+            "per_fold": rows,
+            "mean": {key: float(v.mean()) for key, v in vals.items()},
+            "sd": {key: float(v.std(ddof=1)) for key, v in vals.items()}}

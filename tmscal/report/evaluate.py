@@ -11,11 +11,13 @@ from typing import Any
 
 import numpy as np
 
-from ..calib import Calibration, coil_placement_errors, solve, truth_errors
+from ..calib import Calibration, coil_placement_errors, noise_floor, solve, truth_errors
 from ..calib.metrics import body_errors
-from ..calib.study import convergence, summarize, threshold_n
+from ..calib.study import convergence, cross_validate, summarize, threshold_n
 from ..errors import CalibrationError
 from ..session import Session
+from .outliers import RULE as OUTLIER_RULE
+from .outliers import find_outliers
 
 __all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals"]
 
@@ -40,13 +42,17 @@ def _mat(M: np.ndarray | None) -> list | None:
 @dataclass(frozen=True)
 class SolveResult:
     """What ``tmscal solve`` reports. ``method`` and ``applied`` ("raw" or "orthonormal"
-    matrices); the poses solved on (``n_solve``) and evaluated on (``n_test``), ``errors_on``
-    ("held-out" or "in-sample"), poses skipped at acquisition (``n_skipped``); X =
+    matrices); the poses the reported calibration was solved on (``n_solve``) and the poses the
+    errors were computed on (``n_test``), ``errors_on`` ("cross-validated (k folds)", "held-out"
+    for ``--train`` or "in-sample"), poses skipped at acquisition (``n_skipped``); X =
     flange_from_marker, Y = flange_from_probe (None for marker-only), Z = base_from_tracker
     (orthonormal 4×4 mm) and ``raw`` (the solver's matrices by name); ``errors`` (e_t_mm,
-    theta_t_deg, per body trans_mm/rot_deg, e_z_mm/theta_z_deg for QR24 with a probe);
-    ``truth`` ({X, Y, Z: {trans_mm, rot_deg}}, coil_placement_mm, coil_placement_max_mm) when
-    the session knows the truth. ``to_json()`` is the ``--json`` object."""
+    theta_t_deg, per body trans_mm/rot_deg, e_z_mm/theta_z_deg for QR24 with a probe; the mean
+    over folds when cross-validated); ``errors_sd`` (the same keys: the SD over folds, None
+    unless cross-validated); ``cv`` (folds, split, fold_sizes); ``truth`` ({X, Y, Z: {trans_mm,
+    rot_deg}}, coil_placement_mm, coil_placement_max_mm, coil_placement_n) when the session
+    knows the truth; ``outliers`` (report.outliers.find_outliers on the per-pose errors of the
+    reported calibration). ``to_json()`` is the ``--json`` object."""
 
     method: str
     applied: str
@@ -61,6 +67,9 @@ class SolveResult:
     errors: dict[str, Any]
     Z_probe: np.ndarray | None = None
     truth: dict[str, Any] | None = field(default=None)
+    errors_sd: dict[str, Any] | None = None
+    cv: dict[str, Any] | None = None
+    outliers: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
@@ -69,6 +78,8 @@ class SolveResult:
             "n_test": self.n_test, "errors_on": self.errors_on, "n_skipped": self.n_skipped,
             "X": _mat(self.X), "Y": _mat(self.Y), "Z": _mat(self.Z),
             "raw": {k: _mat(v) for k, v in self.raw.items()}, "errors": self.errors,
+            "errors_sd": self.errors_sd, "cv": self.cv, "outliers": self.outliers,
+            "outlier_rule": OUTLIER_RULE,
         }
         if self.Z_probe is not None:
             out["Z_probe"] = _mat(self.Z_probe)
@@ -78,51 +89,81 @@ class SolveResult:
 
 
 def solve_session(session: Session, method: str = "qr36", train: int | None = None,
-                  orthonormal: bool = False) -> tuple[Calibration, SolveResult]:
-    """Solve on poses [0, train) (default: all) and evaluate on the rest (in-sample when
-    nothing is left). Returns the Calibration and a ``SolveResult`` (errors, the matrices,
-    and the errors against the truth when the session has one)."""
+                  orthonormal: bool = False, folds: int = 5,
+                  in_sample: bool = False) -> tuple[Calibration, SolveResult]:
+    """Solve a session and estimate its errors (docs/methods.md).
+
+    The reported calibration is solved on poses [0, train) (default: all). Its errors are:
+    with ``train``, held out on the poses after it; with ``in_sample``, on the poses it was
+    solved on (optimistic); by default, ``folds``-fold cross-validated
+    (``calib.study.cross_validate``: contiguous folds, mean and SD over folds). Returns the
+    Calibration and a ``SolveResult`` (also the errors against the truth when the session has
+    one, and the outlier poses). Raises CalibrationError for unusable data or bad counts."""
     A, B, C = session_arrays(session, method)
     n = len(A)
     if n == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
-    if train is None:
-        train = n
-    if train < 3:
+    if train is not None and in_sample:
+        raise CalibrationError("--train and --in-sample exclude each other (--train holds "
+                               "out the poses after N; --in-sample holds out none)")
+    n_solve = n if train is None else train
+    if n_solve < 3:
         raise CalibrationError(f"--train {train}: need at least 3 poses to solve")
-    if train > n:
+    if n_solve > n:
         raise CalibrationError(f"--train {train}: the session has only {n} usable poses")
-    cal = solve(A[:train], B[:train], None if C is None else C[:train], method=method,
+    cal = solve(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
                 orthonormal=orthonormal)
-    held_out = train < n
-    sl = slice(train, n) if held_out else slice(0, n)
-    errors = cal.errors(A[sl], B[sl], None if C is None else C[sl])
+    sd = cv = None
+    if train is None and not in_sample:
+        r = cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal)
+        errors, sd = _nest(r["mean"]), _nest(r["sd"])
+        cv = {"folds": r["folds"], "split": r["split"], "fold_sizes": r["fold_sizes"]}
+        errors_on, n_test = f"cross-validated ({r['folds']} folds)", n
+    elif n_solve < n:
+        errors = _flat_errors(cal.errors(A[n_solve:], B[n_solve:],
+                                         None if C is None else C[n_solve:]))
+        errors_on, n_test = "held-out", n - n_solve
+    else:
+        errors = _flat_errors(cal.errors(A, B, C))
+        errors_on, n_test = "in-sample", n
     raw = {"X": cal.X_raw, "Y": cal.Y_raw, "Z": cal.Z_raw}
     if cal.Z_probe is not None:
         raw["Z_probe"] = cal.Z_probe_raw
     res = SolveResult(
-        method=cal.method, applied=cal.applied, n_solve=int(train),
-        n_test=int(n - train) if held_out else int(n),
-        errors_on="held-out" if held_out else "in-sample",
-        n_skipped=sum(p.skipped is not None for p in session.poses),
-        X=cal.X, Y=cal.Y, Z=cal.Z, raw=raw, errors=_flat_errors(errors),
-        Z_probe=cal.Z_probe, truth=_truth_errors(session, cal, C, sl))
+        method=cal.method, applied=cal.applied, n_solve=int(n_solve), n_test=int(n_test),
+        errors_on=errors_on, n_skipped=sum(p.skipped is not None for p in session.poses),
+        X=cal.X, Y=cal.Y, Z=cal.Z, raw=raw, errors=errors, Z_probe=cal.Z_probe,
+        truth=_truth_errors(session, cal, C), errors_sd=sd, cv=cv,
+        outliers=find_outliers(pose_residuals(session, cal)))
     return cal, res
 
 
-def _truth_errors(session: Session, cal: Calibration, C: np.ndarray | None,
-                  sl: slice) -> dict[str, Any] | None:
+def _truth_errors(session: Session, cal: Calibration,
+                  C: np.ndarray | None) -> dict[str, Any] | None:
     """Errors of X, Y, Z against a session's truth, and the coil placement error (mean and
-    max over the evaluated poses, mm); None without truth."""
+    max over every usable pose's probe pose as a target, mm); None without truth."""
     truth = session.truth
     if not truth:
         return None
     out: dict[str, Any] = dict(truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth))
     if C is not None and cal.Y is not None and "Y" in truth:
         u = cal.used()
-        coil = coil_placement_errors(C[sl], u["Y"], u["Z"], truth["Y"], truth["Z"])
+        coil = coil_placement_errors(C, u["Y"], u["Z"], truth["Y"], truth["Z"])
         out["coil_placement_mm"] = float(coil.mean())
         out["coil_placement_max_mm"] = float(coil.max())
+        out["coil_placement_n"] = int(len(coil))
+    return out
+
+
+def _nest(flat: dict[str, float]) -> dict[str, Any]:
+    """Flat study keys ("marker_trans_mm", …) back to the ``errors`` layout of SolveResult."""
+    out: dict[str, Any] = {"e_t_mm": flat["e_t_mm"], "theta_t_deg": flat["theta_t_deg"]}
+    for b in ("marker", "probe"):
+        if f"{b}_trans_mm" in flat:
+            out[b] = {"trans_mm": flat[f"{b}_trans_mm"], "rot_deg": flat[f"{b}_rot_deg"]}
+    for k in ("e_z_mm", "theta_z_deg"):
+        if k in flat:
+            out[k] = flat[k]
     return out
 
 
@@ -141,7 +182,8 @@ def study_session(session: Session, methods: list[str], n_max: int = 250, n_min:
                   progress: Any = None) -> dict[str, Any]:
     """The convergence study of Wang et al. (2018) on a session: curves (their Figure 3),
     statistics with the n of each (Tables 1 and 2) and the n after which e_t stays below each
-    threshold (Table 3)."""
+    threshold (Table 3); "noise_floor" ({e_t_mm, theta_t_deg}: the true X, Y, Z on the
+    same test poses) when the session knows the truth."""
     need_probe = "qr36" in methods
     for m in methods:
         session_arrays(session, m)
@@ -159,7 +201,25 @@ def study_session(session: Session, methods: list[str], n_max: int = 250, n_min:
         thr = {f"{t:g}": threshold_n(c["e_t_mm"], ns, t) for t in thresholds_mm} \
             if "e_t_mm" in c else {}
         table[m] = {"stats": stats, "n_below_mm": thr}
-    return {"n": ns, "n_test": curves["n_test"], "curves": curves["methods"], "table": table}
+    out = {"n": ns, "n_test": curves["n_test"], "curves": curves["methods"], "table": table}
+    floor = _study_floor(session, A[n_max:], B[n_max:], None if C is None else C[n_max:])
+    if floor is not None:
+        out["noise_floor"] = floor
+    return out
+
+
+def _study_floor(session: Session, A: np.ndarray, B: np.ndarray,
+                 C: np.ndarray | None) -> dict[str, float] | None:
+    """The noise floor of a study (docs/methods.md): e_t (mm) and θ_t (deg) of the true X, Y,
+    Z on the study's test poses; None when the session has no truth."""
+    truth = session.truth
+    if not truth or "X" not in truth or "Z" not in truth:
+        return None
+    bodies, Xs = {"marker": B}, {"marker": truth["X"]}
+    if C is not None and "Y" in truth:
+        bodies["probe"], Xs["probe"] = C, truth["Y"]
+    f = noise_floor(A, bodies, Xs, truth["Z"])
+    return {"e_t_mm": f["e_t_mm"], "theta_t_deg": f["theta_t_deg"]}
 
 
 def pose_residuals(session: Session, cal: Calibration) -> dict[str, Any]:

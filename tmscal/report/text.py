@@ -1,4 +1,5 @@
-"""Human-readable tables, the calibration YAML export, and the study plot.
+"""Human-readable tables and the calibration YAML export (the plots are in
+:mod:`tmscal.report.plots`, re-exported here).
 
 Units: mm and degrees, named in every column header.
 """
@@ -6,10 +7,13 @@ Units: mm and degrees, named in every column header.
 from __future__ import annotations
 
 import datetime as _dt
+import textwrap
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
+
+from .plots import plot_residuals, plot_study
 
 if TYPE_CHECKING:
     from .evaluate import SolveResult
@@ -24,34 +28,130 @@ def format_matrix(M: Any, indent: str = "    ") -> str:
     return "\n".join(indent + "  ".join(f"{v:>11.5f}" for v in row) for row in A)
 
 
+_W = 44  # label column width of the solve table
+
+
+def _row(label: str, t: float, r: float | None = None) -> str:
+    return f"  {label:<{_W}}{t:>15.4f}" + ("" if r is None else f"{r:>15.4f}")
+
+
+def _errors_on_text(res: SolveResult) -> str:
+    """One line that says which poses the errors were computed on and how."""
+    if res.cv is not None:
+        sizes = sorted(set(res.cv["fold_sizes"]))
+        size = "–".join(str(x) for x in (sizes[0], sizes[-1])) if len(sizes) > 1 else sizes[0]
+        return (f"errors: {res.cv['folds']}-fold cross-validated: the poses cut in order into "
+                f"{res.cv['folds']} contiguous folds of {size},\n  each held out in turn and "
+                "tested on a calibration solved on the others; mean over folds ± SD")
+    if res.errors_on == "held-out":
+        return (f"errors: held out on the {res.n_test} poses after the first {res.n_solve} "
+                "(--train)")
+    return (f"errors: IN-SAMPLE, on the same {res.n_test} poses the calibration was solved on\n"
+            "  (optimistic: not a hold-out estimate)")
+
+
+def _parts(e: dict[str, Any]) -> str:
+    """What the total e_t, θ_t adds up: "marker + probe (+ e_z)"."""
+    return " + ".join([b for b in ("marker", "probe") if b in e]
+                      + (["e_z"] if "e_z_mm" in e else []))
+
+
+def _error_rows(res: SolveResult) -> list[str]:
+    """The hold-out error table: one row per body, e_z (QR24), the total; each followed by
+    its SD over folds when cross-validated."""
+    e, sd = res.errors, res.errors_sd
+    two_z = "e_z_mm" in e
+    label = {"marker": "marker   E = (AX)⁻¹ZB",
+             "probe": "probe    E = (AY)⁻¹Z_P C" if two_z else "probe    E = (AY)⁻¹ZC"}
+    head = ("mean error over the poses solved on" if res.errors_on == "in-sample"
+            else "mean error over the held-out poses")
+    lines = [f"  {head:<{_W}}{'translation mm':>15}"
+             f"{'rotation deg':>15}"]
+
+    def add(lab: str, key_t: str, key_r: str, sub: str | None = None) -> None:
+        get = (lambda d, k: d[sub][k]) if sub else (lambda d, k: d[k])
+        lines.append(_row(lab, get(e, key_t), get(e, key_r)))
+        if sd is not None:
+            lines.append(_row(f"  ± SD over {res.cv['folds']} folds" if res.cv else "  ± SD",
+                              get(sd, key_t), get(sd, key_r)))
+
+    for b in ("marker", "probe"):
+        if b in e:
+            add(label[b], "trans_mm", "rot_deg", b)
+    if two_z:
+        add("Z_P vs Z_M  e_z, θ_z", "e_z_mm", "theta_z_deg")
+    add(f"total  e_t, θ_t  (= {_parts(e)})", "e_t_mm", "theta_t_deg")
+    return lines
+
+
+def _truth_rows(res: SolveResult) -> list[str]:
+    t = res.truth or {}
+    lines = [f"  {'against the truth (simulated session)':<{_W}}{'translation mm':>15}"
+             f"{'rotation deg':>15}"]
+    for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
+                    ("Z", "base_from_tracker")):
+        if k in t:
+            lines.append(_row(f"{k} = {name}", t[k]["trans_mm"], t[k]["rot_deg"]))
+    if "coil_placement_mm" in t:
+        n = t.get("coil_placement_n")
+        over = f" over {n} targets" if n else ""
+        lines.append(f"  coil placement error, mm{over}: mean {t['coil_placement_mm']:.4f}, "
+                     f"max {t['coil_placement_max_mm']:.4f}")
+    return lines
+
+
+def _outlier_lines(res: SolveResult) -> list[str]:
+    from .outliers import RULE
+    if not res.outliers:
+        return textwrap.wrap(f"outlier poses: none (rule: {RULE})", 98,
+                             subsequent_indent="  ")
+    lines = textwrap.wrap(f"outlier poses (rule: {RULE}):", 98, subsequent_indent="  ")
+    for o in res.outliers:
+        why = "; ".join(f"{f['body']} {f['metric']} {f['value']:.4f} {f['unit']} > "
+                        f"{f['threshold']:.4f}" for f in o["flags"])
+        lines.append(f"  pose {o['index']}: {why}")
+    return lines
+
+
+def _legend(res: SolveResult) -> list[str]:
+    applied = ("raw matrices applied: the errors use the solver's general (non-orthogonal) "
+               "3×4 X, Y, Z, the paper's way; the matrices below, and those exported, are the "
+               "orthonormal ones (--orthonormal applies those instead)"
+               if res.applied == "raw" else
+               "orthonormal matrices applied: the errors use the orthonormal X, Y, Z printed "
+               "below (rotations projected to SO(3), translations re-solved)")
+    lines = [
+        "legend (docs/methods.md):",
+        "  E: what is left of A X = Z B (marker) or A Y = Z C (probe) on one pose; e_trans ="
+        " ‖t(E⊥)‖ in mm, θ = the rotation angle of E⊥ in degrees (E⊥: rotation projected to"
+        " SO(3)), each averaged over the test poses (Wang et al. 2018)",
+        f"  e_t, θ_t: the total error, the sum of the rows above it ({_parts(res.errors)})",
+    ]
+    if "e_z_mm" in res.errors:
+        lines.append("  e_z, θ_z: QR24 solves a separate Z for marker (Z_M) and probe (Z_P);"
+                     " e_z = ‖t(Z_P) − t(Z_M)‖ mm, θ_z = the angle between their rotations")
+    if res.truth and "coil_placement_mm" in res.truth:
+        lines.append("  coil placement: to put the coil at a tracked pose C the robot "
+                     "commands A = Ẑ C Ŷ⁻¹; the error is how far the coil centre then lands "
+                     "from where it was wanted, with the true Y, Z (mm)")
+    lines.append("  " + applied)
+    return [w for ln in lines for w in textwrap.wrap(ln, 98, subsequent_indent="      ",
+                                                    ) or [""]]
+
+
 def format_result(res: SolveResult, show_matrices: bool = True) -> str:
-    """The ``tmscal solve`` human output: a short aligned table."""
-    lines = [f"method {res.method} ({res.applied} matrices applied), solved on "
-             f"{res.n_solve} poses, errors {res.errors_on} on {res.n_test} poses"]
+    """The ``tmscal solve`` human output: what was solved, the error table (mean ± SD over
+    folds when cross-validated), the errors against the truth (simulated sessions), the
+    outlier poses, a legend defining each number, and the calibration matrices."""
+    lines = [f"{res.method.upper()} calibration solved on {res.n_solve} poses "
+             f"({res.applied} matrices applied; see legend)", _errors_on_text(res)]
     if res.n_skipped:
         lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "
                      "and are not used)")
-    e = res.errors
-    lines.append("")
-    lines.append(f"  {'error':<26}{'translation mm':>16}{'rotation deg':>15}")
-    for b in ("marker", "probe"):
-        if b in e:
-            lines.append(f"  {b + ' (E = (AX)⁻¹ZB)':<26}{e[b]['trans_mm']:>16.4f}"
-                         f"{e[b]['rot_deg']:>15.4f}")
-    if "e_z_mm" in e:
-        lines.append(f"  {'Z_P vs Z_M (e_z)':<26}{e['e_z_mm']:>16.4f}{e['theta_z_deg']:>15.4f}")
-    lines.append(f"  {'total (e_t, θ_t)':<26}{e['e_t_mm']:>16.4f}{e['theta_t_deg']:>15.4f}")
+    lines += [""] + _error_rows(res)
     if res.truth is not None:
-        lines.append("")
-        lines.append(f"  {'against the truth':<26}{'translation mm':>16}{'rotation deg':>15}")
-        for k in ("X", "Y", "Z"):
-            if k in res.truth:
-                t = res.truth[k]
-                lines.append(f"  {k:<26}{t['trans_mm']:>16.4f}{t['rot_deg']:>15.4f}")
-        if "coil_placement_mm" in res.truth:
-            t = res.truth
-            lines.append(f"  {'coil placement (mean/max)':<26}{t['coil_placement_mm']:>16.4f}"
-                         f"{t['coil_placement_max_mm']:>15.4f} mm")
+        lines += [""] + _truth_rows(res)
+    lines += [""] + _outlier_lines(res) + [""] + _legend(res)
     if show_matrices:
         for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
                         ("Z", "base_from_tracker")):
@@ -84,12 +184,21 @@ def format_study(study: dict[str, Any], paper: dict[str, Any] | None = None) -> 
         thr = ", ".join(f"{k} mm: {'never' if v is None else v}"
                         for k, v in t["n_below_mm"].items())
         out.append(f"    {m:<7}{thr}")
+    floor = study.get("noise_floor")
+    if floor:
+        out.append("")
+        out.append(f"  noise floor (the true X, Y, Z on the same test poses): e_t "
+                   f"{floor['e_t_mm']:.4f} mm, θ_t {floor['theta_t_deg']:.4f} deg")
+    out.append("")
+    out.append("  e_t, θ_t: hold-out translation (mm) and rotation (deg) errors, marker + probe "
+               "(+ e_z, θ_z for QR24); docs/methods.md")
     return "\n".join(out)
 
 
 def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -> str:
     """The calibration YAML (docs/conventions.md): X, Y, Z orthonormal, raw matrices, method, poses
-    used, held-out errors, and the session's SHA-256. Units mm."""
+    used, the errors (cross-validated by default, with their SD over folds), the outlier poses,
+    and the session's SHA-256. Units mm."""
     j = res.to_json()
     doc = {
         "format": "tmscal-calibration",
@@ -103,6 +212,9 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -
         "session": {"path": session_path, "sha256": session_sha256},
         "poses": {"solve": j["n_solve"], "test": j["n_test"],
                   "errors_on": j["errors_on"]},
+        "cross_validation": j["cv"],
+        "errors_sd": j["errors_sd"],
+        "outlier_poses": [o["index"] for o in j["outliers"]],
         "X": j["X"], "Y": j["Y"], "Z": j["Z"],
         "raw": j["raw"],
         "errors": j["errors"],
@@ -110,55 +222,3 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -
     if res.truth is not None:
         doc["truth_errors"] = res.truth
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
-
-
-def plot_study(study: dict[str, Any], path: str, title: str | None = None) -> None:
-    """Figure 3 of Wang et al. (2018): e_t (and θ_t) against the number of poses, one line
-    per method. Writes a PNG; needs matplotlib (extra ``plot``)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ns = study["n"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for m, c in study["curves"].items():
-        axes[0].plot(ns, c["e_t_mm"], label=f"{m} e_t")
-        if "e_z_mm" in c:
-            axes[0].plot(ns, c["e_z_mm"], "--", label=f"{m} e_z")
-        axes[1].plot(ns, c["theta_t_deg"], label=f"{m} θ_t")
-    for ax, unit in zip(axes, ("translation error (mm)", "rotation error (deg)")):
-        ax.set_xlabel("poses used for the solve (n)")
-        ax.set_ylabel(unit)
-        ax.set_yscale("log")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
-    fig.suptitle(title or f"hold-out error on {study['n_test']} poses")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str) -> None:
-    """Per-pose translation (mm) and rotation (deg) errors of each body against the pose
-    index, the solve set shaded: outliers (a bumped tool, a bad frame) stand out. PNG."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    idx = res["index"]
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
-    for body in ("marker", "probe"):
-        if body in res:
-            axes[0].plot(idx, res[body]["trans_mm"], ".", ms=3, label=body)
-            axes[1].plot(idx, res[body]["rot_deg"], ".", ms=3, label=body)
-    for ax, unit in zip(axes, ("translation error (mm)", "rotation error (deg)")):
-        if n_solve < len(idx):
-            ax.axvspan(idx[0], idx[n_solve - 1], color="0.9", label="solve set")
-        ax.set_ylabel(unit)
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper right")
-    axes[1].set_xlabel("pose index")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)

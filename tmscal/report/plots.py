@@ -1,0 +1,141 @@
+"""Figures: the convergence study (Figure 3 of Wang et al. 2018) and the per-pose errors of a
+solve with its outlier poses named. PNG files; need matplotlib (extra ``plot``), imported
+only when a figure is drawn.
+
+Units: mm and degrees, named on every axis. The metrics are those of docs/methods.md.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from typing import Any
+
+import numpy as np
+
+__all__ = ["plot_study", "plot_residuals", "METRICS_CAPTION"]
+
+#: the metric definitions printed under the study figure (docs/methods.md)
+METRICS_CAPTION = (
+    "Hold-out error on the test poses of a calibration solved on the first n poses. Per pose "
+    "and body, E = (AX)⁻¹ZB (marker) or (AY)⁻¹ZC (probe); e = ‖t(E⊥)‖, θ = rotation angle of "
+    "E⊥, averaged over the test poses. e_t = e_marker + e_probe and θ_t = θ_marker + θ_probe; "
+    "for QR24, which solves a separate Z for each body, e_z = ‖t(Z_P) − t(Z_M)‖ and θ_z are "
+    "added (Wang et al. 2018). Noise floor: the same e_t, θ_t of the true X, Y, Z.")
+
+_THRESHOLDS_MM = (0.4, 0.3)  # Wang et al. (2018), Table 3
+
+
+def _pyplot() -> Any:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_study(study: dict[str, Any], path: str, title: str | None = None) -> None:
+    """Figure 3 of Wang et al. (2018): e_t (mm, left) and θ_t (deg, right) against the
+    number of poses solved on, one colour per method in both panels (QR24's e_z dashed),
+    the 0.4 and 0.3 mm thresholds of their Table 3, the noise floor when the study has one
+    (``study["noise_floor"]``), the legend and the metric definitions below the axes."""
+    plt = _pyplot()
+    ns = study["n"]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 6.2))
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.86, bottom=0.34, wspace=0.22)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (m, c) in enumerate(study["curves"].items()):
+        col = colours[i % len(colours)]
+        axes[0].plot(ns, c["e_t_mm"], color=col, lw=1.4, label=f"{m.upper()}: e_t, θ_t")
+        if "e_z_mm" in c:
+            axes[0].plot(ns, c["e_z_mm"], "--", color=col, lw=1.1,
+                         label=f"{m.upper()}: e_z (included in its e_t)")
+        axes[1].plot(ns, c["theta_t_deg"], color=col, lw=1.4)
+    for t, style in zip(_THRESHOLDS_MM, (":", "-.")):
+        axes[0].axhline(t, color="0.35", ls=style, lw=1.0,
+                        label=f"{t:g} mm (Wang et al. 2018, Table 3)")
+    floor = study.get("noise_floor")
+    if floor:
+        for ax, key in zip(axes, ("e_t_mm", "theta_t_deg")):
+            ax.axhline(floor[key], color="k", ls=(0, (6, 3)), lw=1.0,
+                       label="noise floor (true X, Y, Z)" if ax is axes[0] else None)
+    _study_axes(plt, axes, ns)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.225),
+               ncol=3, frameon=False, fontsize=9)
+    fig.suptitle((title or "convergence") + f"\nhold-out error on {study['n_test']} test "
+                 f"poses (those after pose {ns[-1]})", fontsize=11)
+    fig.text(0.5, 0.08, textwrap.fill(METRICS_CAPTION, 160), ha="center", va="top",
+             fontsize=8)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def _minor_label(v: float, _: Any) -> str:
+    """Label the minor log ticks 2, 3 and 5 × 10^k (a panel within one decade keeps labels)."""
+    if v <= 0:
+        return ""
+    lead = round(v / 10 ** np.floor(np.log10(v)))
+    return f"{v:.3g}" if lead in (2, 3, 5) else ""
+
+
+def _study_axes(plt: Any, axes: Any, ns: list[int]) -> None:
+    """Labels, log scale with plain tick numbers, and grids for the two study panels."""
+    from matplotlib.ticker import FuncFormatter
+
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    for ax, label in zip(axes, ("(a) translation e_t (mm)", "(b) rotation θ_t (deg)")):
+        ax.set_xlabel("poses solved on (n)")
+        ax.set_ylabel(label)
+        ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(plain)
+        ax.yaxis.set_minor_formatter(FuncFormatter(_minor_label))
+        ax.set_xlim(ns[0], ns[-1])
+        ax.grid(True, which="major", alpha=0.4)
+        ax.grid(True, which="minor", alpha=0.15)
+
+
+def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
+                   outliers: list[dict[str, Any]] | None = None) -> None:
+    """Per-pose translation (mm) and rotation (deg) errors of each body against the session
+    pose index (``report.evaluate.pose_residuals``), the solve set shaded when only part of
+    the poses were solved on; the ``outliers`` (``report.outliers.find_outliers``) ringed and
+    named by pose index, the rule under the axes. PNG."""
+    from .outliers import RULE
+
+    plt = _pyplot()
+    idx = list(res["index"])
+    pos = {p: i for i, p in enumerate(idx)}
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, layout="constrained")
+    for body in ("marker", "probe"):
+        if body in res:
+            axes[0].plot(idx, res[body]["trans_mm"], ".", ms=3, label=body)
+            axes[1].plot(idx, res[body]["rot_deg"], ".", ms=3, label=body)
+    if n_solve < len(idx):
+        for ax in axes:
+            ax.axvspan(idx[0], idx[n_solve - 1], color="0.9", zorder=0,
+                       label="poses solved on" if ax is axes[0] else None)
+    keys = {"translation": (0, "trans_mm"), "rotation": (1, "rot_deg")}
+    ringed = False
+    for o in outliers or []:
+        for f in o["flags"]:
+            row, key = keys[f["metric"]]
+            y = res[f["body"]][key][pos[o["index"]]]
+            axes[row].plot([o["index"]], [y], "o", mfc="none", mec="red", ms=9, mew=1.3,
+                           label=None if ringed else "outlier pose")
+            ringed = True
+            axes[row].annotate(f"pose {o['index']}", (o["index"], y), xytext=(6, 4),
+                               textcoords="offset points", color="red", fontsize=8)
+    for ax, unit in zip(axes, ("translation error e (mm)", "rotation error θ (deg)")):
+        ax.set_ylabel(unit)
+        ax.set_ylim(bottom=0)
+        ax.grid(True, alpha=0.3)
+    axes[1].set_xlabel("session pose index")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside right upper", frameon=False, fontsize=9,
+               markerscale=2.5)
+    names = ", ".join(str(o["index"]) for o in outliers or []) or "none"
+    fig.suptitle(f"{title}\noutlier poses: {names}", fontsize=11)
+    caption = ("Per pose: E = (AX)⁻¹ZB (marker), (AY)⁻¹ZC (probe); e = ‖t(E⊥)‖, θ = rotation "
+               f"angle of E⊥ (docs/methods.md). Outlier rule: {RULE}.")
+    fig.text(0.5, 0.0, textwrap.fill(caption, 140), ha="center", va="top", fontsize=8)
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
