@@ -12,6 +12,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test,plot,ur]'
 	touch $(STAMP)
+	@echo 'environment ready in $(VENV); put it on your PATH with:  . $(BIN)/activate'
 
 venv: $(STAMP)
 

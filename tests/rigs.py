@@ -19,7 +19,7 @@ from tmscal.sim import TMS_RIG_P0, Noise, SimRig, Truth, simulate, tms_rig_truth
 from tmscal.timing import Deadline
 
 REPO = Path(__file__).resolve().parents[1]
-CONFIGS = REPO / "configs"
+CONFIGS = REPO / "tmscal" / "data" / "configs"  # (the top-level configs/ links here)
 TOOLS_DIR = CONFIGS / "tools"
 
 #: ``mock.noise`` of a mock config that makes the mock rig exact
