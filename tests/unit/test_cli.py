@@ -37,10 +37,26 @@ def test_solve_json_recovers_truth(sim_session):
     assert "trans_mm" in e["marker"] and "rot_deg" in e["probe"]
 
 
-def test_solve_qr24_reports_ez_and_in_sample_label(sim_session):
+def test_solve_qr24_reports_ez_cross_validated_by_default(sim_session):
     res = json.loads(run("solve", sim_session, "--method", "qr24", "--json").output)
-    assert res["errors_on"] == "in-sample" and res["n_test"] == 120
+    assert res["errors_on"] == "cross-validated (5 folds)" and res["n_test"] == 120
+    assert res["n_solve"] == 120
+    assert res["cv"] == {"folds": 5, "split": "contiguous", "fold_sizes": [24] * 5}
     assert "e_z_mm" in res["errors"] and "theta_z_deg" in res["errors"]
+    assert res["errors_sd"]["e_z_mm"] > 0 and res["errors_sd"]["marker"]["trans_mm"] > 0
+
+
+def test_solve_in_sample_only_on_request_and_labelled(sim_session):
+    res = json.loads(run("solve", sim_session, "--in-sample", "--json").output)
+    assert res["errors_on"] == "in-sample" and res["n_test"] == 120
+    assert res["errors_sd"] is None and res["cv"] is None
+    r = run("solve", sim_session, "--in-sample")
+    assert r.exit_code == 0 and "errors: IN-SAMPLE, on the same 120 poses" in r.output
+    res3 = json.loads(run("solve", sim_session, "--folds", 3, "--json").output)
+    assert res3["errors_on"] == "cross-validated (3 folds)"
+    assert res3["cv"]["fold_sizes"] == [40, 40, 40]
+    msg = _one_error_line(run("solve", sim_session, "--train", 60, "--in-sample"))
+    assert "--train" in msg and "--in-sample" in msg
 
 
 def test_solve_human_table_and_yaml(sim_session, tmp_path):
@@ -49,11 +65,18 @@ def test_solve_human_table_and_yaml(sim_session, tmp_path):
     r = run("solve", sim_session, "--train", 60, "-o", out, "--plot", png)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert r.exit_code == 0, r.output
-    assert "coil placement" in r.output and "e_t" in r.output
+    assert "coil placement error, mm over 120 targets: mean" in r.output and "e_t" in r.output
+    assert "errors: held out on the 60 poses after the first 60 (--train)" in r.output
+    assert "probe    E = (AY)⁻¹ZC" in r.output and "legend" in r.output
     import yaml
     doc = yaml.safe_load(out.read_text())
     assert doc["method"] == "qr36" and len(doc["session"]["sha256"]) == 64
     assert np.asarray(doc["Y"]).shape == (4, 4)
+    assert doc["poses"]["errors_on"] == "held-out" and doc["outlier_poses"] == []
+    # the plot obeys the one output rule: an existing file is refused and left as it was
+    before = png.read_bytes()
+    assert "already exists" in _one_error_line(run("solve", sim_session, "--plot", png))
+    assert png.read_bytes() == before
 
 
 def test_study_json_and_plot(sim_session, tmp_path):
@@ -64,6 +87,11 @@ def test_study_json_and_plot(sim_session, tmp_path):
     assert res["n"][0] == 5 and res["n"][-1] == 30 and res["n_test"] == 90
     assert set(res["table"]) == {"qr24", "qr36"}
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert 0 < res["noise_floor"]["e_t_mm"] <= min(res["curves"]["qr36"]["e_t_mm"])
+    before = png.read_bytes()
+    assert "already exists" in _one_error_line(run("study", sim_session, "--n-max", 30,
+                                                   "--plot", png))
+    assert png.read_bytes() == before
 
 
 def _one_error_line(r):
