@@ -80,7 +80,7 @@ log = logging.getLogger(__name__)
 #: robot.options keys that would override a safety or motion argument, or one with its own key
 ROBOT_RESERVED_OPTIONS = ("envelope", "speed_mm_s", "accel_mm_s2", "host", "port")
 #: tracker.options keys that have their own key in the tracker section
-TRACKER_RESERVED_OPTIONS = ("port", "tools", "baud", "frame_rate_hz", "reply")
+TRACKER_RESERVED_OPTIONS = ("port", "tools", "baud", "frame_rate_hz", "reply", "log_wire")
 #: safety keys a config that drives a robot must set (no defaults for a robot)
 SAFETY_KEYS = ("max_offset_mm", "max_rotation_deg", "workspace_min_mm", "workspace_max_mm",
                "max_speed_mm_s", "max_accel_mm_s2")
@@ -108,7 +108,9 @@ class RobotConfig:
 @dataclass
 class TrackerConfig:
     """Tracker driver, port (device path, pty, or socket://host:port) and tools
-    (our name → ROM file path, absolute, or None for a tool already loaded)."""
+    (our name → ROM file path, absolute, or None for a tool already loaded). ``log_wire``:
+    a new file (absolute once parsed) that records the serial traffic (docs/devices-ndi.md);
+    ``options`` go to the driver (NDI: ``reset_timeout_s``, ``init_timeout_s`` …)."""
 
     driver: str = "ndi"
     port: str = ""
@@ -117,6 +119,7 @@ class TrackerConfig:
     reply: str = "bx"
     tools: dict[str, str | None] = field(default_factory=dict)
     options: dict[str, Any] = field(default_factory=dict)
+    log_wire: str | None = None
 
 
 @dataclass
@@ -355,7 +358,35 @@ def _parse_tracker(data: Any, src: str, base_dir: Path | None) -> TrackerConfig 
     positive(src, "tracker.frame_rate_hz", tracker.frame_rate_hz, at_most=10_000)
     positive(src, "tracker.baud", tracker.baud)
     _check_options(tracker.options, TRACKER_RESERVED_OPTIONS, src, "tracker")
+    if tracker.log_wire is not None:
+        tracker.log_wire = _log_wire_path(tracker, src, base_dir)
     return tracker
+
+
+def _log_wire_path(tracker: TrackerConfig, src: str, base_dir: Path | None) -> str:
+    """The absolute path of ``tracker.log_wire``: a new file in an existing directory, not an
+    input (the config, a ROM file), on a serial device port. Whether it exists is checked
+    again when the port opens (it must not: nothing is overwritten)."""
+    raw = tracker.log_wire
+    if not isinstance(raw, str) or not raw.strip() or any(c in raw for c in "\0\r\n"):
+        raise err(src, "tracker.log_wire", f"expected a file path, got {show(raw)}")
+    p = Path(raw).expanduser()
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    p = p.absolute()
+    inputs = {Path(r).resolve() for r in tracker.tools.values() if r}
+    if Path(src).is_file():
+        inputs.add(Path(src).resolve())
+    if p.resolve() in inputs:
+        raise err(src, "tracker.log_wire", f"{p} is an input file; name a new file")
+    if p.is_dir():
+        raise err(src, "tracker.log_wire", f"{p} is a directory; name a new file")
+    if not p.parent.is_dir():
+        raise err(src, "tracker.log_wire", f"directory {p.parent} does not exist")
+    if tracker.port and "://" in tracker.port:
+        raise err(src, "tracker.log_wire", "the wire log records a serial device port "
+                  f"(pyserial's spy://); {tracker.port!r} is not one")
+    return str(p)
 
 
 def _rom_path(rom: Any, src: str, name: str, base_dir: Path | None) -> str | None:

@@ -100,14 +100,15 @@ def test_command_sequence_and_clean_close(mock: PolarisMock) -> None:
 def test_high_baud_and_registry(mock: PolarisMock) -> None:
     cls = driver_class("ndi")
     assert cls is NDITracker
-    with cls(mock.start_tcp(), ROMS, timeout_s=0.3, reset=False, baud=921600) as tr:
+    with cls(mock.start_pty(), ROMS, timeout_s=0.3, reset=False, baud=921600) as tr:
         assert tr.read().tools["marker"].usable
-    assert "COMM:60000" in mock.commands
+    assert "COMM:60000" in mock.commands  # a serial line: the rate is raised
 
 
 def test_break_reset_falls_back_to_init(mock: PolarisMock) -> None:
     # a pty cannot carry a break: no RESET answer, the driver carries on with INIT
-    with NDITracker(mock.start_pty(), ROMS, timeout_s=0.3, reset=True, reset_wait_s=0.05) as tr:
+    with NDITracker(mock.start_pty(), ROMS, timeout_s=0.3, reset=True,
+                    reset_timeout_s=0.05) as tr:
         assert tr.read().tools["probe"].usable
 
 

@@ -118,6 +118,8 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
     _check_spec_options(cfg, "tracker", t.options, spec.options)
     kw: dict[str, Any] = dict(t.options)
     kw.update(port=p, tools=t.tools, baud=t.baud, frame_rate_hz=t.frame_rate_hz, reply=t.reply)
+    if t.log_wire is not None:  # only drivers that record the wire take it
+        kw["log_wire"] = t.log_wire
     return construct(spec.load(), f"{cfg.path}: key 'tracker.options'", **kw)
 
 

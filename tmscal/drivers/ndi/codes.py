@@ -21,7 +21,9 @@ __all__ = [
 #: ``device`` of the errors the codec raises.
 DEVICE = "ndi"
 
-#: ``ERRORxx`` code -> meaning (NDI Combined API).
+#: ``ERRORxx`` code -> meaning (NDI Combined API). The texts follow NDI's Polaris API guide as
+#: ndicapi's ``ndiErrorString`` gives them (PlusToolkit/ndicapi; 0x29 and 0x34-0x39 from its
+#: newer table, see docs/devices-ndi.md).
 ERROR_TEXTS: dict[int, str] = {
     0x01: "invalid command",
     0x02: "command too long",
@@ -57,6 +59,7 @@ ERROR_TEXTS: dict[int, str] = {
     0x24: "unable to select parameters by volume",
     0x25: "unable to determine the supported features list",
     0x28: "too many tools",
+    0x29: "main processor firmware corrupt",
     0x2A: "no memory available (heap full)",
     0x2B: "port handle not allocated",
     0x2C: "port handle unoccupied",
@@ -66,6 +69,13 @@ ERROR_TEXTS: dict[int, str] = {
     0x30: "requested port already has a handle",
     0x32: "invalid operation for this port handle",
     0x33: "feature unavailable",
+    0x34: "user parameter does not exist",
+    0x35: "invalid value type (e.g. a string instead of an integer)",
+    0x36: "user parameter value out of the valid range",
+    0x37: "user parameter array index out of the valid range",
+    0x38: "user parameter size is incorrect",
+    0x39: "permission denied (read-only file or user parameter, or a master-mode command "
+          "from a monitor-mode connection)",
     0x3B: "file not found",
     0x3C: "write error",
     0x3D: "read error",

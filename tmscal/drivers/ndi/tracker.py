@@ -1,17 +1,25 @@
 """NDI Polaris (Vicra / Spectra) driver over a serial line (or anything pyserial's
 ``serial_for_url`` opens: ``/dev/ttyUSB0``, a pty path, ``socket://127.0.0.1:PORT``).
 
-Session: optional reset by serial break (fallback: no RESET answer → just INIT), INIT,
-VER / GETINFO for the identity, COMM to the configured rate (the host switches after the
-OKAY), passive tools loaded from .rom files (PHRQ, PVWR in 64-byte chunks, PINIT, PENA D) after
-freeing stale handles, TSTART; every :meth:`NDITracker.read` sends BX (or TX) and returns a
+Session: optional reset by serial break (a serial line only; wait up to ``reset_timeout_s``
+for ``RESET``, then 100 ms; no RESET answer → just INIT), INIT, VER / GETINFO for the identity,
+COMM to the configured rate on a serial line (never over ``socket://``: a networked tracker
+takes no baud change; the host switches after the OKAY), passive tools loaded from .rom files
+(PHRQ, PVWR in 64-byte chunks, PINIT, PENA D) after freeing stale handles, TSTART. INIT,
+PINIT and TSTART get their own long timeouts. BX falls back to TX on the firmware revisions
+whose BX fails with three or more tools. Every :meth:`NDITracker.read` sends BX (or TX) and
+returns a
 :class:`~tmscal.drivers.base.TrackerFrame` whose tools are keyed by OUR tool names, each pose
 tracker_from_tool 4×4 in mm. ``close()`` sends TSTOP and closes the port, also after errors.
 
 Errors: a corrupt (CRC) or torn reply and a reply that does not come in time are retried up
 to ``retries`` times (the command is re-sent), then raised as ``ProtocolError`` /
 ``DeviceTimeout`` naming the command; ``ERRORxx`` replies raise ``DeviceError`` with
-``code`` (int NDI code) and ``text`` (its meaning) at once.
+``code`` (int NDI code) and ``text`` (its meaning) at once. ``RESET`` as the answer to a
+command means the device reset (power, a break) and lost its tools: :class:`DeviceReset`
+(a ``ConnectionLost``, so a run reconnects), naming the command. The input is flushed before
+every command, so a late reply is never taken for the next command's. Device facts relied on:
+docs/devices-ndi.md.
 """
 
 from __future__ import annotations
@@ -25,18 +33,26 @@ from typing import Any
 
 import serial
 
-from ...config import tracker_port_problem
 from ...errors import ConfigError, ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
 from ...timing import Deadline
 from ..base import ToolState, Tracker, TrackerFrame
 from . import protocol as p
 from .codes import ErrorCode, HandleStatus, PortStatus, SystemStatus, flag_names
 from .replies import ReplyKind
+from .wire import open_port
 
 log = logging.getLogger(__name__)
 
+__all__ = ["NDITracker", "DeviceReset", "BX_UNRELIABLE_FIRMWARE"]
+
+#: VER freeze tags whose BX fails with three or more tools (scikit-surgerynditracker issues
+#: #53 and #67, fixed there by using TX for these revisions): the driver uses TX on them
+BX_UNRELIABLE_FIRMWARE = ("Polaris Spectra Rev 006", "Polaris Spectra Rev 007")
+_BX_UNRELIABLE_FROM_TOOLS = 3
+#: pause after RESET before the next command (ndicapi's ndiSerialProbe sleeps 100 ms)
+_AFTER_RESET_S = 0.1
+
 _PHRQ_PASSIVE = "*********1****"
-_READ_SLICE_S = 0.05
 #: errors that, on a re-sent command, mean the first (unanswered) attempt already worked.
 #: PHRQ is not idempotent: a lost PHRQ reply leaves an empty handle behind (harmless).
 _DONE_ON_RETRY: dict[str, tuple[int, ...]] = {
@@ -66,9 +82,14 @@ class NDITracker(Tracker):
     * ``timeout_s``: per-command reply timeout (s). ``retries``: re-sends after a corrupt,
       torn or missing reply.
     * ``reset``: send a serial break first (None = only when every tool has a .rom file,
-      since a reset unloads the tools on the device). ``reset_wait_s``: how long to wait for
-      the ``RESET`` answer before falling back to INIT.
+      since a reset unloads the tools on the device; never over ``socket://``).
+      ``reset_timeout_s``: how long to wait for the ``RESET`` answer to the break (7 s, as
+      ndicapi) before carrying on with INIT.
+    * ``init_timeout_s``, ``pinit_timeout_s``, ``tstart_timeout_s``: reply timeouts of INIT,
+      PINIT and TSTART (5 s each; never shorter than ``timeout_s``).
     * ``options``: TX/BX reply option word (default 0x0801: transforms incl. out-of-volume).
+    * ``log_wire``: a file that records the serial traffic (pyserial's ``spy://`` hex dump;
+      device paths only). It must not exist yet; a reconnect writes ``NAME.1``, ``NAME.2`` …
     """
 
     name = "ndi"
@@ -76,7 +97,10 @@ class NDITracker(Tracker):
     def __init__(self, port: str, tools: Mapping[str, str | os.PathLike[str] | None], *,
                  baud: int = 115200, frame_rate_hz: float = 60.0, reply: str = "bx",
                  timeout_s: float = 2.0, retries: int = 3, reset: bool | None = None,
-                 reset_wait_s: float = 0.5, options: int = 0x0801) -> None:
+                 reset_timeout_s: float = 7.0, init_timeout_s: float = 5.0,
+                 pinit_timeout_s: float = 5.0, tstart_timeout_s: float = 5.0,
+                 options: int = 0x0801,
+                 log_wire: str | os.PathLike[str] | None = None) -> None:
         if not tools:
             raise ValueError("NDITracker needs at least one tool")
         if reply not in ("bx", "tx"):
@@ -85,6 +109,11 @@ class NDITracker(Tracker):
             raise ValueError(f"unsupported baud {baud}; choose from {sorted(p.BAUD_CODES)}")
         if timeout_s <= 0 or retries < 0:
             raise ValueError("timeout_s must be > 0 and retries >= 0")
+        waits = {"reset_timeout_s": reset_timeout_s, "init_timeout_s": init_timeout_s,
+                 "pinit_timeout_s": pinit_timeout_s, "tstart_timeout_s": tstart_timeout_s}
+        for key, v in waits.items():
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v <= 120:
+                raise ValueError(f"{key} must be a number of seconds in (0, 120], got {v!r}")
         super().__init__(list(tools), frame_rate_hz)
         self.port = port
         self.rom_paths: dict[str, Path | None] = {
@@ -94,8 +123,13 @@ class NDITracker(Tracker):
         self.timeout_s = float(timeout_s)
         self.retries = int(retries)
         self.reset = reset
-        self.reset_wait_s = float(reset_wait_s)
+        self.reset_timeout_s = float(reset_timeout_s)
+        #: per-command reply timeouts longer than ``timeout_s``
+        self.command_timeouts = {"INIT": float(init_timeout_s), "PINIT": float(pinit_timeout_s),
+                                 "TSTART": float(tstart_timeout_s)}
         self.options = int(options)
+        self.log_wire = Path(log_wire) if log_wire is not None else None
+        self._opens = 0
         self.handles: dict[str, int] = {}
         self._ser: Any = None
         self._tracking = False
@@ -106,34 +140,54 @@ class NDITracker(Tracker):
     # --- lifecycle ---------------------------------------------------------------------------
     def _open(self) -> None:
         roms = self._read_roms()
-        # defence in depth (the config refuses these first): pyserial's other URL handlers
-        # (spy://…?file=, loop://, rfc2217:// …) can open or write files named in the URL
-        problem = tracker_port_problem(self.port)
-        if problem:
-            raise ConfigError(f"{self.name}: port {self.port!r} refused: {problem}")
-        try:
-            self._ser = serial.serial_for_url(self.port, baudrate=9600, bytesize=8,
-                                              parity="N", stopbits=1, timeout=_READ_SLICE_S,
-                                              write_timeout=self.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as e:
-            raise ConnectionLost(f"{self.name}: cannot open {self.port}: {e}",
-                                 device=self.name) from e
+        self._ser = open_port(self.name, self.port, self.timeout_s, self._wire_log_path())
+        self._opens += 1
         self._ser.reset_input_buffer()
         self._status_seen.clear()
         do_reset = self.reset if self.reset is not None else all(
             v is not None for v in self.rom_paths.values())
-        if do_reset:
+        if do_reset and not self.networked:
             self._break_reset()
         self._init()
         self._identify()
-        if self.baud != 9600:
+        if self.baud != 9600 and not self.networked:
             self._command("COMM", f"{p.BAUD_CODES[self.baud]}0000")
             time.sleep(0.1)  # the device switches after its OKAY
             self._ser.baudrate = self.baud
+        self._choose_reply()
         self._load_tools(roms)
         self._command("TSTART")
         self._tracking = True
         log.info("%s: tracking on %s, handles %s", self.name, self.port, self.handles)
+
+    @property
+    def networked(self) -> bool:
+        """Whether the port is ``socket://`` (a networked tracker, or a mock): no serial
+        line, so no break and no COMM."""
+        return self.port.lower().startswith("socket://")
+
+    def _wire_log_path(self) -> Path | None:
+        """Where this open records the traffic: ``log_wire`` the first time, then
+        ``NAME.1``, ``NAME.2`` … (the first free one), so a reconnect overwrites nothing."""
+        if self.log_wire is None:
+            return None
+        if self._opens == 0:
+            return self.log_wire
+        n = self._opens
+        while (cand := self.log_wire.with_name(f"{self.log_wire.name}.{n}")).exists():
+            n += 1
+        return cand
+
+    def _choose_reply(self) -> None:
+        """TX instead of BX on the firmware revisions whose BX fails with three or more
+        tools (:data:`BX_UNRELIABLE_FIRMWARE`), said in the log."""
+        tag = self._identity.get("firmware") or ""
+        if self.reply == "bx" and len(self.tools) >= _BX_UNRELIABLE_FROM_TOOLS \
+                and tag.strip() in BX_UNRELIABLE_FIRMWARE:
+            log.warning("%s: %s: BX fails on this firmware with %d or more tools; using TX "
+                        "(text) tracking replies instead", self.name, tag.strip(),
+                        _BX_UNRELIABLE_FROM_TOOLS)
+            self.reply = "tx"
 
     def _read_roms(self) -> dict[str, bytes]:
         """The tool definitions of the tools that have a .rom file (ConfigError if one cannot
@@ -167,23 +221,28 @@ class NDITracker(Tracker):
                 log.debug("%s: closing the port raised", self.name, exc_info=True)
 
     def _break_reset(self) -> None:
+        """Serial break; a real Polaris answers ``RESET`` seconds later (ndicapi waits up to
+        7 s). Without that answer (no break possible, a pty) carry on with INIT."""
+        self._ser.reset_input_buffer()
         try:
             self._ser.send_break(0.25)
         except (serial.SerialException, OSError, NotImplementedError) as e:
             log.debug("%s: send_break not possible (%s); INIT only", self.name, e)
             return
-        raw = self._read_reply(self.reset_wait_s)
+        raw = self._read_reply(self.reset_timeout_s)
         if raw == p.RESET_REPLY:
             log.info("%s: device reset", self.name)
+            time.sleep(_AFTER_RESET_S)
         else:
-            log.debug("%s: no RESET answer to the break (%r); INIT only", self.name, raw[:20])
+            log.debug("%s: no RESET answer to the break within %g s (%r); INIT only",
+                      self.name, self.reset_timeout_s, raw[:20])
         self._ser.reset_input_buffer()
 
     def _init(self) -> None:
         try:
-            self._command("INIT")
+            self._init_once()
         except DeviceTimeout:
-            if self.baud == 9600:
+            if self.baud == 9600 or self.networked:
                 raise
             # a device left at the working rate by an earlier session without reset
             log.info("%s: no answer at 9600 baud; trying INIT at %d", self.name, self.baud)
@@ -193,6 +252,16 @@ class NDITracker(Tracker):
             if e.code != ErrorCode.INVALID_MODE:
                 raise
             self._stop_then_init()
+
+    def _init_once(self) -> None:
+        """INIT; a ``RESET`` answer means the device was still resetting (a break, power-up):
+        wait 100 ms and send INIT again, once."""
+        try:
+            self._command("INIT")
+        except DeviceReset:
+            log.info("%s: the device reset before INIT; sending INIT again", self.name)
+            time.sleep(_AFTER_RESET_S)
+            self._command("INIT")
 
     def _init_tracking_aware(self) -> None:
         try:
@@ -335,6 +404,11 @@ class NDITracker(Tracker):
 
     def _parse_text(self, raw: bytes, name: str) -> p.Reply:
         reply = p.parse_reply(raw)
+        if reply.kind == ReplyKind.RESET:
+            self._tracking = False  # the device is back in setup mode
+            raise DeviceReset(f"{self.name}: {name} was answered RESET: the device reset "
+                              "(power, a serial break) and unloaded its tools; reconnect",
+                              device=self.name)
         if reply.kind == ReplyKind.WARNING:
             log.warning("%s %s: WARNING%02X (%s)", self.name, name, reply.code, reply.meaning)
         return reply
@@ -345,37 +419,39 @@ class NDITracker(Tracker):
         if self._ser is None:
             raise DeviceError(f"{self.name}: {name} on a closed port", device=self.name)
         cmd = p.encode_command(name, params)
+        timeout_s = max(self.timeout_s, self.command_timeouts.get(name, 0.0))
         last: DeviceError | None = None
         for attempt in range(self.retries + 1):
             if attempt:
                 log.info("%s: retrying %s (attempt %d): %s", self.name, name, attempt + 1, last)
-                self._ser.reset_input_buffer()
             try:
+                # a late reply to an earlier command must not be taken for this one's
+                self._ser.reset_input_buffer()
                 self._ser.write(cmd)
             except (serial.SerialException, OSError) as e:
                 raise ConnectionLost(f"{self.name}: writing {name} failed: {e}",
                                      device=self.name) from e
-            raw, last = self._receive(name)
+            raw, last = self._receive(name, timeout_s)
             if last is None:
                 return raw, attempt + 1
         assert last is not None
         raise type(last)(f"{last} (after {self.retries + 1} attempts)", code=last.code,
                          text=last.text, device=self.name)
 
-    def _receive(self, name: str) -> tuple[bytes, DeviceError | None]:
+    def _receive(self, name: str, timeout_s: float) -> tuple[bytes, DeviceError | None]:
         """One reply to ``name`` with its framing and CRC checked, or the problem (a corrupt,
         torn or missing reply) that makes re-sending the command worth it."""
         try:
-            raw = self._read_reply(self.timeout_s)
+            raw = self._read_reply(timeout_s)
         except ProtocolError as e:
             return b"", self._protocol_error(name, e)
         if not raw:
             return raw, DeviceTimeout(f"{self.name}: no reply to {name} within "
-                                      f"{self.timeout_s:g} s", device=self.name)
+                                      f"{timeout_s:g} s", device=self.name)
         need = p.reply_length(raw)
         if need is None or len(raw) < need:
             return raw, ProtocolError(f"{self.name} {name}: torn reply {raw[:60]!r} (timed out "
-                                      f"after {self.timeout_s:g} s)", device=self.name)
+                                      f"after {timeout_s:g} s)", device=self.name)
         try:
             if p.is_bx(raw):
                 p.check_bx(raw)  # CRC check here so a corrupt BX is retried
@@ -413,4 +489,7 @@ class NDITracker(Tracker):
             buf += chunk
 
 
-__all__ = ["NDITracker"]
+
+class DeviceReset(ConnectionLost):
+    """The tracker answered a command with ``RESET``: it reset (power, a serial break) and
+    lost its initialisation and tools. A ``ConnectionLost``: reconnecting sets it up again."""

@@ -39,9 +39,12 @@ class RecordStatus(enum.StrEnum):
     VALID = "valid"
     MISSING = "missing"
     DISABLED = "disabled"
+    #: the port handle has no tool any more (a wired tool unplugged): TX ``hhUNOCCUPIED``
+    UNOCCUPIED = "unoccupied"
 
 
 VALID, MISSING, DISABLED = RecordStatus.VALID, RecordStatus.MISSING, RecordStatus.DISABLED
+UNOCCUPIED = RecordStatus.UNOCCUPIED
 _OUT_OF_VOLUME = int(PortStatus.OUT_OF_VOLUME)
 _PARTIALLY_OUT_OF_VOLUME = int(PortStatus.PARTIALLY_OUT_OF_VOLUME)
 _IR_INTERFERENCE = int(PortStatus.IR_INTERFERENCE)
@@ -184,7 +187,9 @@ def decode_tx(payload: str) -> TrackingReply:
     Layout: 2-hex handle count, then per handle ``hh`` + transform (Q0 Qx Qy Qz sign+5 ×1e-4,
     Tx Ty Tz sign+6 ×0.01 mm, error sign+5 ×1e-4 mm) or ``MISSING``, port status (8 hex),
     frame (8 hex), LF; finally the system status (4 hex). ``DISABLED`` rows are accepted
-    with or without status and frame. Raises ``ProtocolError`` on any deviation.
+    with or without status and frame; ``UNOCCUPIED`` rows (a handle whose tool went away)
+    carry nothing else and count in the handle count, as ndicapi reads them. Raises
+    ``ProtocolError`` on any deviation.
     """
     if len(payload) < 2:
         raise ProtocolError(f"TX reply too short: {payload!r}", device=DEVICE)
@@ -215,6 +220,9 @@ def decode_tx(payload: str) -> TrackingReply:
         if body.startswith("DISABLED"):
             records.append(HandleRecord(handle, DISABLED))
             continue
+        if body == "UNOCCUPIED":
+            records.append(HandleRecord(handle, UNOCCUPIED))
+            continue
         raise ProtocolError(f"TX row for handle {handle:02X} does not parse: {row[:80]!r}",
                             device=DEVICE)
     tail = parts[-1]
@@ -242,6 +250,9 @@ def encode_tx(records: Iterable[HandleRecord], system_status: int = 0) -> str:
         if r.status == MISSING:
             rows.append(head + "MISSING" + tail)
             continue
+        if r.status == UNOCCUPIED:
+            rows.append(head + "UNOCCUPIED\n")
+            continue
         assert r.quaternion is not None and r.translation_mm is not None
         q = "".join(_signed(v, 1e4, 5) for v in r.quaternion)
         t = "".join(_signed(v, 1e2, 6) for v in r.translation_mm)
@@ -262,7 +273,7 @@ def encode_bx(records: Iterable[HandleRecord], system_status: int = 0) -> bytes:
             body += bytes([r.handle & 0xFF, BxStatus.VALID])
             body += struct.pack("<8f", *r.quaternion, *r.translation_mm, r.error_mm or 0.0)
             body += struct.pack("<II", r.port_status & 0xFFFFFFFF, (r.frame or 0) & 0xFFFFFFFF)
-        elif r.status == MISSING:
+        elif r.status in (MISSING, UNOCCUPIED):  # BX has no UNOCCUPIED status: missing
             body += bytes([r.handle & 0xFF, BxStatus.MISSING])
             body += struct.pack("<II", r.port_status & 0xFFFFFFFF, (r.frame or 0) & 0xFFFFFFFF)
         else:

@@ -26,6 +26,7 @@ from ...drivers.ndi.codes import ErrorCode, HandleStatus, ReplyOption, ToolInfoS
 from ...errors import ProtocolError
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
+from .delays import CommandDelays
 from .frames import FrameSource
 from .model import MODELS, MeasurementVolume, PolarisFaults
 
@@ -104,13 +105,19 @@ class PolarisFirmware:
     * ``freeze_tag``: override the ``Freeze Tag:`` of VER (scikit-surgerynditracker picks TX
       instead of BX for "Polaris Spectra Rev 007"; the Vicra tag makes it use BX).
     * ``error_mm``: the RMS fit error reported for every tool (mm).
+    * ``reset_delay_s``: from a break (:meth:`serial_break`) or the RESET command to the
+      ``RESET`` reply, during which nothing is answered (None: 3 s on the real-time clock, 0
+      on the fast one). ``init_delay_s``, ``pinit_delay_s``, ``tstart_delay_s``: how long
+      INIT, PINIT and TSTART take (default 0). See :mod:`.delays`.
     """
 
     def __init__(self, rig: SimRig, tools: Mapping[str, str | os.PathLike[str]] | None = None,
                  *, model: str = "spectra", clock: Clock = REAL_TIME,
                  volume: MeasurementVolume | None = MeasurementVolume(),
                  faults: PolarisFaults | None = None, seed: int = 0,
-                 freeze_tag: str | None = None, error_mm: float = 0.1) -> None:
+                 freeze_tag: str | None = None, error_mm: float = 0.1,
+                 reset_delay_s: float | None = None, init_delay_s: float = 0.0,
+                 pinit_delay_s: float = 0.0, tstart_delay_s: float = 0.0) -> None:
         if model not in MODELS:
             raise ValueError(f"unknown Polaris model {model!r}; known: {sorted(MODELS)}")
         self.rig = rig
@@ -121,6 +128,12 @@ class PolarisFirmware:
         self.rate_hz = float(MODELS[model]["rate_hz"])  # type: ignore[arg-type]
         self.freeze_tag = freeze_tag or str(MODELS[model]["freeze_tag"])
         self.error_mm = float(error_mm)
+        self.delays = CommandDelays.make(clock, reset_delay_s, init_delay_s, pinit_delay_s,
+                                         tstart_delay_s)
+        #: monotonic time at which a reset in progress ends with RESET (None: no reset)
+        self._reset_until: float | None = None
+        #: set when the mock closes: cuts a command delay short
+        self._stopping = threading.Event()
         self._bodies: list[str] = list(tools) if tools is not None else list(rig.bodies)
         for b in self._bodies:
             if b not in rig.bodies:
@@ -146,6 +159,23 @@ class PolarisFirmware:
             self.state = "setup"  # "setup" → INIT → "ready" → TSTART → "tracking"
             self._handles: dict[int, _Handle] = {}
             self._frames.restart()
+
+    def serial_break(self) -> None:
+        """What a serial break does to a real Polaris: it resets (:meth:`reset`), answers
+        nothing for ``reset_delay_s`` and then sends ``RESET`` by itself (see
+        :meth:`pending_output`). A pty or TCP link cannot carry a break, so tests call this."""
+        with self._lock:
+            self._power_up()
+            self._reset_until = self.clock.now() + self.delays.reset_s
+
+    def pending_output(self) -> list[bytes]:
+        """Replies the device sends by itself now (the ``RESET`` that ends a reset); the
+        transports call this between reads."""
+        with self._lock:
+            if self._reset_until is None or self.clock.now() < self._reset_until:
+                return []
+            self._reset_until = None
+            return [p.RESET_REPLY]
 
     def reset(self) -> None:
         """Device reset (what a serial break does on real hardware): handles freed, back to
@@ -185,6 +215,9 @@ class PolarisFirmware:
         """Answer one command line (without ``\\r``); None means the reply is dropped (fault
         injection). Transport-independent; thread-safe."""
         with self._lock:
+            if self._reset_until is not None:  # resetting: the device reads nothing
+                log.debug("Polaris mock: resetting, %r ignored", line[:20])
+                return None
             try:
                 cmd = p.parse_command(line)
             except ProtocolError as e:
@@ -196,6 +229,12 @@ class PolarisFirmware:
                 reply = self._dispatch(cmd)
             except _Reply as r:
                 reply = p.encode_error(r.code)
+        delay = self.delays.of(cmd.name)
+        if delay > 0:  # a slow command: the reply comes late (close() cuts it short)
+            self._stopping.wait(delay)
+        if not reply:  # a command the device leaves unanswered
+            return None
+        with self._lock:
             return self._maybe_fault(reply, cmd.name in _TRACKING_COMMANDS)
 
     def _maybe_fault(self, reply: bytes, tracking: bool) -> bytes | None:
@@ -424,6 +463,9 @@ class PolarisFirmware:
         return p.frame_reply(p.encode_tx(*self._tracking_records(prm)))
 
     def _cmd_bx(self, prm: str) -> bytes:
+        limit = self.faults.bx_fails_from_tools
+        if limit and sum(h.enabled for h in self._handles.values()) >= limit:
+            return b""  # the firmware fault: no BX reply with this many tools (TX works)
         return p.encode_bx(*self._tracking_records(prm))
 
     _COMMANDS: ClassVar[dict[str, _Spec]] = {

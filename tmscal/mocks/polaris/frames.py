@@ -21,7 +21,7 @@ from .model import MeasurementVolume, PolarisFaults
 __all__ = ["FrameSource"]
 
 _OBS_BATCH = 32
-_VALID, _MISSING, _OUT_OF_VOLUME = "valid", "missing", "oov"
+_VALID, _MISSING, _OUT_OF_VOLUME, _UNOCCUPIED = "valid", "missing", "oov", "unoccupied"
 #: per enabled handle: (kind, pose tracker_from_body 4×4 mm or None, port status)
 _HandleState = tuple[str, np.ndarray | None, int]
 
@@ -69,8 +69,10 @@ class FrameSource:
                 if kind == _VALID
                 or (kind == _OUT_OF_VOLUME and options & ReplyOption.OUT_OF_VOLUME)]
         valid = {r.handle: r for r in p.records_from_poses(seen)}  # type: ignore[arg-type]
-        recs = [valid.get(number) or p.HandleRecord.missing_tool(number, status, frame)
-                for number, (_, _, status) in state.items()]
+        recs = [valid.get(number)
+                or (p.HandleRecord(number, p.RecordStatus.UNOCCUPIED) if kind == _UNOCCUPIED
+                    else p.HandleRecord.missing_tool(number, status, frame))
+                for number, (kind, _, status) in state.items()]
         return recs, sys_status
 
     def _current_frame(self) -> int:
@@ -92,6 +94,9 @@ class FrameSource:
         healthy = int(PORT_HEALTHY) | (int(PortStatus.IR_INTERFERENCE) if ir else 0)
         out: dict[int, _HandleState] = {}
         for number, body in handles:
+            if f.unoccupied_fraction > 0 and rng.random() < f.unoccupied_fraction:
+                out[number] = (_UNOCCUPIED, None, 0)
+                continue
             if body is None or (f.missing_fraction > 0 and rng.random() < f.missing_fraction):
                 out[number] = (_MISSING, None, healthy)
                 continue

@@ -25,10 +25,13 @@ _READ_BYTES = 4096
 
 class _PtyServer:
     """A new pty whose master end a daemon thread serves with ``feed(buf, data) ->
-    replies``; ``path`` is the slave (``/dev/pts/N``) clients open as a serial port."""
+    replies``, writing ``pending()`` (what the device sends by itself) between reads;
+    ``path`` is the slave (``/dev/pts/N``) clients open as a serial port."""
 
-    def __init__(self, feed: Callable[[bytearray, bytes], list[bytes]], what: str) -> None:
+    def __init__(self, feed: Callable[[bytearray, bytes], list[bytes]],
+                 pending: Callable[[], list[bytes]], what: str) -> None:
         self._feed = feed
+        self._pending = pending
         self._stop = threading.Event()
         master, slave = os.openpty()
         tty.setraw(slave)
@@ -48,6 +51,8 @@ class _PtyServer:
                 r, _, _ = select.select([master], [], [], _POLL_S)
             except (OSError, ValueError):
                 return
+            for reply in self._pending():
+                self._write(reply)
             if not r:
                 continue
             try:
@@ -125,7 +130,7 @@ class PolarisMock(PolarisFirmware, MockDevice):
     def start_pty(self) -> str:
         """Serve on a new pty; returns the slave path (``/dev/pts/N``) clients open."""
         if self._pty is None:
-            self._pty = _PtyServer(self._feed, "polaris-mock")
+            self._pty = _PtyServer(self._feed, self.pending_output, "polaris-mock")
             log.info("Polaris mock (%s) on %s", self.model, self._pty.path)
         return self._pty.path
 
@@ -142,6 +147,7 @@ class PolarisMock(PolarisFirmware, MockDevice):
         return str(self._tcp_url)
 
     def _close(self) -> None:
+        self._stopping.set()
         if self._tcp is not None:
             self._tcp.close()
         if self._pty is not None:
@@ -153,6 +159,8 @@ class PolarisMock(PolarisFirmware, MockDevice):
         conn.settimeout(_POLL_S)
         buf = bytearray()
         while not listener.stopping:
+            for reply in self.pending_output():
+                conn.sendall(reply)
             try:
                 data = conn.recv(_READ_BYTES)
             except TimeoutError:

@@ -60,6 +60,11 @@ class PolarisFaults:
     (then to every reply). ``missing_fraction``: per frame and tool, the tool is reported
     MISSING. ``ir_interference_fraction``: per frame, every tool's port status gets 0x200
     (IR interference) and the system status 0x02 (too much IR); poses are still reported.
+    ``unoccupied_fraction``: per frame and tool, the handle is reported ``UNOCCUPIED`` (TX;
+    BX has no such status and says missing, port status 0), as when a wired tool is
+    unplugged. ``bx_fails_from_tools``: when > 0, BX goes unanswered while at least this many
+    handles are enabled, as BX does on the Polaris Spectra firmware revisions 006 and 007
+    with three or more tools (scikit-surgerynditracker issues #53 and #67); TX still works.
     """
 
     crc_error_prob: float = 0.0
@@ -67,10 +72,16 @@ class PolarisFaults:
     missing_fraction: float = 0.0
     ir_interference_fraction: float = 0.0
     tracking_only: bool = True
+    unoccupied_fraction: float = 0.0
+    bx_fails_from_tools: int = 0
 
     def __post_init__(self) -> None:
+        if isinstance(self.bx_fails_from_tools, bool) or not isinstance(
+                self.bx_fails_from_tools, int) or self.bx_fails_from_tools < 0:
+            raise ValueError(f"PolarisFaults.bx_fails_from_tools must be an int >= 0, got "
+                             f"{self.bx_fails_from_tools!r}")
         for name in ("crc_error_prob", "drop_reply_prob", "missing_fraction",
-                     "ir_interference_fraction"):
+                     "ir_interference_fraction", "unoccupied_fraction"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"PolarisFaults.{name} must be in [0, 1], got {v}")
