@@ -98,8 +98,9 @@ class _StopFlag:
     """First SIGINT/SIGTERM sets the flag (finish the pose in flight); a second SIGINT raises
     KeyboardInterrupt."""
 
-    def __init__(self) -> None:
+    def __init__(self, quiet: bool = False) -> None:
         self.set = False
+        self.quiet = quiet
 
     def __call__(self) -> bool:
         return self.set
@@ -111,8 +112,9 @@ class _StopFlag:
             if self.set and signum == signal.SIGINT:
                 raise KeyboardInterrupt
             self.set = True
-            click.echo("\nstopping after the pose in flight (Ctrl-C again to abort now)",
-                       err=True)
+            if not self.quiet:
+                click.echo("\nstopping after the pose in flight (Ctrl-C again to abort now)",
+                           err=True)
 
         signal.signal(signal.SIGINT, handler)
         signal.signal(signal.SIGTERM, handler)
@@ -158,37 +160,66 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
               help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many distinct frames (default: until Ctrl-C).")
+@click.option("--plain", is_flag=True,
+              help="Print every frame's lines one after another instead of a table redrawn "
+                   "in place (the default off a terminal).")
 @handle_errors
-def track(config: Path, port: str | None, frames: int | None) -> None:
-    """Connect to the tracker, list the tools and print live poses, quality and flags."""
+def track(config: Path, port: str | None, frames: int | None, plain: bool) -> None:
+    """Connect to the tracker, list the tools and show a live table: per tool whether it is
+    seen, its position (mm) and rotation (rotation vector, deg) in the tracker frame, the
+    tracker's RMS fit error (mm), volume flags, and the tracker's frame rate (Hz).
+
+    Ctrl-C stops after the frame being read and closes the tracker; a second Ctrl-C
+    abandons the read in flight."""
     from ..acquisition.devices import make_tracker
     from ..config import load_config
+    from .live import TrackView
 
     cfg = load_config(config)
-    with make_tracker(cfg, port) as tr:
+    stop = _StopFlag(quiet=True)
+    stop.install()
+    tr = make_tracker(cfg, port)
+    tr.open()
+    interrupted = False
+    try:
         ident = tr.identity()
         click.echo("tracker: " + ", ".join(f"{k} {v}" for k, v in ident.items() if v))
         handles = getattr(tr, "handles", {})
         for name in tr.tools:
             h = handles.get(name)
             click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
-        try:
-            for fr in tr.distinct_frames(frames, stall_s=5.0):
-                parts = [f"frame {fr.frame:>8}"]
-                for name, st in fr.tools.items():
-                    if st.pose is None:
-                        parts.append(f"{name}: MISSING")
-                        continue
-                    t = st.pose[:3, 3]
-                    flags = [f for f, on in (("out-of-volume", st.out_of_volume),
-                                             ("partly-out", st.partially_out_of_volume))
-                             if on]
-                    err = f" err {st.error_mm:.3f}" if st.error_mm is not None else ""
-                    parts.append(f"{name}: ({t[0]:8.2f} {t[1]:8.2f} {t[2]:9.2f}) mm{err}"
-                                 + (" " + ",".join(flags) if flags else ""))
-                click.echo("  ".join(parts))
-        except KeyboardInterrupt:
-            pass
+        view = TrackView(sys.stdout, plain=plain)
+        view.header()
+        frames_in = tr.distinct_frames(frames, stall_s=5.0)
+        for fr in frames_in:
+            view.show(fr)
+            if stop():
+                break
+        frames_in.close()
+        view.finish()
+    except KeyboardInterrupt:  # a second Ctrl-C, during a read: the link's state is unknown
+        interrupted = True
+    finally:
+        if interrupted:
+            _close_quietly(tr)
+        else:
+            tr.close()
+
+
+def _close_quietly(dev: Any) -> None:
+    """Close a device whose link was interrupted mid-reply: its stop command may meet the
+    rest of that reply, so the drivers' warnings and errors are held back."""
+    import logging
+
+    drivers = logging.getLogger("tmscal.drivers")
+    level = drivers.level
+    drivers.setLevel(logging.CRITICAL)
+    try:
+        dev.close()
+    except Exception:  # the process is ending on the user's request
+        pass
+    finally:
+        drivers.setLevel(level)
 
 
 @main.command()
