@@ -99,39 +99,49 @@ def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
     pose index (``report.evaluate.pose_residuals``), the solve set shaded when only part of
     the poses were solved on; the ``outliers`` (``report.outliers.find_outliers``) ringed and
     named by pose index, the rule under the axes. PNG."""
-    from .outliers import RULE
+    from .outliers import RULE, outlier_threshold
 
     plt = _pyplot()
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles: list[Any] = []
     idx = list(res["index"])
     pos = {p: i for i, p in enumerate(idx)}
     fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, layout="constrained")
     for body in ("marker", "probe"):
         if body in res:
-            axes[0].plot(idx, res[body]["trans_mm"], ".", ms=3, label=body)
-            axes[1].plot(idx, res[body]["rot_deg"], ".", ms=3, label=body)
+            for ax, key in zip(axes, ("trans_mm", "rot_deg")):
+                (dots,) = ax.plot(idx, res[body][key], ".", ms=3)
+                thr = outlier_threshold(res[body][key])
+                if np.isfinite(thr):
+                    ax.axhline(thr, color=dots.get_color(), ls=":", lw=0.9)
+            handles.append(Line2D([], [], ls="", marker=".", ms=9, color=dots.get_color(),
+                                  label=body))
+            handles.append(Line2D([], [], ls=":", color=dots.get_color(),
+                                  label=f"{body} outlier threshold"))
     if n_solve < len(idx):
         for ax in axes:
-            ax.axvspan(idx[0], idx[n_solve - 1], color="0.9", zorder=0,
-                       label="poses solved on" if ax is axes[0] else None)
+            ax.axvspan(idx[0], idx[n_solve - 1], color="0.9", zorder=0)
+        handles.append(Patch(color="0.9", label="poses solved on"))
     keys = {"translation": (0, "trans_mm"), "rotation": (1, "rot_deg")}
-    ringed = False
     for o in outliers or []:
         for f in o["flags"]:
             row, key = keys[f["metric"]]
             y = res[f["body"]][key][pos[o["index"]]]
-            axes[row].plot([o["index"]], [y], "o", mfc="none", mec="red", ms=9, mew=1.3,
-                           label=None if ringed else "outlier pose")
-            ringed = True
+            axes[row].plot([o["index"]], [y], "o", mfc="none", mec="red", ms=9, mew=1.3)
             axes[row].annotate(f"pose {o['index']}", (o["index"], y), xytext=(6, 4),
                                textcoords="offset points", color="red", fontsize=8)
     for ax, unit in zip(axes, ("translation error e (mm)", "rotation error θ (deg)")):
         ax.set_ylabel(unit)
+        ax.margins(y=0.15)
         ax.set_ylim(bottom=0)
         ax.grid(True, alpha=0.3)
     axes[1].set_xlabel("session pose index")
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside right upper", frameon=False, fontsize=9,
-               markerscale=2.5)
+    if outliers:
+        handles.append(Line2D([], [], ls="", marker="o", mfc="none", mec="red", ms=8,
+                              label="outlier pose"))
+    fig.legend(handles=handles, loc="outside right upper", frameon=False, fontsize=9)
     names = ", ".join(str(o["index"]) for o in outliers or []) or "none"
     fig.suptitle(f"{title}\noutlier poses: {names}", fontsize=11)
     caption = ("Per pose: E = (AX)⁻¹ZB (marker), (AY)⁻¹ZC (probe); e = ‖t(E⊥)‖, θ = rotation "

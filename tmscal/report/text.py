@@ -108,7 +108,7 @@ def _outlier_lines(res: SolveResult) -> list[str]:
     lines = textwrap.wrap(f"outlier poses (rule: {RULE}):", 98, subsequent_indent="  ")
     for o in res.outliers:
         why = "; ".join(f"{f['body']} {f['metric']} {f['value']:.4f} {f['unit']} > "
-                        f"{f['threshold']:.4f}" for f in o["flags"])
+                        f"{f['threshold']:.4f} {f['unit']}" for f in o["flags"])
         lines.append(f"  pose {o['index']}: {why}")
     return lines
 
