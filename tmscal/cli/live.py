@@ -40,15 +40,24 @@ PLAIN_WIDTH = 80
 _SEP = "  "
 
 
-def fit(fields: list[str], width: int) -> str:
+def fit(fields: list[str], width: int, cut: bool = False) -> str:
     """``fields`` joined by two spaces, leaving out trailing fields that would make the line
-    longer than ``width``; the first field is cut with "…" if it alone is too long."""
-    line = fields[0] if len(fields[0]) <= width else fields[0][:max(0, width - 1)] + "…"
+    longer than ``width``; with ``cut`` the first field that does not fit is shortened with
+    "…" instead (if 12 or more columns are left for it). The first field is always shown,
+    shortened if need be."""
+    line = _cut(fields[0], width)
     for f in fields[1:]:
-        if len(line) + len(_SEP) + len(f) > width:
+        room = width - len(line) - len(_SEP)
+        if len(f) > room:
+            if cut and room >= 12:
+                line += _SEP + _cut(f, room)
             break
         line += _SEP + f
     return line
+
+
+def _cut(text: str, width: int) -> str:
+    return text if len(text) <= width else text[:max(0, width - 1)] + "…"
 
 
 def spread_text(rec: Any) -> list[str]:
@@ -144,7 +153,7 @@ class AcquireProgress:
             fields += [f"skipped ({self.skipped} so far): {_short_reason(rec.skipped)}"]
         else:
             fields += [f"skipped {self.skipped}", *spread_text(rec)]
-        print(fit(fields, self.width), file=self.stream, flush=True)
+        print(fit(fields, self.width, cut=bool(rec.skipped)), file=self.stream, flush=True)
 
     def _status(self, rec: Any = None) -> None:
         spread = spread_text(rec) if rec is not None and not rec.skipped else []
@@ -152,7 +161,7 @@ class AcquireProgress:
         if self.last_reason:
             skipped += f"; last: {self.last_reason}"
         for bar, text in zip(self._bars[1:], (fit(spread or [" "], self.width),
-                                              fit([skipped], self.width))):
+                                              _cut(skipped, self.width))):
             if spread or bar is self._bars[2]:
                 bar.set_description_str(text, refresh=True)
 
