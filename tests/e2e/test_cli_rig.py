@@ -27,13 +27,18 @@ def test_track_robot_dry_run_and_jog(tmp_path, mock_config):
         r = CliRunner().invoke(main, ["track", str(cfg), "--frames", "3"])
         assert r.exit_code == 0, r.output
         lines = [ln for ln in r.output.splitlines() if ln.startswith("frame")]
-        assert len(lines) == 3 and "marker: (" in lines[0] and "probe: (" in lines[0]
+        assert len(lines) == 3
+        marker = [ln.split() for ln in r.output.splitlines() if ln.startswith("  marker ")]
         truth_marker = mr.rig.true_body("marker")[:3, 3]
-        assert f"{truth_marker[2]:9.2f}".strip() in lines[0]
+        assert len(marker) == 3 and marker[0][4] == f"{truth_marker[2]:.2f}"
 
         r = CliRunner().invoke(main, ["robot", str(cfg)])
         assert r.exit_code == 0, r.output
         assert "x    500.00" in r.output and "z    400.00" in r.output  # P0 of the TMS rig
+        # P0 points the flange down: roll 180° about the base x axis, labelled as such
+        assert "roll/pitch/yaw 180.000 0.000 0.000 deg" in r.output.replace("-0.000", "0.000")
+        assert "R = Rz(yaw)·Ry(pitch)·Rx(roll)" in r.output
+        assert " rx " not in r.output and "UR pendant" not in r.output  # a DENSO
 
         r = CliRunner().invoke(main, ["acquire", str(cfg), "-o", str(tmp_path / "s.jsonl"),
                                       "--dry-run", "--poses", "50"])
@@ -75,3 +80,21 @@ def test_demo_json_recovers_truth(mock_config):
     assert res["method"] == "qr36" and res["n_solve"] == 25
     assert res["truth"]["coil_placement_mm"] < 0.3
     assert res["truth"]["Y"]["trans_mm"] < 0.5
+
+
+def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_config):
+    from tmscal.geometry import rotvec_pose_from_matrix
+    from tmscal.mocks.rig import spawn_mock_rig
+
+    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
+                      mock={"noise": NOISE_FREE_MOCK})
+    with spawn_mock_rig(cfg, transport="tcp") as mp:
+        host = mp.endpoints["robot"]
+        out = subprocess.run([sys.executable, "-m", "tmscal.cli", "robot", str(cfg),
+                              "--host", host], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "roll/pitch/yaw" in out.stdout and "R = Rz(yaw)·Ry(pitch)·Rx(roll)" in out.stdout
+    pendant = next(ln for ln in out.stdout.splitlines() if "UR pendant" in ln)
+    v = rotvec_pose_from_matrix(TMS_RIG_P0)  # the mock's TCP offset is zero: TCP = flange
+    assert f"RX {v[3]:.4f}  RY {v[4]:.4f}  RZ {v[5]:.4f} rad (rotation vector)" in pendant
+    assert f"X {v[0] * 1000:.2f}  Y {v[1] * 1000:.2f}  Z {v[2] * 1000:.2f} mm" in pendant
