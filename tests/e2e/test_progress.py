@@ -192,3 +192,24 @@ def test_track_table_plain_and_in_place(tmp_path, mock_config):
     assert "\x1b[3A" in text  # redrawn in place: the cursor goes back up over the table
     screen = _screen_lines(text[text.index("position:"):])
     assert max(len(s) for s in screen) <= 80, [s for s in screen if len(s) > 80]
+
+
+@pytest.mark.e2e
+def test_track_ctrl_c_closes_the_tracker_quietly(tmp_path, mock_config):
+    import signal
+
+    cfg = _rig(mock_config)
+    with start_mock_rig(load_config(cfg), tracker_transport="tcp") as mr:
+        pointed = point_config(cfg, mr.endpoints)
+        for _attempt in range(3):  # each run must find the tracker as the last one left it
+            p = subprocess.Popen(_cli("track", str(pointed), "--plain"), stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, env=_env(), cwd=REPO)
+            seen = 0
+            for line in p.stdout:  # frames stream in; the hang guard is the test timeout
+                seen += line.startswith("frame ")
+                if seen == 50:
+                    break
+            p.send_signal(signal.SIGINT)
+            _, err = p.communicate(timeout=60)
+            assert p.returncode == 0, err
+            assert err == "", err  # no warning, no raw reply bytes, no error line
