@@ -9,6 +9,8 @@ Each test uses its own loopback address.
 
 from __future__ import annotations
 
+import socket
+import time
 from typing import Any
 
 import numpy as np
@@ -22,7 +24,7 @@ if __name__ != "__main__":
 from tests.child import child_main, run_child
 from tmscal.geometry import compose, make_pose, rot_x, rot_y, rot_z
 from tmscal.mocks.clock import FAST
-from tmscal.mocks.ur import URFaults, URMock
+from tmscal.mocks.ur import ROBOT_MODE_POWER_OFF, URFaults, URMock
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
 
 
@@ -76,7 +78,7 @@ def test_protective_stop_raises_robot_fault() -> None:
     targets = _targets()
     with URMock(rig, host="127.0.0.22", clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
-        res = _moves(mock, targets, upload_script=False)
+        res = _moves(mock, targets, upload_script=True)
         assert mock.protective_stopped
     err = res["error"]
     assert err is not None and err["type"] == "RobotFault"
@@ -87,7 +89,7 @@ def test_protective_stop_raises_robot_fault() -> None:
     # the flange stopped half-way between the first and the second target
     half = 0.5 * (targets[0][:3, 3] + targets[1][:3, 3])
     assert np.abs(rig.flange[:3, 3] - half).max() < 1e-6
-    assert mock.scripts_received == 0          # flags=0: nothing uploaded
+    assert "clear it at the pendant" in err["message"]
 
 
 def test_dropped_connection_raises_connection_lost() -> None:
@@ -95,7 +97,7 @@ def test_dropped_connection_raises_connection_lost() -> None:
     targets = _targets()
     with URMock(rig, host="127.0.0.23", clock=FAST,
                 faults=URFaults(drop_at_move=2)) as mock:
-        res = _moves(mock, targets, upload_script=False)
+        res = _moves(mock, targets, upload_script=True)
     err = res["error"]
     assert err is not None and err["type"] == "ConnectionLost"
     assert "ConnectionError" in err["mro"] and "DeviceError" in err["mro"]
@@ -106,28 +108,164 @@ def test_dropped_connection_raises_connection_lost() -> None:
     assert np.abs(rig.flange - targets[1]).max() < 1e-6
 
 
+def test_protective_stop_cleared_script_reuploaded_and_run_continues() -> None:
+    """After a protective stop the control script no longer runs; once the operator has
+    cleared the stop, the next move re-uploads the script and the run goes on."""
+    rig = _rig()
+    targets = _targets()
+    with URMock(rig, host="127.0.0.24", clock=FAST,
+                faults=URFaults(protective_stop_at_move=2)) as mock:
+        res = run_child(__file__, "moves", mock.host, {
+            "poses": [t.tolist() for t in targets], "upload_script": True,
+            "operator": ["unlock protective stop"]})
+        assert mock.scripts_received == 2           # at connect, and after the stop
+    assert res["error"]["type"] == "RobotFault" and res["error"]["at"] == 1
+    assert res["retry_error"] is None, res["retry_error"]
+    # the failed pose was moved to again, then the rest of the plan
+    assert len(res["reported"]) == len(targets)
+    for got, want in zip(res["reported"], targets, strict=True):
+        assert np.abs(np.array(got) - want).max() < 1e-6
+    assert np.abs(rig.flange - targets[-1]).max() < 1e-6
+
+
+def test_protective_stop_not_cleared_is_robot_fault_on_retry() -> None:
+    """Without the operator clearing the stop, the retry is refused naming it; nothing is
+    re-uploaded and the flange stays where the stop left it."""
+    rig = _rig()
+    targets = _targets()
+    with URMock(rig, host="127.0.0.25", clock=FAST,
+                faults=URFaults(protective_stop_at_move=2)) as mock:
+        res = run_child(__file__, "moves", mock.host, {
+            "poses": [t.tolist() for t in targets], "upload_script": True, "operator": []})
+        assert mock.scripts_received == 1
+    err = res["retry_error"]
+    assert err is not None and err["type"] == "RobotFault" and err["at"] == 1
+    assert err["text"] == "PROTECTIVE_STOP" and "clear it" in err["message"]
+    half = 0.5 * (targets[0][:3, 3] + targets[1][:3, 3])
+    assert np.abs(rig.flange[:3, 3] - half).max() < 1e-6
+
+
+def _free_port() -> int:
+    """A TCP port nothing listens on now (for ur_rtde's URCap script sender)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_urcap_path_serves_script_to_external_control() -> None:
+    """upload_script false is the External Control URCap (FLAG_USE_EXT_UR_CAP): the pendant
+    is in Local Control, nothing goes to the script port; the URCap fetches the script from
+    ur_rtde when the operator presses Play, and the moves run."""
+    rig = _rig()
+    targets = _targets()[:2]
+    port = _free_port()
+    with URMock(rig, host="127.0.0.26", clock=FAST, remote_control=False, urcap_port=port,
+                play_when_ready=True) as mock:
+        assert mock.runtime_state != 2              # nothing runs before Play
+        res = run_child(__file__, "moves", mock.host, {
+            "poses": [t.tolist() for t in targets], "upload_script": False,
+            "ur_cap_port": port})
+        assert mock.scripts_received == 0
+        assert mock.urcap is not None and mock.urcap.requests == 1
+        assert (mock.last_urcap_script or "").startswith("# HEADER_BEGIN")   # the URCap's anchor
+    assert res["error"] is None, res["error"]
+    assert len(rig.moves) == len(targets)
+    assert np.abs(rig.flange - targets[-1]).max() < 1e-6
+
+
+def _open_error(mock: URMock, **args: Any) -> dict[str, Any]:
+    res = run_child(__file__, "open", mock.host, args)
+    assert res["error"] is not None, "open succeeded"
+    return res["error"]
+
+
+def test_remote_control_off_is_robot_fault_at_open() -> None:
+    rig = _rig()
+    with URMock(rig, host="127.0.0.27", clock=FAST, remote_control=False) as mock:
+        err = _open_error(mock, upload_script=True)
+        assert mock.scripts_received == 0
+    assert err["type"] == "RobotFault"
+    assert "remote control is not enabled" in err["message"]
+    assert "Remote Control" in err["message"]       # what to do at the pendant
+
+
+def test_powered_off_robot_is_robot_fault_at_open() -> None:
+    rig = _rig()
+    with URMock(rig, host="127.0.0.28", clock=FAST, robot_mode=ROBOT_MODE_POWER_OFF) as mock:
+        err = _open_error(mock, upload_script=True)
+    assert err["type"] == "RobotFault" and err["text"] == "POWER_OFF"
+    assert "power it on" in err["message"]
+    assert err["elapsed_s"] < 4.0       # at once: not after ur_rtde's 5 s script-start timeout
+
+
+def test_power_off_during_move_is_robot_fault_naming_it() -> None:
+    rig = _rig()
+    targets = _targets()
+    with URMock(rig, host="127.0.0.29", clock=FAST,
+                faults=URFaults(power_off_at_move=2)) as mock:
+        res = _moves(mock, targets, upload_script=True)
+        assert mock.robot_mode == ROBOT_MODE_POWER_OFF
+    err = res["error"]
+    assert err is not None and err["type"] == "RobotFault" and err["at"] == 1
+    assert err["text"] == "POWER_OFF" and "power it on" in err["message"]
+
+
 # --- child process ------------------------------------------------------------------------------
+
+def _error(e: Exception, at: int) -> dict[str, Any]:
+    return {"type": type(e).__name__, "message": str(e), "at": at,
+            "mro": [c.__name__ for c in type(e).__mro__],
+            "code": getattr(e, "code", None), "text": getattr(e, "text", None)}
+
+
+def _operator(host: str, commands: list[str]) -> None:
+    """The operator at the pendant, through the dashboard server (ur_rtde's client)."""
+    import dashboard_client
+
+    db = dashboard_client.DashboardClient(host)
+    db.connect()
+    for cmd in commands:
+        db.send(cmd + "\n")
+        db.receive()
+    db.disconnect()
+
+
+def _run_poses(robot: Any, poses: list[Any], start: int, res: dict[str, Any], key: str) -> int:
+    """Move through ``poses[start:]``; on an error record it under ``key`` and return its
+    index (len(poses) when all moved)."""
+    for i in range(start, len(poses)):
+        try:
+            robot.move_to(np.array(poses[i]))
+        except Exception as e:  # reported to the parent, which checks the type
+            res[key] = _error(e, i)
+            return i
+        res["reported"].append(robot.flange_pose().tolist())
+    return len(poses)
+
 
 def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
     from tmscal.drivers.ur.robot import URRobot
 
-    res.update({"error": None, "reported": []})
-    assert scenario == "moves"
+    res.update({"error": None, "retry_error": None, "reported": []})
+    kw = {"ur_cap_port": args["ur_cap_port"]} if "ur_cap_port" in args else {}
     robot = URRobot(host, upload_script=args["upload_script"], speed_mm_s=100.0,
-                    timeout_s=10.0)
+                    timeout_s=10.0, **kw)
+    if scenario == "open":
+        t0 = time.monotonic()
+        try:
+            robot.open()
+        except Exception as e:
+            res["error"] = {**_error(e, 0), "elapsed_s": time.monotonic() - t0}
+        robot.close()
+        return
+    assert scenario == "moves"
     with robot:
         res["identity"] = robot.identity()
         res["initial"] = robot.flange_pose().tolist()
-        for i, pose in enumerate(args["poses"]):
-            try:
-                robot.move_to(np.array(pose))
-            except Exception as e:  # reported to the parent, which checks the type
-                res["error"] = {"type": type(e).__name__, "message": str(e), "at": i,
-                                "mro": [c.__name__ for c in type(e).__mro__],
-                                "code": getattr(e, "code", None),
-                                "text": getattr(e, "text", None)}
-                break
-            res["reported"].append(robot.flange_pose().tolist())
+        failed = _run_poses(robot, args["poses"], 0, res, "error")
+        if failed < len(args["poses"]) and "operator" in args:
+            _operator(host, args["operator"])
+            _run_poses(robot, args["poses"], failed, res, "retry_error")
 
 
 if __name__ == "__main__":

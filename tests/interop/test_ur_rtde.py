@@ -27,7 +27,7 @@ if __name__ != "__main__":
 from tests.child import child_main, run_child
 from tmscal.geometry import compose, make_pose, pose_from_rotvec, rot_z, rotvec_pose_from_matrix
 from tmscal.mocks.clock import FAST, REAL_TIME
-from tmscal.mocks.ur import URFaults, URMock
+from tmscal.mocks.ur import ROBOT_MODE_POWER_OFF, URFaults, URMock
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
 from tmscal.timing import Deadline
 
@@ -121,12 +121,17 @@ def test_protective_stop_fails_move_and_unlock_clears_it() -> None:
     assert res["protective_stopped"] is True
     assert res["safety_mode"] == 3
     assert res["safety_status_bits"] & (1 << 2)
-    assert res["runtime_state"] == 4            # the program paused
+    assert res["runtime_state"] == 1            # the control script stopped
     assert res["unlock_error"] is None          # reply was "Protective stop releasing"
     assert res["protective_after_unlock"] is False
-    # the flange stopped half-way to the second target
+    # cleared, the script stays stopped until it is uploaded again (ur_rtde's reuploadScript)
+    assert res["running_after_unlock"] is False
+    assert res["running_after_reupload"] is True and res["third_ok"] is True
+    assert mock.scripts_received == 1
+    # the flange stopped half-way to the second target, then went back to the first
     half = 0.5 * (_T1[:3, 3] + _T2[:3, 3])
-    assert np.abs(rig.flange[:3, 3] - half).max() < 1e-6
+    assert np.abs(rig.moves[1][:3, 3] - half).max() < 1e-6
+    assert np.abs(rig.flange - _T1).max() < 1e-6
 
 
 # --- parsers against arbitrary bytes -----------------------------------------------------------
@@ -158,6 +163,22 @@ def _still_serves(host: str) -> None:
         while len(reply) < 19:
             reply += s.recv(19 - len(reply))
         assert struct.unpack(">HBIIII", reply) == (19, ord("v"), 5, 11, 0, 108249)
+
+
+def test_local_control_and_power_off_as_a_controller_answers() -> None:
+    """Remote control off: ur_rtde's constructor refuses (its own check); powered off: the
+    dashboard says so and an uploaded script does not start (the library times out)."""
+    with URMock(_rig(), host="127.0.0.35", clock=FAST, remote_control=False) as mock:
+        res = run_child(__file__, "states", mock.host, {})
+    assert "remote control" in res["ctor_error"].lower()
+    assert res["remote"] is False
+    assert res["play"].startswith("Command is not allowed due to safety reasons")
+    with URMock(_rig(), host="127.0.0.36", clock=FAST,
+                robot_mode=ROBOT_MODE_POWER_OFF) as mock:
+        res = run_child(__file__, "states", mock.host, {})
+        assert mock.runtime_state == 1 and mock.scripts_received == 1
+    assert res["robotmode"] == "Robotmode: POWER_OFF" and res["remote"] is True
+    assert "control script" in res["ctor_error"]
 
 
 @settings(max_examples=40, deadline=None,
@@ -279,12 +300,37 @@ def _protective(host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
     db.disconnect()
     _wait_while(r.isProtectiveStopped, 5.0, 0.002)
     res["protective_after_unlock"] = r.isProtectiveStopped()
+    _wait_fresh(r)
+    res["running_after_unlock"] = c.isProgramRunning()
+    c.reuploadScript()
+    _wait_while(lambda: not c.isProgramRunning(), 5.0, 0.002)
+    res["running_after_reupload"] = c.isProgramRunning()
+    res["third_ok"] = c.moveL(args["t1"], 0.25, 1.2)
     c.disconnect()
     r.disconnect()
 
 
+def _states(host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
+    """The dashboard's answers, then ur_rtde's constructor with the default flags."""
+    import dashboard_client
+    import rtde_control
+
+    db = dashboard_client.DashboardClient(host)
+    db.connect()
+    res["robotmode"] = db.robotmode().strip()
+    res["remote"] = db.isInRemoteControl()
+    db.send("play\n")
+    res["play"] = db.receive().strip()
+    db.disconnect()
+    try:
+        rtde_control.RTDEControlInterface(host)
+        res["ctor_error"] = None
+    except RuntimeError as e:
+        res["ctor_error"] = str(e)
+
+
 def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
-    {"moves": _moves, "protective": _protective}[scenario](host, args, res)
+    {"moves": _moves, "protective": _protective, "states": _states}[scenario](host, args, res)
 
 
 if __name__ == "__main__":

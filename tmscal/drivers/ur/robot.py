@@ -19,6 +19,7 @@ run the mock in another process (``tmscal mock``) or the robot in a subprocess.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -48,6 +49,19 @@ SAFETY_MODES = {
     10: "VALIDATE_JOINT_ID", 11: "UNDEFINED_SAFETY_MODE", 12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
     13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
 }
+#: UR robot modes (RTDE ``robot_mode``; the dashboard's ``robotmode`` names them alike).
+ROBOT_MODES = {
+    -1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF",
+    4: "POWER_ON", 5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING", 8: "UPDATING_FIRMWARE",
+}
+_RUNNING = 7
+#: What the operator does at the pendant for a robot mode other than RUNNING.
+_MODE_ACTION = {
+    "POWER_OFF": "the robot is powered off: power it on and release the brakes at the pendant",
+    "POWER_ON": "the robot is powering on: wait, then release the brakes at the pendant",
+    "IDLE": "the robot's brakes are engaged: release them at the pendant",
+    "BOOTING": "the robot is booting: wait for it, then power it on at the pendant",
+}
 #: UR program runtime states (RTDE ``runtime_state``).
 RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED",
                   5: "RESUMING"}
@@ -59,6 +73,9 @@ _POLL_S = 0.005          # how often a wait looks at the worker or the receive s
 _FRESH_POLL_S = 0.0005   # how often a wait for new data looks at the timestamp (s)
 _LINK_GRACE_S = 0.5      # a receive link down this long during a call: the call is abandoned
 _DIAGNOSE_S = 1.0        # longest wait for the receive stream to show why a move failed (s)
+_SCRIPT_START_S = 5.0    # longest wait for a re-uploaded control script to run (ur_rtde's 5 s)
+#: ur_rtde error texts that name the robot's state, not the link (RobotFault, not retried)
+_ROBOT_STATE_TEXTS = ("remote control", "control script", "control program")
 
 
 def base_from_flange_from_tcp(tcp_pose: Any, flange_from_tcp: np.ndarray) -> np.ndarray:
@@ -86,14 +103,27 @@ class URRobot(Robot):
         Safety envelope and default linear speed (mm/s) and acceleration (mm/s²); see
         ``Robot``.
     upload_script:
-        True (default): ur_rtde uploads its ``rtde_control`` URScript (replacing a running
-        program). False: ``flags=0``, the control script must already run on the controller
-        (e.g. through the ur_rtde URCap or a program that contains it).
+        True (default): ur_rtde uploads its ``rtde_control`` URScript over the script port
+        (replacing a running program; needs Remote Control on e-Series). False: the External
+        Control URCap path (``FLAG_USE_EXT_UR_CAP``): ur_rtde serves its script on
+        ``ur_cap_port`` and the URCap's program node fetches and runs it when the operator
+        presses Play on the pendant (Local Control is fine); ``open`` waits for that.
+    ur_cap_port:
+        Port of ur_rtde's script sender for the URCap (the URCap installation's "Custom port",
+        50002 by default); used only with ``upload_script=False``.
     frequency_hz:
         RTDE data rate; None lets ur_rtde choose (500 Hz on e-Series, 125 Hz on CB3).
     timeout_s:
         Longest a single move, or a wait for controller data, may take (s); beyond it the
         driver raises ``DeviceTimeout``.
+
+    Robot state (docs/devices-ur.md): ``open`` asks the dashboard server first and raises
+    ``RobotFault`` naming the cause and the fix at the pendant when remote control is off
+    (script upload only), the robot is not powered and brake-released, or a protective or
+    emergency stop is active; these are never treated as link losses. After a protective stop
+    the control script no longer runs: once the stop is cleared, ``move_to`` finds it
+    stopped (``isProgramRunning``), re-uploads it (``reuploadScript``) and continues, or
+    raises ``RobotFault`` saying why it cannot.
 
     ``move_to`` sends a synchronous ``moveL`` and returns once the controller reported it done
     and a newer data package has arrived (so ``flange_pose()`` then reads the final pose).
@@ -106,7 +136,8 @@ class URRobot(Robot):
 
     def __init__(self, host: str, envelope: Envelope | None = None, speed_mm_s: float = 100.0,
                  accel_mm_s2: float = 500.0, upload_script: bool = True,
-                 frequency_hz: float | None = None, timeout_s: float = 30.0) -> None:
+                 frequency_hz: float | None = None, timeout_s: float = 30.0,
+                 ur_cap_port: int = 50002) -> None:
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         if not host:
             raise ValueError("URRobot: host must be a non-empty address")
@@ -118,6 +149,10 @@ class URRobot(Robot):
         self.upload_script = bool(upload_script)
         self.frequency_hz = frequency_hz
         self.timeout_s = float(timeout_s)
+        if isinstance(ur_cap_port, bool) or not isinstance(ur_cap_port, int) \
+                or not 0 < ur_cap_port < 65536:
+            raise ValueError(f"URRobot: ur_cap_port must be a TCP port, got {ur_cap_port!r}")
+        self.ur_cap_port = ur_cap_port
         self.flange_from_tcp = np.eye(4)
         self._rx: Any = None
         self._ctl: Any = None
@@ -133,11 +168,19 @@ class URRobot(Robot):
         except ImportError as e:  # pragma: no cover - the ur extra is missing
             raise MissingExtraError(f"ur {self.host}", "ur", str(e)) from e
         freq = -1.0 if self.frequency_hz is None else float(self.frequency_hz)
-        flags = (rtde_control.RTDEControlInterface.Flags.FLAG_UPLOAD_SCRIPT
-                 if self.upload_script else 0)
+        F = rtde_control.RTDEControlInterface.Flags
+        # ur_rtde: FLAG_UPLOAD_SCRIPT sends the script to port 30003; FLAG_USE_EXT_UR_CAP
+        # serves it to the External Control URCap and skips the remote-control check
+        flags = F.FLAG_UPLOAD_SCRIPT if self.upload_script else F.FLAG_USE_EXT_UR_CAP
+        self._identity = self._dashboard_check("connect")
         with self._translated("connect"):
             self._rx = rtde_receive.RTDEReceiveInterface(self.host, freq, RECEIVE_VARIABLES)
-            self._ctl = rtde_control.RTDEControlInterface(self.host, freq, int(flags))
+            if not self.upload_script:
+                log.warning("ur %s: waiting for the External Control program: press Play on "
+                            "the pendant (the URCap fetches the script from this computer, "
+                            "port %d)", self.host, self.ur_cap_port)
+            self._ctl = rtde_control.RTDEControlInterface(self.host, freq, int(flags),
+                                                          self.ur_cap_port)
         self._wait_fresh_data("first data from the controller")
         try:
             self._check_safety("open")
@@ -152,7 +195,6 @@ class URRobot(Robot):
         if np.abs(rotvec_pose_from_matrix(self.flange_from_tcp)).max() > 0:
             log.warning("ur %s: TCP offset %s (m, rad) is not zero; poses are converted to "
                         "the flange with it", self.host, list(offset))
-        self._identity = self._query_identity()
         self._identity["tcp_offset_m_rad"] = [float(v) for v in offset] if len(offset) == 6 \
             else None
         log.info("ur %s: connected (%s)", self.host, self._identity)
@@ -176,8 +218,12 @@ class URRobot(Robot):
         """Driver, host, controller (PolyScope) version, serial number, model, TCP offset."""
         return {"driver": self.name, "host": self.host, **self._identity}
 
-    def _query_identity(self) -> dict[str, Any]:
-        """Ask the dashboard server (best effort: a missing answer is recorded as None)."""
+    def _dashboard_check(self, what: str) -> dict[str, Any]:
+        """Ask the dashboard server for the controller's identity (best effort: a missing
+        answer is None) and its state; raise ``RobotFault`` naming ``what``, the cause and
+        the fix at the pendant when the robot cannot run the control script: remote control
+        off (e-Series ≥ 5.6, script upload only), robot mode not RUNNING, safety status not
+        NORMAL/REDUCED. An unreachable dashboard is logged and left to ur_rtde to report."""
         out: dict[str, Any] = {"controller_version": None, "serial": None, "model": None}
         try:
             import dashboard_client
@@ -187,19 +233,49 @@ class URRobot(Robot):
         try:
             db.connect()
             for key, fn in (("controller_version", db.polyscopeVersion),
-                            ("serial", db.getSerialNumber), ("model", db.getRobotModel)):
+                            ("serial", db.getSerialNumber), ("model", db.getRobotModel),
+                            ("robot_mode", db.robotmode), ("safety_status", db.safetystatus)):
                 try:
                     out[key] = str(fn()).strip() or None
                 except RuntimeError as e:
                     log.debug("ur %s: dashboard %s failed: %s", self.host, key, e)
+            if not self.upload_script or not _remote_check_applies(out["controller_version"]):
+                out["remote_control"] = None
+            else:
+                out["remote_control"] = bool(db.isInRemoteControl())
         except RuntimeError as e:
-            log.warning("ur %s: dashboard server not reachable for identity: %s", self.host, e)
+            log.warning("ur %s: dashboard server not reachable: %s", self.host, e)
+            return out
         finally:
             try:
                 db.disconnect()
             except RuntimeError:
                 pass
-        return out
+        fault = self._state_fault(what, out)
+        if fault is not None:
+            raise fault
+        return {k: out[k] for k in ("controller_version", "serial", "model")}
+
+    def _state_fault(self, what: str, st: dict[str, Any]) -> RobotFault | None:
+        """The ``RobotFault`` for a dashboard state (``_dashboard_check``) in which the control
+        script cannot run, or None."""
+        mode = _after_colon(st.get("robot_mode"))
+        safety = _after_colon(st.get("safety_status"))
+        if safety is not None and safety not in ("NORMAL", "REDUCED"):
+            return RobotFault(f"ur {self.host}: {what}: safety status {safety}: clear it at "
+                              "the pendant (a protective stop: 'unlock protective stop'), then "
+                              "run again", text=safety, device=self.name)
+        if mode is not None and mode != "RUNNING":
+            action = _MODE_ACTION.get(mode, "the robot is not ready: bring it to RUNNING at "
+                                            "the pendant")
+            return RobotFault(f"ur {self.host}: {what}: robot mode {mode}: {action}, then run "
+                              "again", text=mode, device=self.name)
+        if st.get("remote_control") is False:
+            return RobotFault(f"ur {self.host}: {what}: remote control is not enabled: switch "
+                              "the pendant to Remote Control (the icon at its top right), or "
+                              "use the External Control URCap (upload_script: false), then run "
+                              "again", text="LOCAL_CONTROL", device=self.name)
+        return None
 
     # --- robot hooks --------------------------------------------------------------------------
 
@@ -214,6 +290,7 @@ class URRobot(Robot):
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
         self._check_connected("move_to")
         self._check_safety("move_to")
+        self._ensure_script("move_to")
         target = tcp_pose_from_base_from_flange(pose, self.flange_from_tcp)
         speed, accel = speed_mm_s / 1000.0, self.accel_mm_s2 / 1000.0
         log.debug("ur %s: moveL %s at %.4f m/s, %.4f m/s²", self.host, target, speed, accel)
@@ -244,6 +321,17 @@ class URRobot(Robot):
         except RuntimeError as e:
             text = str(e)
             low = text.lower()
+            if any(k in low for k in _ROBOT_STATE_TEXTS):
+                # ur_rtde refused on the robot's state (remote control, script not running):
+                # not a link loss; say what the dashboard shows
+                try:
+                    self._dashboard_check(what)
+                except RobotFault as fault:
+                    raise fault from e
+                hint = (" press Play on the External Control program at the pendant"
+                        if not self.upload_script else " check the pendant for a popup")
+                raise RobotFault(f"ur {self.host}: {what} failed: {e};{hint}",
+                                 device=self.name, text=text) from e
             if not self._connected() or "connect" in low:
                 cls: type[DeviceError] = ConnectionLost
             elif "timeout" in low or "timed out" in low:
@@ -317,30 +405,73 @@ class URRobot(Robot):
             raise ConnectionLost(f"ur {self.host}: {what}: the RTDE connection is lost",
                                  device=self.name)
 
-    def _safety(self) -> tuple[int, str, bool, bool, int]:
-        """(safety mode, its name, protective stop, emergency stop, runtime state), read
-        through the translator."""
-        def read() -> tuple[int, str, bool, bool, int]:
+    def _safety(self) -> tuple[int, str, bool, bool, int, int]:
+        """(safety mode, its name, protective stop, emergency stop, runtime state, robot
+        mode), read through the translator."""
+        def read() -> tuple[int, str, bool, bool, int, int]:
             rx = self._rx
             mode = int(rx.getSafetyMode())
             return (mode, SAFETY_MODES.get(mode, f"safety mode {mode}"),
                     bool(rx.isProtectiveStopped()), bool(rx.isEmergencyStopped()),
-                    int(rx.getRuntimeState()))
+                    int(rx.getRuntimeState()), int(rx.getRobotMode()))
         return self._call("safety status", read)
 
-    def _fault(self, what: str, status: tuple[int, str, bool, bool, int]) -> RobotFault | None:
+    def _fault(self, what: str, status: tuple[int, str, bool, bool, int, int]
+               ) -> RobotFault | None:
         """A ``RobotFault`` naming ``what`` when ``status`` (from ``_safety``) says the robot
-        is stopped or faulted, else None."""
-        mode, name, protective, emergency, _ = status
+        is stopped, faulted, powered off or braked, else None."""
+        mode, name, protective, emergency, _, robot_mode = status
         if protective or emergency or mode not in _SAFE_MODES:
-            return RobotFault(f"ur {self.host}: {what}: robot in {name}", code=mode, text=name,
-                              device=self.name)
+            hint = (": clear it at the pendant, then resume" if protective else "")
+            return RobotFault(f"ur {self.host}: {what}: robot in {name}{hint}", code=mode,
+                              text=name, device=self.name)
+        if robot_mode != _RUNNING:
+            rname = ROBOT_MODES.get(robot_mode, f"robot mode {robot_mode}")
+            action = _MODE_ACTION.get(rname, "the robot is not ready: bring it to RUNNING at "
+                                             "the pendant")
+            return RobotFault(f"ur {self.host}: {what}: robot mode {rname}: {action}, then "
+                              "resume", code=robot_mode, text=rname, device=self.name)
         return None
 
     def _check_safety(self, what: str) -> None:
+        """Raise the ``RobotFault`` the receive stream shows; a fault is confirmed on data
+        newer than the call (the stream lags the dashboard: a stop just cleared there)."""
+        if self._fault(f"{what} refused", self._safety()) is None:
+            return
+        self._wait_fresh_data(f"controller data for {what}")
         fault = self._fault(f"{what} refused", self._safety())
         if fault is not None:
             raise fault
+
+    def _ensure_script(self, what: str) -> None:
+        """Make sure the control script runs: after a protective stop (cleared since) it does
+        not. Script upload: check the robot's state on the dashboard, ``reuploadScript`` and
+        wait for ``isProgramRunning``; the URCap path cannot restart it from here. Raise
+        ``RobotFault`` saying why when it does not run."""
+        if self._call("isProgramRunning", self._ctl.isProgramRunning):
+            return
+        runtime = int(self._call("getRuntimeState", self._rx.getRuntimeState))
+        state = RUNTIME_STATES.get(runtime, str(runtime))
+        if not self.upload_script:
+            raise RobotFault(f"ur {self.host}: {what} refused: the External Control program is "
+                             f"not running (program {state}): press Play on the pendant, then "
+                             "resume", code=runtime, text=state, device=self.name)
+        self._dashboard_check(f"{what}: re-uploading the control script")
+        log.warning("ur %s: the control script is not running (program %s, e.g. after a "
+                    "protective stop); re-uploading it", self.host, state)
+        self._call_watched("reuploadScript", self._ctl.reuploadScript, self.timeout_s)
+        deadline = Deadline(min(_SCRIPT_START_S, self.timeout_s))
+        while not self._call("isProgramRunning", self._ctl.isProgramRunning):
+            if deadline.expired():
+                runtime = int(self._call("getRuntimeState", self._rx.getRuntimeState))
+                state = RUNTIME_STATES.get(runtime, str(runtime))
+                raise RobotFault(f"ur {self.host}: {what}: the re-uploaded control script did "
+                                 f"not start within {deadline.timeout_s:.0f} s (program "
+                                 f"{state}); check the pendant for a popup", code=runtime,
+                                 text=state, device=self.name)
+            self._check_connected(what)
+            time.sleep(_POLL_S)
+        log.info("ur %s: control script running again", self.host)
 
     def _diagnose_failed_move(self, target: list[float]) -> None:
         """moveL returned False: raise the typed error that says why. The receive stream may
@@ -379,3 +510,17 @@ class URRobot(Robot):
                                     device=self.name)
             else:
                 time.sleep(_FRESH_POLL_S)
+
+
+def _after_colon(reply: str | None) -> str | None:
+    """``NORMAL`` from the dashboard's ``Safetystatus: NORMAL`` (None stays None)."""
+    if reply is None:
+        return None
+    return reply.split(":")[-1].strip().upper() or None
+
+
+def _remote_check_applies(version: str | None) -> bool:
+    """Whether the dashboard knows ``is in remote control``: PolyScope 5.6 and later (what
+    ur_rtde's own check requires; ``URSoftware 5.11.0.108249 (…)`` → True)."""
+    m = re.search(r"(\d+)\.(\d+)\.\d+", version or "")
+    return m is not None and int(m.group(1)) == 5 and int(m.group(2)) > 5

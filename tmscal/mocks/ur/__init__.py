@@ -9,12 +9,18 @@ The unmodified ``ur_rtde`` client library (``RTDEControlInterface``, ``RTDERecei
   start/pause (``S``/``P``), data packages (``U``) both ways. Each connection streams its output
   recipe from its own thread at the requested frequency, on the real-time and on the fast clock
   alike (only *motion* is instant on the fast clock).
-* **29999 dashboard**: banner, ``PolyscopeVersion``, ``get serial number``,
-  ``is in remote control`` (→ ``true``), ``stop`` (→ ``Stopped``), ``play``, ``pause``,
-  ``unlock protective stop`` and the other status queries; unknown commands get the real
-  server's ``could not understand: '…'``.
+* **29999 dashboard** (``dashboard``): banner, ``PolyscopeVersion``, ``get serial number``,
+  ``is in remote control``, ``robotmode``, ``safetystatus``, ``stop`` (→ ``Stopped``),
+  ``play``, ``pause``, ``unlock protective stop``, ``power on``/``power off``/``brake
+  release`` and the other status queries; unknown commands get the real server's ``could not
+  understand: '…'``; in Local Control the commands that act on the robot get the real
+  server's "Command is not allowed due to safety reasons, …".
 * **30003 script**: the uploaded URScript program is accepted (kept in ``last_script``) and
-  the emulated ``rtde_control`` script starts (``runtime_state`` 2, PLAYING).
+  the emulated ``rtde_control`` script starts (``runtime_state`` 2, PLAYING) — only on a
+  powered, brake-released robot (robot mode RUNNING) without a protective stop, in remote
+  control, as on a real controller; otherwise it is dropped and nothing runs.
+* The **External Control URCap** (``urcap``, with ``urcap_port``): Play fetches the script
+  from ur_rtde's script sender on the PC (``FLAG_USE_EXT_UR_CAP``).
 
 The emulated control script follows ur_rtde's register handshake (``controller``). A linear
 move puts the rig's flange at ``pose_from_rotvec(pose)``; in real time it takes distance /
@@ -35,14 +41,18 @@ flange stays where it was, and nothing non-finite reaches the rig; ``play`` (das
 new script upload starts it again. Joint targets must be finite too.
 
 Faults (``URFaults``): a protective stop during the k-th move (safety mode 3,
-``safety_status_bits`` bit 2, the flange stops half-way, the program pauses as on a real
-robot; cleared with the dashboard's ``unlock protective stop``, resumed with ``play`` or a new
-script upload) and a dropped connection at the k-th move (every client socket is closed and
+``safety_status_bits`` bit 2, the flange stops half-way and the control script stops,
+runtime_state 1, as ur_rtde's ``reuploadScript`` documentation describes; cleared with the
+dashboard's ``unlock protective stop``, after which only a new script upload or ``play`` runs
+it again), a power-off during the k-th move (robot mode POWER_OFF, the program stops), and a
+dropped connection at the k-th move (every client socket is closed and
 the listeners close). Moves are counted from 1 over the mock's life (moveL, moveJ, moveL_FK,
 moveJ_IK).
 
 Modules: ``rtde`` (the RTDE wire codec), ``controller`` (the simulated controller state
-machine), ``servers`` (the RTDE, dashboard and script servers; ``URMock``).
+machine), ``motion`` (a linear move), ``dashboard`` (the dashboard's command table),
+``urcap`` (the External Control URCap), ``servers`` (the RTDE, dashboard and script
+servers; ``URMock``).
 """
 
 from __future__ import annotations
@@ -59,6 +69,9 @@ from .controller import (
     CMD_WATCHDOG,
     HOME_Q,
     JOINT_RUNNING_MODE,
+    ROBOT_MODE_IDLE,
+    ROBOT_MODE_NAMES,
+    ROBOT_MODE_POWER_OFF,
     ROBOT_MODE_RUNNING,
     RUNTIME_PAUSED,
     RUNTIME_PLAYING,
@@ -82,7 +95,8 @@ __all__ = [
     "CMD_MOVEJ", "CMD_MOVEJ_IK", "CMD_MOVEL", "CMD_MOVEL_FK", "CMD_NO_CMD", "CMD_STOPJ",
     "CMD_STOPL", "CMD_STOP_SCRIPT", "CMD_WATCHDOG", "DASHBOARD_PORT", "HOME_Q",
     "JOINT_RUNNING_MODE", "MAX_FREQUENCY_HZ", "MIN_FREQUENCY_HZ", "PackageType", "Recipe",
-    "ROBOT_MODE_RUNNING", "RTDE_PORT", "RUNTIME_PAUSED", "RUNTIME_PLAYING", "RUNTIME_STOPPED",
+    "ROBOT_MODE_IDLE", "ROBOT_MODE_NAMES", "ROBOT_MODE_POWER_OFF", "ROBOT_MODE_RUNNING",
+    "RTDE_PORT", "RUNTIME_PAUSED", "RUNTIME_PLAYING", "RUNTIME_STOPPED",
     "SAFETY_NORMAL", "SAFETY_PROTECTIVE_STOP", "SCRIPT_PORT", "URController", "URFaults",
     "URMock", "rtde_type",
 ]

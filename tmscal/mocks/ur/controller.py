@@ -24,20 +24,23 @@ from typing import Any
 import numpy as np
 
 from ...geometry import (
-    matrix_from_rotvec,
     pose_from_rotvec,
     rotvec_from_matrix,
     rotvec_pose_from_matrix,
 )
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
+from .motion import Motion
 from .rtde import rtde_type, zero_value
 
 log = logging.getLogger(__name__)
 
 # Controller constants (UR e-Series / CB3 RTDE definitions).
 RUNTIME_STOPPED, RUNTIME_PLAYING, RUNTIME_PAUSED = 1, 2, 4
-ROBOT_MODE_RUNNING = 7
+ROBOT_MODE_POWER_OFF, ROBOT_MODE_IDLE, ROBOT_MODE_RUNNING = 3, 5, 7
+#: RTDE ``robot_mode`` values as the dashboard's ``robotmode`` names them
+ROBOT_MODE_NAMES = {-1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING",
+                    3: "POWER_OFF", 4: "POWER_ON", 5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING"}
 SAFETY_NORMAL, SAFETY_PROTECTIVE_STOP = 1, 3
 SAFETY_BIT_NORMAL, SAFETY_BIT_PROTECTIVE, SAFETY_BIT_STOPPED_BY_SAFETY = 1 << 0, 1 << 2, 1 << 10
 ROBOT_BIT_POWER_ON, ROBOT_BIT_PROGRAM_RUNNING = 1 << 0, 1 << 1
@@ -62,7 +65,7 @@ SCRIPT_PERIOD_S = 0.004
 
 #: Output variables whose value never changes in the mock.
 CONSTANT_OUTPUTS: dict[str, Any] = {
-    "robot_mode": ROBOT_MODE_RUNNING, "joint_mode": [JOINT_RUNNING_MODE] * 6,
+    "joint_mode": [JOINT_RUNNING_MODE] * 6,
     "joint_temperatures": [30.0] * 6, "actual_joint_voltage": [48.0] * 6,
     "actual_main_voltage": 48.0, "actual_robot_voltage": 48.0, "actual_robot_current": 0.5,
     "speed_scaling": 1.0, "target_speed_fraction": 1.0, "actual_execution_time": 0.3,
@@ -75,8 +78,10 @@ CONSTANT_OUTPUTS: dict[str, Any] = {
 class URFaults:
     """Faults to inject. Moves (moveL, moveJ, moveL_FK, moveJ_IK) are counted from 1.
 
-    ``protective_stop_at_move``: the k-th move triggers a protective stop half-way (the program
-    pauses; the client's ``moveL`` fails). ``drop_at_move``: the network link fails during
+    ``protective_stop_at_move``: the k-th move triggers a protective stop half-way (the control
+    script stops; the client's ``moveL`` fails). ``power_off_at_move``: the robot is powered
+    off (robot mode POWER_OFF) half-way through the k-th move, as when someone presses the
+    pendant's power button; the program stops. ``drop_at_move``: the network link fails during
     the k-th move: the controller finishes that move, and when the client clears the command
     every client socket (RTDE, dashboard, script) is shut down and the listeners close, so
     reconnects are refused (named like the DENSO mock's ``drop_at_request``; the earlier name
@@ -87,6 +92,7 @@ class URFaults:
 
     protective_stop_at_move: int | None = None
     drop_at_move: int | None = None
+    power_off_at_move: int | None = None
     drop_connection_at_move: InitVar[int | None] = None
 
     def __post_init__(self, drop_connection_at_move: int | None) -> None:
@@ -103,56 +109,23 @@ URFaults.drop_connection_at_move = property(  # type: ignore[assignment,misc]
     lambda self: self.drop_at_move, doc="The earlier name of ``drop_at_move``.")
 
 
-@dataclass
-class Motion:
-    """A linear move of the flange (base_from_flange 4×4 mm) under way."""
-
-    start: np.ndarray          # base_from_flange 4×4 mm at the start
-    target: np.ndarray         # base_from_flange 4×4 mm commanded
-    t0: float
-    duration: float            # s
-    asynchronous: bool
-    speed: float               # m/s (rad/s for rotation-only moves)
-    stop_fraction: float | None = None   # protective stop at this fraction of the motion
-
-    def fraction(self, now: float) -> float:
-        if self.duration <= 0:
-            return 1.0
-        return min(1.0, max(0.0, (now - self.t0) / self.duration))
-
-    def pose_at(self, f: float) -> np.ndarray:
-        """Interpolated base_from_flange (mm): translation lerp, rotation along the geodesic."""
-        if f >= 1.0:
-            return self.target.copy()
-        out = np.eye(4)
-        out[:3, 3] = self.start[:3, 3] + f * (self.target[:3, 3] - self.start[:3, 3])
-        rel = self.start[:3, :3].T @ self.target[:3, :3]
-        out[:3, :3] = self.start[:3, :3] @ matrix_from_rotvec(f * rotvec_from_matrix(rel))
-        return out
-
-    def velocity(self, now: float) -> list[float]:
-        """TCP speed [vx, vy, vz (m/s), wx, wy, wz (rad/s)] in the base frame (zero when
-        done)."""
-        if self.duration <= 0 or self.fraction(now) >= 1.0:
-            return [0.0] * 6
-        v = (self.target[:3, 3] - self.start[:3, 3]) / 1000.0 / self.duration
-        rel = self.start[:3, :3].T @ self.target[:3, :3]
-        w = self.start[:3, :3] @ rotvec_from_matrix(rel) / self.duration
-        return [float(x) for x in (*v, *w)]
-
-
 class URController:
     """The controller state machine serving ``rig`` (see the module docstring).
 
     ``clock``: ``REAL_TIME``, moves take distance/speed seconds; ``FAST``, they complete at
     once. ``faults``: ``URFaults`` to inject. ``program_running``: a control program runs at
-    start (runtime_state 2, ready); False, the controller starts stopped. State is guarded
+    start (runtime_state 2, ready); False, the controller starts stopped. ``robot_mode``
+    (RTDE values, ``ROBOT_MODE_RUNNING`` by default; ``ROBOT_MODE_POWER_OFF``: powered off)
+    and ``remote_control`` (the pendant's Remote/Local Control switch) are the operator's:
+    a program starts only on a RUNNING robot, with no protective stop, and (over the network)
+    in remote control, as on an e-Series controller. State is guarded
     by ``_lock``; ``_tick()`` is one cycle of the control script. ``_link_down()`` is the
     hook a server fills to drop its connections (the ``drop_at_move`` fault).
     """
 
     def __init__(self, rig: SimRig, clock: Clock = REAL_TIME, faults: URFaults = URFaults(),
-                 program_running: bool = True) -> None:
+                 program_running: bool = True, robot_mode: int = ROBOT_MODE_RUNNING,
+                 remote_control: bool = True) -> None:
         self.rig = rig
         self.clock = clock
         self.faults = faults
@@ -165,6 +138,9 @@ class URController:
         self.out_double = [0.0] * N_REGISTERS
         self.external_force_torque = [0.0] * 6
         self.safety_mode = SAFETY_NORMAL
+        self.robot_mode = int(robot_mode)
+        self.remote_control = bool(remote_control)
+        program_running = program_running and self.robot_mode == ROBOT_MODE_RUNNING
         self.runtime_state = RUNTIME_PLAYING if program_running else RUNTIME_STOPPED
         self.target_q = list(HOME_Q)
         self._program_loaded = program_running
@@ -194,7 +170,7 @@ class URController:
         return SAFETY_BIT_NORMAL
 
     def _robot_status_bits(self) -> int:
-        bits = ROBOT_BIT_POWER_ON
+        bits = ROBOT_BIT_POWER_ON if self.robot_mode > ROBOT_MODE_POWER_OFF else 0
         if self.runtime_state == RUNTIME_PLAYING:
             bits |= ROBOT_BIT_PROGRAM_RUNNING
         return bits
@@ -244,6 +220,7 @@ class URController:
             "target_TCP_speed": self._tcp_speed,
             "actual_q": lambda now: self.target_q,
             "target_q": lambda now: self.target_q,
+            "robot_mode": lambda now: self.robot_mode,
             "safety_mode": lambda now: self.safety_mode,
             "safety_status": lambda now: self.safety_mode,
             "safety_status_bits": lambda now: self._safety_status_bits(),
@@ -302,6 +279,43 @@ class URController:
         self._write_async(-1)
         log.info("UR mock: control script running (%s)", why)
 
+    def why_no_program(self, network: bool) -> str | None:
+        """Why the controller would refuse to start a program now (None: it would start it):
+        the robot is not RUNNING (powered off, brakes engaged), a protective stop is active,
+        or (``network``: the program comes over the script port, not from the pendant) the
+        robot is in local control."""
+        if self.robot_mode != ROBOT_MODE_RUNNING:
+            return f"robot mode {ROBOT_MODE_NAMES.get(self.robot_mode, self.robot_mode)}"
+        if self.safety_mode != SAFETY_NORMAL:
+            return "protective stop"
+        if network and not self.remote_control:
+            return "local control (remote control is off)"
+        return None
+
+    def power_off(self, why: str = "power off") -> None:
+        """The robot is powered off: motion stops where it is, the program stops."""
+        with self._lock:
+            self._stop_program(why)
+            self.robot_mode = ROBOT_MODE_POWER_OFF
+            log.warning("UR mock: robot powered off (%s)", why)
+
+    def power_on(self) -> None:
+        """Power on (robot mode IDLE: brakes still engaged)."""
+        with self._lock:
+            if self.robot_mode == ROBOT_MODE_POWER_OFF:
+                self.robot_mode = ROBOT_MODE_IDLE
+
+    def release_brakes(self) -> None:
+        """Brake release: an IDLE robot becomes RUNNING."""
+        with self._lock:
+            if self.robot_mode == ROBOT_MODE_IDLE:
+                self.robot_mode = ROBOT_MODE_RUNNING
+
+    def set_remote_control(self, on: bool) -> None:
+        """The pendant's Remote/Local Control switch."""
+        with self._lock:
+            self.remote_control = bool(on)
+
     def _stop_program(self, why: str) -> None:
         self._reset_script(RUNTIME_STOPPED)
         log.info("UR mock: program stopped (%s)", why)
@@ -342,13 +356,19 @@ class URController:
                                "resumed move", resumed=True)
 
     def _protective_stop(self, m: Motion) -> None:
+        """A fault half-way through motion ``m``: the flange stops there and the control
+        script stops (runtime_state STOPPED); it runs again only when re-uploaded (or played
+        from the dashboard) after the stop is cleared. ``m.stop_kind`` "power_off": the robot
+        is powered off instead of protective-stopped."""
         f = m.stop_fraction if m.stop_fraction is not None else 0.5
         self._halt(m, f)
-        self._interrupted = m
-        self.safety_mode = SAFETY_PROTECTIVE_STOP
-        self.runtime_state = RUNTIME_PAUSED
         if m.asynchronous:
             self._write_async(-1)
+        if m.stop_kind == "power_off":
+            self.power_off(f"power off during move {self.move_count}")
+            return
+        self.safety_mode = SAFETY_PROTECTIVE_STOP
+        self._stop_program(f"protective stop during move {self.move_count}")
         log.warning("UR mock: PROTECTIVE STOP during move %d (flange stopped at %.0f%%)",
                     self.move_count, 100 * f)
 
@@ -465,10 +485,13 @@ class URController:
             self._runtime_error(f"{what}: target or duration not finite ({duration} s)")
             return
         self._abort_motion(now)
-        stop_at = (0.5 if not resumed and self.faults.protective_stop_at_move == self.move_count
-                   else None)
+        stop_at, kind = None, "protective"
+        if not resumed and self.faults.protective_stop_at_move == self.move_count:
+            stop_at = 0.5
+        elif not resumed and self.faults.power_off_at_move == self.move_count:
+            stop_at, kind = 0.5, "power_off"
         self._motion = Motion(start, np.asarray(target, dtype=np.float64).copy(), now,
-                              duration, asynchronous, speed, stop_at)
+                              duration, asynchronous, speed, stop_at, kind)
         log.debug("UR mock: %s move %d, %.1f mm, %.3f rad, %.3f s%s", what, self.move_count,
                   dist_m * 1000, angle, duration, " (async)" if asynchronous else "")
         if asynchronous:

@@ -18,14 +18,12 @@ from ..clock import REAL_TIME, Clock
 from ..net import loopback_family
 from ..server import MockDevice, TCPListener
 from .controller import (
-    RUNTIME_PAUSED,
-    RUNTIME_PLAYING,
-    RUNTIME_STOPPED,
-    SAFETY_NORMAL,
+    ROBOT_MODE_RUNNING,
     SCRIPT_PERIOD_S,
     URController,
     URFaults,
 )
+from .dashboard import DASHBOARD_BANNER, _Dashboard
 from .rtde import (
     CONTROLLER_VERSION,
     HEADER,
@@ -38,6 +36,7 @@ from .rtde import (
     parse_names,
     recv_exact,
 )
+from .urcap import _ExternalControl
 
 log = logging.getLogger(__name__)
 
@@ -55,9 +54,6 @@ POLL_S = 0.2
 MAX_DASHBOARD_LINE = 65536
 MAX_SCRIPT_BYTES = 4_000_000
 
-DASHBOARD_BANNER = b"Connected: Universal Robots Dashboard Server\n"
-#: The control program's name as the dashboard reports it.
-PROGRAM_NAME = "rtde_control"
 
 
 class URMock(URController, MockDevice):
@@ -88,22 +84,42 @@ class URMock(URController, MockDevice):
         ready), as it must be for clients using ``flags=0``; with the default upload flag
         ur_rtde then stops it and uploads its own. False: the controller starts stopped and
         only a script upload (or dashboard ``play`` after one) makes it run.
+    robot_mode, remote_control:
+        The operator's state (see ``URController``): e.g. ``ROBOT_MODE_POWER_OFF`` for a
+        powered-off robot, ``remote_control=False`` for a pendant in Local Control. Tests
+        change them while the mock runs (``power_off``, ``power_on``, ``release_brakes``,
+        ``set_remote_control``; the dashboard's ``power on``/``power off``/``brake release``).
+    urcap_port, urcap_host:
+        The External Control URCap (Universal Robots' ``Universal_Robots_ExternalControl_
+        URCap``): when ``urcap_port`` is set, the loaded program is an External Control
+        program, and ``pendant_play()`` (the operator pressing Play) connects to the remote
+        PC at ``urcap_host:urcap_port``, sends ``request_program``, and runs the script that
+        ur_rtde's script sender (``FLAG_USE_EXT_UR_CAP``) answers. Nothing is fetched over the
+        script port. ``play_when_ready=True`` presses Play as soon as the PC answers.
     """
 
     def __init__(self, rig: SimRig, host: str = "127.0.0.2", clock: Clock = REAL_TIME,
                  faults: URFaults = URFaults(), version: tuple[int, int, int, int] = (
                      5, 11, 0, 108249),
                  serial: str = "20185500001", model: str = "UR5",
-                 program_running: bool = True) -> None:
+                 program_running: bool = True, robot_mode: int = ROBOT_MODE_RUNNING,
+                 remote_control: bool = True, urcap_port: int | None = None,
+                 urcap_host: str = "127.0.0.1", play_when_ready: bool = False) -> None:
         loopback_family(host, "URMock host")  # refuses a non-loopback host at once
+        loopback_family(urcap_host, "URMock urcap_host")
         if len(version) != 4:
             raise ValueError(f"version must be (major, minor, bugfix, build), got {version!r}")
-        super().__init__(rig, clock=clock, faults=faults, program_running=program_running)
+        super().__init__(rig, clock=clock, faults=faults,
+                         program_running=program_running and urcap_port is None,
+                         robot_mode=robot_mode, remote_control=remote_control)
+        self.urcap = _ExternalControl(self, urcap_host, urcap_port, play_when_ready) \
+            if urcap_port is not None else None
         self.host = host
         self.version = tuple(int(v) for v in version)
         self.serial = serial
         self.model = model
         self.last_script: str | None = None
+        self.last_urcap_script: str | None = None
         self.scripts_received = 0
         self.dashboard_log: list[str] = []
         self._stop = threading.Event()
@@ -131,6 +147,8 @@ class URMock(URController, MockDevice):
         self._script_thread = threading.Thread(target=self._script_loop, name="ur-script",
                                                daemon=True)
         self._script_thread.start()
+        if self.urcap is not None:
+            self.urcap.start()
         log.info("UR mock serving on %s (RTDE %d, dashboard %d, script %d)", self.host,
                  RTDE_PORT, DASHBOARD_PORT, SCRIPT_PORT)
         return self.host
@@ -230,112 +248,24 @@ class URMock(URController, MockDevice):
         self.scripts_received += 1
         log.info("UR mock: received program %r (%d bytes)", m.group(2), len(data))
         with self._lock:
-            self._start_program(f"script {m.group(2)!r} uploaded")
+            why = self.why_no_program(network=True)
+            if why is None:
+                self._start_program(f"script {m.group(2)!r} uploaded")
+            else:   # the real controller shows a popup and runs nothing
+                log.warning("UR mock: program %r not started: %s", m.group(2), why)
         return True
 
-
-class _Dashboard:
-    """The dashboard server's command table: a fixed reply, or a handler of the command line
-    (exact commands, then prefixes), all lower-cased; anything else gets the real server's
-    ``could not understand: '…'``."""
-
-    FIXED = {
-        "is in remote control": "true", "close safety popup": "closing safety popup",
-        "close popup": "closing popup", "isprogramsaved": f"true {PROGRAM_NAME}.urp",
-        "robotmode": "Robotmode: RUNNING", "power on": "Powering on",
-        "power off": "Powering off", "brake release": "Brake releasing",
-    }
-    HANG_UP = {"quit": "Disconnected", "shutdown": "Shutting down"}
-
-    def __init__(self, mock: URMock) -> None:
-        self.mock = mock
-        self.commands: dict[str, Callable[[str], str]] = {
-            "polyscopeversion": self._version,
-            "get serial number": lambda cmd: mock.serial,
-            "get robot model": lambda cmd: mock.model,
-            "stop": self._stop,
-            "play": self._play,
-            "pause": self._pause,
-            "unlock protective stop": self._unlock,
-            "restart safety": self._restart_safety,
-            "running": self._running,
-            "programstate": self._program_state,
-            "get loaded program": self._loaded_program,
-            "safetymode": lambda cmd: f"Safetymode: {self._safety()}",
-            "safetystatus": lambda cmd: f"Safetystatus: {self._safety()}",
-        }
-        self.prefixes: list[tuple[str, Callable[[str], str]]] = [
-            ("popup ", lambda cmd: "showing popup"),
-            ("load ", lambda cmd: f"Loading program: {cmd[5:]}"),
-            ("addtolog ", lambda cmd: "Added log message"),
-            ("setuserrole ", lambda cmd: "Setting user role: " + cmd[12:]),
-        ]
-
-    def reply(self, line: str) -> tuple[str, bool]:
-        """The answer to one command line, and whether to hang up after it."""
-        cmd = line.strip()
-        low = cmd.lower()
-        if low in self.FIXED:
-            return self.FIXED[low], False
-        if low in self.HANG_UP:
-            return self.HANG_UP[low], True
-        handler = self.commands.get(low)
-        if handler is None:
-            handler = next((h for p, h in self.prefixes if low.startswith(p)), None)
-        if handler is None:
-            return f"could not understand: '{cmd}'", False
-        with self.mock._lock:
-            return handler(cmd), False
-
-    def _version(self, cmd: str) -> str:
-        return f"URSoftware {'.'.join(str(x) for x in self.mock.version)} (Mar 24 2021)"
-
-    def _stop(self, cmd: str) -> str:
-        # A real controller answers "Stopped" even when the program has just ended
-        # (ur_rtde sends STOP_SCRIPT and then "stop", and insists on "Stopped").
-        if self.mock.runtime_state != RUNTIME_STOPPED:
-            self.mock._stop_program("dashboard stop")
-        return "Stopped"
-
-    def _play(self, cmd: str) -> str:
-        m = self.mock
-        if not m._program_loaded or m.safety_mode != SAFETY_NORMAL:
-            return "Failed to execute: play"
-        if m.runtime_state == RUNTIME_PAUSED:
-            m._resume()
-        else:
-            m._start_program("dashboard play")
-        return "Starting program"
-
-    def _pause(self, cmd: str) -> str:
-        if self.mock.runtime_state != RUNTIME_PLAYING:
-            return "Failed to execute: pause"
-        self.mock._pause()
-        return "Pausing program"
-
-    def _unlock(self, cmd: str) -> str:
-        self.mock.safety_mode = SAFETY_NORMAL
-        return "Protective stop releasing"
-
-    def _restart_safety(self, cmd: str) -> str:
-        self.mock.safety_mode = SAFETY_NORMAL
-        return "Restarting safety"
-
-    def _running(self, cmd: str) -> str:
-        return f"Program running: {str(self.mock.runtime_state == RUNTIME_PLAYING).lower()}"
-
-    def _program_state(self, cmd: str) -> str:
-        state = {RUNTIME_PLAYING: "PLAYING", RUNTIME_PAUSED: "PAUSED"}.get(
-            self.mock.runtime_state, "STOPPED")
-        return f"{state} {PROGRAM_NAME}.urp"
-
-    def _loaded_program(self, cmd: str) -> str:
-        if self.mock._program_loaded:
-            return f"Loaded program: /programs/{PROGRAM_NAME}.urp"
-        return "No program loaded"
-
-    def _safety(self) -> str:
-        return "PROTECTIVE_STOP" if self.mock.protective_stopped else "NORMAL"
+    def pendant_play(self) -> bool:
+        """The operator presses Play on the pendant: with the External Control URCap, the
+        program node fetches the script from the PC and runs it; otherwise the loaded program
+        (re)starts. True if a program now runs."""
+        if self.urcap is not None:
+            return self.urcap.play()
+        with self._lock:
+            if not self._program_loaded or self.why_no_program(network=False) is not None:
+                return False
+            self._start_program("pendant play")
+            return True
 
 
 class _RTDEConnection:
