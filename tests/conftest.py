@@ -1,9 +1,11 @@
 """Shared pytest options and fixtures.
 
-``--fuzz-long`` raises the fuzz budget (see ``tests/fuzz.py``). The fixtures give every test
-the same rigs (``tests/rigs.py``): ``configs_dir`` and ``tools_dir`` (the shipped configs and
-tool ROMs), ``sim_rig`` (the built-in TMS rig without noise, flange at P0) and ``mock_config``
-(a copy of a shipped mock config with sections changed, in the test's tmp_path).
+``--fuzz-long`` raises the fuzz budget (see ``tests/fuzz.py``); ``--rig CONFIG`` and the other
+``--rig-*`` options run the rig acceptance suite, ``tests/acceptance`` (``docs/acceptance.md``).
+The fixtures give every test the same rigs (``tests/rigs.py``): ``configs_dir`` and
+``tools_dir`` (the shipped configs and tool ROMs), ``sim_rig`` (the built-in TMS rig without
+noise, flange at P0) and ``mock_config`` (a copy of a shipped mock config with sections
+changed, in the test's tmp_path).
 """
 
 from __future__ import annotations
@@ -20,6 +22,21 @@ from tmscal.sim import SimRig
 def pytest_addoption(parser) -> None:
     parser.addoption("--fuzz-long", action="store_true", default=False,
                      help="run every fuzz test with at least 100,000 examples (slow)")
+    # the rig acceptance suite, tests/acceptance (docs/acceptance.md)
+    group = parser.getgroup("rig acceptance (tests/acceptance, docs/acceptance.md)")
+    group.addoption("--rig", metavar="CONFIG", default=None,
+                    help="run tests/acceptance against the devices of this rig config "
+                         "(without it those tests are skipped)")
+    group.addoption("--rig-report", metavar="PATH", default=None,
+                    help="where to write the acceptance report (default: "
+                         "acceptance-report-<date>.txt in the current folder, never "
+                         "overwriting an earlier one)")
+    group.addoption("--rig-no-start-mocks", action="store_true", default=False,
+                    help="a config with a mock: section is served by mocks that are already "
+                         "running (tmscal mock CONFIG); by default the suite starts them")
+    group.addoption("--rig-frames", metavar="N", type=int, default=100,
+                    help="distinct tracker frames read by the tool-visibility check "
+                         "(default 100)")
 
 
 def pytest_configure(config) -> None:
