@@ -40,6 +40,7 @@ from tmscal.drivers.denso.variant import (
     VT_UI4,
     VT_VARIANT,
     Variant,
+    to_variant,
 )
 from tmscal.errors import (
     ConfigError,
@@ -97,7 +98,7 @@ R_180_0_90 = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 def test_move_without_takearm_then_without_motor(client: BCAPClient, rig: SimRig) -> None:
     r = open_robot(client)
-    pose = "@P P(400, 50, 300, 180, 0, 90, -1)"
+    pose = "@E P(400, 50, 300, 180, 0, 90, -1)"
     with pytest.raises(DeviceError) as ei:
         client.robot_move(r, 2, pose, "")
     assert ei.value.code == E_ACCESSDENIED and ei.value.text == "E_ACCESSDENIED"
@@ -153,20 +154,49 @@ def test_variables_errors_and_descriptions(client: BCAPClient) -> None:
     client.service_stop()
 
 
-def test_busy_while_next_motion_runs_then_halt(rig: SimRig) -> None:
-    # motion_time_s=60: the second request certainly arrives while the motion runs
-    with DensoMock(rig, clock=REAL_TIME, motion_time_s=60.0) as m, \
-            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=5.0) as c:
+def test_busy_connection_refuses_even_halt_which_comes_over_a_second_one(rig: SimRig) -> None:
+    # hold_move_at=1: the motion runs until halted, so every request below meets it running
+    with DensoMock(rig, clock=FAST, faults=DensoFaults(hold_move_at=1)) as m, \
+            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=5.0) as c, \
+            BCAPClient("127.0.0.1", m.port, timeout_s=5.0) as watch:
         r = open_robot(c)
         c.take_arm(r)
         c.motor(r, True)
-        c.robot_move(r, 2, "@P P(500, 0, 300, 180, 0, 0)", "NEXT")  # answers at once
-        with pytest.raises(DeviceError) as ei:
-            c.cur_pos(r)
-        assert ei.value.code == E_BUSY_PROC and ei.value.text == "E_BUSY_PROC"
-        c.robot_halt(r)
+        c.robot_move(r, 2, "@E P(500, 0, 300, 180, 0, 0)", "NEXT")  # answers at once
+        for request in (lambda: c.cur_pos(r), lambda: c.robot_halt(r)):
+            with pytest.raises(DeviceError) as ei:
+                request()
+            assert ei.value.code == E_BUSY_PROC and ei.value.text == "E_BUSY_PROC"
+        w = open_robot(watch)  # DENSO's ROS driver halts over its own "watch" connection
+        watch.robot_halt(w)
         assert np.allclose(c.cur_pos(r)[:3], [500, 0, 400])  # halted: rig not moved
-        assert m.stats["busy"] == 1
+        assert m.stats["busy"] == 2 and m.stats["halts"] == 1
+
+
+def test_pass_move_replies_before_the_arm_is_still_end_move_after(client: BCAPClient,
+                                                                  rig: SimRig) -> None:
+    r = open_robot(client)
+    client.take_arm(r)
+    client.motor(r, True)
+    start = rig.flange.copy()
+    client.robot_move(r, 2, "@P P(510, 0, 400, 180, 0, 0)", "")
+    assert np.allclose(rig.flange, start)  # replied; the arm is not yet at rest on the target
+    assert np.allclose(client.cur_pos(r)[:3], [510, 0, 400])  # still by the next request
+    client.robot_move(r, 2, to_variant([[520.0, 0.0, 400.0, 180.0, 0.0, 0.0, -1], "P", "@E"]),
+                      "")
+    assert np.allclose(rig.flange[:3, 3], [520, 0, 400])  # @E: at rest when it replies
+
+
+def test_latched_error_blocks_takearm_until_clearerror(rig: SimRig) -> None:
+    with DensoMock(rig, clock=FAST, faults=DensoFaults(latched_error=0x84204051)) as m, \
+            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=5.0) as c:
+        r = open_robot(c)
+        with pytest.raises(RobotFault) as ei:
+            c.take_arm(r)
+        assert ei.value.code == 0x84204051
+        c.controller_execute(1, "ClearError")  # controller handle 1: the first one made
+        c.take_arm(r)
+        c.motor(r, True)
 
 
 def test_watchdog_keepalives_are_discarded(rig: SimRig) -> None:
@@ -176,7 +206,7 @@ def test_watchdog_keepalives_are_discarded(rig: SimRig) -> None:
         r = open_robot(c, ",WDT=50")
         c.take_arm(r)
         c.motor(r, True)
-        c.robot_move(r, 2, "@P P(510, 0, 400, 180, 0, 0)", "")
+        c.robot_move(r, 2, "@E P(510, 0, 400, 180, 0, 0)", "")
         # returned only with the final reply: the rig is already at the target
         assert np.allclose(rig.commanded[:3, 3], [510, 0, 400])
         assert m.stats["keepalives"] == 4
@@ -352,14 +382,17 @@ def test_mock_serves_on_every_loopback_spelling(rig: SimRig, host: str) -> None:
             c.service_start("")
 
 
-def test_denso_robot_stop_halts_a_blocking_move(rig: SimRig) -> None:
+def test_stop_halts_a_running_move_over_a_second_connection(rig: SimRig) -> None:
     from tests.rigs import wait_until
 
-    with DensoMock(rig, clock=REAL_TIME, motion_time_s=60.0) as m, \
-            DensoRobot(port=port_of(m.start()), timeout_s=30.0) as robot:
+    # hold_move_at=1: the move runs until halted; timeout_s=20 only guards against a hang
+    with DensoMock(rig, clock=FAST, faults=DensoFaults(hold_move_at=1)) as m, \
+            DensoRobot(port=port_of(m.start()), timeout_s=20.0) as robot:
         errors: list[BaseException] = []
+        started = threading.Event()
 
         def move() -> None:
+            started.set()
             try:
                 robot.move_to(TMS_RIG_P0 @ make_pose(t=[0, 0, 50]))
             except BaseException as e:  # handed to the test thread
@@ -367,13 +400,44 @@ def test_denso_robot_stop_halts_a_blocking_move(rig: SimRig) -> None:
 
         t = threading.Thread(target=move, daemon=True)
         t.start()
-        wait_until(lambda: m.stats["moves"] == 1, 10.0, "the mock to start the move")
-        robot.stop()  # the move thread holds the connection: halt is sent without waiting
+        started.wait(10.0)
+        wait_until(lambda: m.motion is not None, 10.0, "the mock to start the move")
+        robot.stop()  # returns once the controller acknowledged the halt
         t.join(10.0)
         assert not t.is_alive()
         assert len(errors) == 1 and isinstance(errors[0], RobotFault)
         assert errors[0].code == 0x80004005  # the mock answers a halted move with E_FAIL
+        assert m.stats["halts"] == 1 and m.stats["busy"] == 0
         assert np.allclose(robot.flange_pose(), TMS_RIG_P0)
+
+
+def test_stop_raises_when_the_halt_cannot_reach_the_controller(rig: SimRig) -> None:
+    m = DensoMock(rig, clock=FAST)
+    robot = DensoRobot(port=port_of(m.start()), halt_timeout_s=2.0)
+    with m:
+        robot.open()
+    # the controller is gone: the halt connection is reopened once, refused, and said so
+    with pytest.raises(ConnectionLost, match="cannot connect"):
+        robot.stop()
+    robot.close()  # best effort, does not raise
+    robot.stop()  # a closed robot: never raises
+
+
+def test_open_clears_a_latched_error_before_takearm(rig: SimRig) -> None:
+    with DensoMock(rig, clock=FAST, faults=DensoFaults(latched_error=0x84204051)) as m, \
+            DensoRobot(port=port_of(m.start())) as robot:
+        assert m.latched_error is None and m.stats["clear_errors"] == 1
+        target = TMS_RIG_P0 @ make_pose(t=[10, 0, 0])
+        robot.move_to(target)
+        assert np.allclose(rig.flange, target)
+
+
+def test_open_replaces_a_low_external_speed_left_on_the_controller(rig: SimRig) -> None:
+    with DensoMock(rig, clock=FAST, max_linear_speed_mm_s=1000.0) as m:
+        m.ext_speed = 10.0  # left by the pendant: every move would take 10 × as long
+        with DensoRobot(port=port_of(m.start()), max_linear_speed_mm_s=1000.0) as robot:
+            robot.move_to(TMS_RIG_P0 @ make_pose(t=[0, 100, 0]), speed_mm_s=50.0)
+        assert m.last_motion_s == pytest.approx(100.0 / 50.0)  # 100 mm at 50 mm/s
 
 
 # --- CurPos integrity (issue 8) and acceleration (issue 2) ------------------------------------

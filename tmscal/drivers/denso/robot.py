@@ -4,11 +4,16 @@ Frames and units: poses are base_from_flange 4×4 in mm (the controller's P-type
 coordinates with no tool and work offset selected: x, y, z in mm, rx, ry, rz in degrees,
 converted only through ``tmscal.geometry``); speeds in mm/s, accelerations in mm/s².
 
-Session: Service_Start (``,WDT=<ms>`` if a watchdog is set) → Controller_Connect →
-Controller_GetRobot → TakeArm → ExtSpeed → Motor on. Moves are blocking ``Robot_Move``
-comp 2 (MOVE L) with the pose as a VARIANT array ``[[x, y, z, rx, ry, rz, fig], "P", "@P"]``
-(fig −1: the controller chooses the arm configuration) and the option ``SPEED=<percent>``.
-Close (best effort): Motor off, GiveArm, Robot_Release, Controller_Disconnect, Service_Stop.
+Session (as DENSO's own denso_robot_ros opens one): Service_Start (``,WDT=<ms>`` if a
+watchdog is set) → Controller_Connect → Controller_GetRobot → ``Controller_Execute
+ClearError`` (and ``ManualReset`` with ``manual_reset=True``, for a COBOTTA) → TakeArm →
+ExtSpeed → Motor on; then a second connection for Robot_Halt (:mod:`.halt`). Moves are
+blocking ``Robot_Move`` comp 2 (MOVE L) with the pose as a VARIANT array
+``[[x, y, z, rx, ry, rz, fig], "P", "@E"]`` (fig −1: the controller chooses the arm
+configuration; ``@E``: the reply comes when the arm has reached the target and settled, as in
+DENSO's value-move sample, not ``@P``/``@0``, which may reply while it still moves) and the
+option ``SPEED=<percent>``. Close (best effort): the halt connection, then Motor off, GiveArm,
+Robot_Release, Controller_Disconnect, Service_Stop. See ``docs/devices-denso.md``.
 
 Speed and acceleration (DENSO's RC8 manuals: the controller scales motion by percentages).
 The real speed is SPEED × ExtSpeed of the arm's maximum, the real acceleration (and
@@ -32,10 +37,11 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import DeviceError, ProtocolError
+from ...errors import ConnectionLost, DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
 from .client import DEFAULT_PORT, BCAPClient
+from .halt import HaltLink
 from .variant import to_variant
 
 log = logging.getLogger(__name__)
@@ -96,7 +102,10 @@ class DensoRobot(Robot):
     linear acceleration (mm/s²) that 100 % acceleration means (default
     :data:`DEFAULT_MAX_LINEAR_ACCEL_MM_S2`). ``ext_speed_percent``: the speed part of the
     ExtSpeed sent at open (default 100: the SPEED option alone sets the speed; lower it to slow
-    every move further). ``provider``/``machine``: the
+    every move further); it replaces whatever external speed the pendant or another program
+    left on the controller. ``manual_reset``: also send ``ManualReset`` after ClearError at
+    open (a COBOTTA's safety-state reset; an RC8/RC8A needs only ClearError). ``halt_timeout_s``:
+    the bound on each wait of the halt connection (connect, reply). ``provider``/``machine``: the
     CAO provider (``"CaoProv.DENSO.VRC9"`` for RC9) and its machine argument.
     ``robot_name``: the robot object ("Arm"). ``timeout_s``: the longest wait for any reply,
     including a move (re-armed by each S_EXECUTING keep-alive). ``watchdog_ms``: WDT for
@@ -112,7 +121,8 @@ class DensoRobot(Robot):
                  ext_speed_percent: float = 100.0,
                  provider: str = "CaoProv.DENSO.VRC", machine: str = "localhost",
                  robot_name: str = "Arm", timeout_s: float = 30.0,
-                 watchdog_ms: int | None = 400, fig: int = -1) -> None:
+                 watchdog_ms: int | None = 400, fig: int = -1, manual_reset: bool = False,
+                 halt_timeout_s: float = 5.0) -> None:
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         _positive("speed_mm_s", speed_mm_s)
         self.max_linear_speed_mm_s = _positive("max_linear_speed_mm_s", max_linear_speed_mm_s)
@@ -134,6 +144,11 @@ class DensoRobot(Robot):
         self.timeout_s = float(timeout_s)
         self.watchdog_ms = watchdog_ms
         self.fig = int(fig)
+        if not isinstance(manual_reset, bool):
+            raise ValueError(f"manual_reset must be true or false, got {manual_reset!r}")
+        self.manual_reset = manual_reset
+        self.halt_timeout_s = _positive("halt_timeout_s", halt_timeout_s)
+        self._halt: HaltLink | None = None
         self._client: BCAPClient | None = None
         self._ctrl: int | None = None
         self._robot: int | None = None
@@ -156,6 +171,7 @@ class DensoRobot(Robot):
         self._ctrl = c.controller_connect("", self.provider, self.machine, "")
         self._robot = c.controller_get_robot(self._ctrl, self.robot_name, "")
         self._controller_info = self._read_controller_info()
+        self._clear_errors()
         c.take_arm(self._robot)
         self._arm = True
         accel = self.accel_percent()
@@ -165,8 +181,19 @@ class DensoRobot(Robot):
                  self.max_linear_accel_mm_s2)
         c.motor(self._robot, True)
         self._motor = True
-        log.info("DENSO robot %r on %s:%d ready (motor on)", self.robot_name, self.host,
-                 self.port)
+        self._halt = HaltLink(self.host, self.port, self.provider, self.machine,
+                              self.robot_name, self.halt_timeout_s).open()
+        log.info("DENSO robot %r on %s:%d ready (motor on, halt connection open)",
+                 self.robot_name, self.host, self.port)
+
+    def _clear_errors(self) -> None:
+        """ClearError (and ManualReset when asked) before TakeArm, as DENSO's denso_robot_ros
+        does: an error latched on the controller would refuse TakeArm and Motor. A failure
+        raises (the controller cannot be cleared from here: see the pendant)."""
+        assert self._client is not None and self._ctrl is not None
+        self._client.controller_execute(self._ctrl, "ClearError")
+        if self.manual_reset:
+            self._client.controller_execute(self._ctrl, "ManualReset")
 
     def accel_percent(self) -> float:
         """The acceleration (= deceleration) percentage sent with ExtSpeed: the smaller of
@@ -194,6 +221,9 @@ class DensoRobot(Robot):
         return info
 
     def _close(self) -> None:
+        halt, self._halt = self._halt, None
+        if halt is not None:
+            halt.close()
         c = self._client
         if c is None:
             return
@@ -243,22 +273,31 @@ class DensoRobot(Robot):
         """Blocking MOVE L to base_from_flange ``pose`` (4×4 mm) at ``speed_mm_s``."""
         assert self._robot is not None
         p = [float(x) for x in denso_p_from_matrix(pose)]
-        target = to_variant([p + [self.fig], "P", "@P"])
+        target = to_variant([p + [self.fig], "P", "@E"])  # reply when reached and settled
         option = speed_option(speed_mm_s, self.max_linear_speed_mm_s)
         log.debug("DENSO MOVE L %s %s", np.round(p, 3).tolist(), option)
         # a failure HRESULT raises RobotFault (code = HRESULT); timeouts and drops their own
         self.client.robot_move(self._robot, 2, target, option, timeout_s=self.timeout_s)
 
     def _stop(self) -> None:
-        """Robot_Halt. If a move is waiting on this connection, the halt is sent without
-        waiting for its reply."""
-        c = self._client
-        if c is None or self._robot is None:
-            return
+        """Robot_Halt over the halt connection (the move's own connection answers anything
+        with E_BUSY_PROC while it runs) and check its reply. A dropped halt connection is
+        reopened once (each wait bounded by ``halt_timeout_s``). A failure is logged and
+        raised (``DeviceError`` / ``ConnectionLost`` / ``DeviceTimeout`` with its code)."""
+        if self._halt is None:
+            self._halt = HaltLink(self.host, self.port, self.provider, self.machine,
+                                  self.robot_name, self.halt_timeout_s)
         try:
-            c.robot_halt(self._robot, wait=not c.busy)
+            try:
+                self._halt.halt()
+            except ConnectionLost as e:
+                log.warning("DENSO halt connection lost (%s); reconnecting once", e)
+                self._halt.close(release=False)
+                self._halt.halt()
         except DeviceError as e:
-            log.warning("DENSO Robot_Halt failed: %s", e)
+            log.error("DENSO Robot_Halt failed: %s", e)
+            raise
+        log.info("DENSO Robot_Halt acknowledged")
 
 
 __all__ = ["DensoRobot", "speed_option", "accel_percent", "DEFAULT_MAX_LINEAR_ACCEL_MM_S2"]

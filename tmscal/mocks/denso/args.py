@@ -24,6 +24,8 @@ from ...drivers.denso.variant import (
 PCT_MIN, PCT_MAX = 0.01, 100.0
 
 _P_TEXT = re.compile(r"^\s*(?:@\w+\s+)?P\s*\(([^()]*)\)\s*$", re.IGNORECASE)
+_PASS_TEXT = re.compile(r"^\s*(@\w+)\s", re.IGNORECASE)
+_PASS = re.compile(r"^@(0|P|E|\d+(\.\d*)?)$", re.IGNORECASE)
 
 
 class Refusal(Exception):
@@ -121,3 +123,22 @@ def pose(v: Variant) -> list[float]:
     if len(vals) != 7 or not np.isfinite(vals).all():
         raise Refusal(E_INVALIDARG, f"pose needs 6 or 7 finite values, got {vals}")
     return vals
+
+
+def pass_mode(v: Variant) -> str:
+    """The path-end option of a Robot_Move pose, upper case: ``"@E"`` (wait until the arm has
+    reached the target and settled), ``"@P"`` (until the command reached it), ``"@0"`` or
+    ``"@<n>"`` (pass motion); from the text prefix (``"@E P(…)"``) or the third element of a
+    VARIANT array pose. Missing → ``"@0"`` (the controller's default, pass motion); anything
+    else → ``Refusal(E_INVALIDARG)``."""
+    mode = ""
+    if v.vt == VT_BSTR:
+        m = _PASS_TEXT.match(v.value)
+        mode = m.group(1) if m else ""
+    elif v.vt == VT_VARIANT | VT_ARRAY and len(v.value) > 2:
+        mode = text(v.value[2], "pose pass option").strip()
+    if not mode:
+        return "@0"
+    if not _PASS.match(mode):
+        raise Refusal(E_INVALIDARG, f"pose pass option {mode!r} is not @0, @P, @E or @<n>")
+    return mode.upper()

@@ -25,7 +25,6 @@ from ...drivers.denso.hresult import (
     E_ACCESSDENIED,
     E_CAO_OBJECT_NOTFOUND,
     E_EMERGENCY_STOP,
-    E_FAIL,
     E_HANDLE,
     E_INVALIDARG,
     E_MOTOR_OFF,
@@ -59,6 +58,9 @@ WDT_MIN_MS, WDT_MAX_MS = 10, 3_600_000
 BAD_CURPOS = ("nan", "inf", "short", "long", "bstr", "bool_array", "empty", "nested_bstr")
 #: A handler's answer when the reply is sent later (when a blocking move ends).
 DEFERRED = object()
+#: On the real-time clock, how long before the arm is still a pass (``@0``) or ``@P`` move
+#: replies (s): the command has reached the target, the servo has not (RC8 manuals).
+SETTLE_S = 0.05
 
 _CONTROLLER_VARIABLES = ("@VERSION", "@MODE")
 _ROBOT_VARIABLES = ("@CURRENT_POSITION", "@CURRENT_ANGLE")
@@ -79,6 +81,11 @@ class DensoFaults:
     "bool_array" (a BOOL array), "empty" (EMPTY), "nested_bstr" (a VARIANT array with a BSTR
     in it). None (default): correct replies. The mock reads its ``faults`` at every request,
     so a test may swap them (``dataclasses.replace``) while it serves.
+    ``hold_move_at``: the k-th Robot_Move does not end by itself (a stalled or very slow arm):
+    its connection stays busy until a Robot_Halt, on either clock. ``latched_error``: an error
+    HRESULT the controller holds when the mock starts (one left over from before, e.g. an
+    emergency stop that was released): TakeArm, Motor on and Robot_Move are refused with it
+    until ``Controller_Execute("ClearError")`` (read once, when the mock is built).
     """
 
     fail_move_at: int | None = None
@@ -88,6 +95,8 @@ class DensoFaults:
     drop_rate: float = 0.0
     seed: int = 0
     bad_curpos: str | None = None
+    hold_move_at: int | None = None
+    latched_error: int | None = None
 
     def __post_init__(self) -> None:
         if self.bad_curpos is not None and self.bad_curpos not in BAD_CURPOS:
@@ -95,9 +104,13 @@ class DensoFaults:
                              f"{self.bad_curpos!r}")
 
 
-@dataclass
+@dataclass(eq=False)
 class Job:
-    """A motion in progress on one connection (times on the mock's clock, s)."""
+    """A motion in progress on one connection (times on the mock's clock, s). ``end`` is
+    when the reply is due and the connection is free again (``inf``: only a Robot_Halt ends
+    it); ``settle_s``: the arm is still this long after ``end`` (a pass or ``@P`` move: the
+    reply comes before the arm is still); ``halted``: set by Robot_Halt from any
+    connection, the owning connection then ends the job."""
 
     target: np.ndarray  # base_from_flange 4×4 mm
     start: float
@@ -105,6 +118,8 @@ class Job:
     serial: int | None  # blocking move: reply pending with this serial; None for NEXT
     wdt_s: float | None
     next_keepalive: float = 0.0
+    settle_s: float = 0.0
+    halted: bool = False
 
     def __post_init__(self) -> None:
         if self.wdt_s:
@@ -165,10 +180,19 @@ class DensoController:
         self.move_accel: float | None = None   # ACCEL / DECEL of the last move (percent)
         self.move_decel: float | None = None
         self.robot_speed = 100.0
+        #: the controller's latched error (HRESULT) until ClearError; see DensoFaults
+        self.latched_error: int | None = self.faults.latched_error
+        #: the motion the arm runs (one arm: at most one), and where an arm that replied before
+        #: it was still comes to rest: (target, time; inf on the fast clock = the next request)
+        self.motion: Job | None = None
+        self.coast: tuple[np.ndarray, float] | None = None
+        #: modelled duration (s) of the last move, distance / (SPEED × ExtSpeed × max speed),
+        #: computed on both clocks (the fast clock does not wait for it)
+        self.last_motion_s: float | None = None
         self.fig = -1
         self.variables: dict[str, Any] = {}
         self.stats = {"connections": 0, "requests": 0, "moves": 0, "keepalives": 0,
-                      "busy": 0, "dropped": 0}
+                      "busy": 0, "dropped": 0, "halts": 0, "clear_errors": 0}
         # function ID → (least number of arguments, handler)
         self._functions: dict[int, tuple[int, Handler]] = {
             Fn.SERVICE_START: (0, self._on_service_start),
@@ -288,6 +312,13 @@ class DensoController:
             code = int(args.number(a[2], "error code")) & 0xFFFFFFFF
             return Variant(VT_BSTR, hresult_name(code))
         if cmd.lower() == "clearerror":
+            with self._lock:
+                self.stats["clear_errors"] += 1
+                if self.latched_error is not None:
+                    log.info("DENSO mock: ClearError clears 0x%08X", self.latched_error)
+                self.latched_error = None
+            return Variant(VT_EMPTY)
+        if cmd.lower() == "manualreset":  # COBOTTA's safety-state reset; nothing to do here
             return Variant(VT_EMPTY)
         raise Refusal(E_NOTIMPL, f"Controller_Execute {cmd!r} not implemented")
 
@@ -308,10 +339,14 @@ class DensoController:
         return run(sess, a[2])
 
     def _on_robot_halt(self, sess: Session, serial: int, a: list[Variant]) -> None:
+        """Stop the arm's motion, whichever connection runs it (that connection answers its
+        blocking move with E_FAIL when it next looks at it, within one poll)."""
         self._get(sess, a[0], "robot")
-        job, sess.job = sess.job, None
-        if job is not None and job.serial is not None:
-            sess.reply(job.serial, E_FAIL)  # the halted blocking move fails
+        with self._lock:
+            self.stats["halts"] += 1
+            if self.motion is not None:
+                self.motion.halted = True
+            self.coast = None  # an arm still settling stops where it is (no kinematics)
 
     def _on_robot_move(self, sess: Session, serial: int, a: list[Variant]) -> Any:
         self._get(sess, a[0], "robot")
@@ -362,8 +397,15 @@ class DensoController:
         return Variant(VT_R8 | VT_ARRAY, [0.0] * (7 if kind == "P" else 6))
 
     # --- Robot_Execute commands ----------------------------------------------------------------
+    def _check_no_error(self, what: str) -> None:
+        """Refuse ``what`` with the latched error's HRESULT until ClearError."""
+        code = self.latched_error
+        if code is not None:
+            raise Refusal(code, f"{what} refused: error 0x{code:08X} latched (ClearError first)")
+
     def _take_arm(self, sess: Session, param: Variant) -> Variant:
         args.numbers(param, "TakeArm")
+        self._check_no_error("TakeArm")
         sess.arm = True
         return Variant(VT_EMPTY)
 
@@ -377,6 +419,8 @@ class DensoController:
             raise Refusal(E_INVALIDARG, "Motor needs a state (0 or 1)")
         if vals[0] != 0 and not sess.arm:
             raise Refusal(E_ACCESSDENIED, "Motor on without TakeArm")
+        if vals[0] != 0:
+            self._check_no_error("Motor on")
         self.motor_on = vals[0] != 0
         return Variant(VT_EMPTY)
 
@@ -424,6 +468,7 @@ class DensoController:
             raise Refusal(E_NOTIMPL if comp == 3 else E_INVALIDARG,
                           f"Robot_Move comp {comp} (mock supports 1 = MOVE P, 2 = MOVE L)")
         p = args.pose(pose)
+        mode = args.pass_mode(pose)
         opts = args.options(option)
         pct = args.option_percent(opts, ("SPEED", "S"), "SPEED", option)
         if pct is None:
@@ -434,6 +479,7 @@ class DensoController:
             raise Refusal(E_ACCESSDENIED, "Robot_Move without TakeArm")
         if not self.motor_on:
             raise Refusal(E_MOTOR_OFF, "Robot_Move with the motor off")
+        self._check_no_error("Robot_Move")
         if fail:
             raise Refusal(self.faults.fail_move_hresult, f"fault injected at move {k}")
         target = matrix_from_denso_p(p[:6])
@@ -443,26 +489,67 @@ class DensoController:
         self.move_accel, self.move_decel = accel, decel
         if p[6] >= 0:
             self.fig = int(p[6])
-        if duration <= 0:
-            self.rig.move_flange(target)
-            return None
+        return self._run_move(sess, serial, target, duration, mode, "NEXT" in opts,
+                           hold=self.faults.hold_move_at == k)
+
+    def _run_move(self, sess: Session, serial: int, target: np.ndarray, duration: float,
+               mode: str, nxt: bool, hold: bool) -> Any:
+        """Run a checked move. The arm is still on ``target`` ``duration`` s from now; a
+        blocking ``@E`` move replies then, a pass / ``@P`` move up to :data:`SETTLE_S` earlier
+        (on the fast clock: at once, and the arm is still only when the next request comes).
+        ``hold``: the move lasts until a Robot_Halt."""
         now = self.clock.now()
-        nxt = "NEXT" in opts
-        sess.job = Job(target=target, start=now, end=now + duration,
-                       serial=None if nxt else serial, wdt_s=sess.wdt_s)
+        still = now + duration
+        lead = 0.0 if mode == "@E" or nxt else min(SETTLE_S, duration)
+        if not hold and still - lead <= now:
+            pending = self.clock.fast and mode != "@E" and not nxt
+            self.arrive(target, math.inf if pending else still)
+            return None
+        job = Job(target=target, start=now, end=math.inf if hold else still - lead,
+                  serial=None if nxt else serial, wdt_s=sess.wdt_s,
+                  settle_s=0.0 if hold else lead)
+        sess.job = job
+        with self._lock:
+            self.motion = job
         return None if nxt else DEFERRED
 
+    def arrive(self, target: np.ndarray, at: float) -> None:
+        """The arm comes to rest on ``target`` at time ``at`` (now or past: at once; ``inf``:
+        at the next request)."""
+        with self._lock:
+            if at <= self.clock.now():
+                self.coast = None
+                self.rig.move_flange(target)
+            else:
+                self.coast = (target, at)
+
+    def settle(self, request: bool) -> None:
+        """Bring an arm that replied before it was still to rest when its time has come (or,
+        on the fast clock, when ``request``: a request arrived)."""
+        with self._lock:
+            if self.coast is None:
+                return
+            target, at = self.coast
+            if (request and math.isinf(at)) or at <= self.clock.now():
+                self.coast = None
+                self.rig.move_flange(target)
+
+    def end_motion(self, job: Job) -> None:
+        with self._lock:
+            if self.motion is job:
+                self.motion = None
+
     def _duration(self, target: np.ndarray, pct: float) -> float:
-        """Seconds a move to ``target`` (base_from_flange, mm) at SPEED ``pct`` % takes."""
+        """Seconds a move to ``target`` (base_from_flange, mm) at SPEED ``pct`` % takes until
+        the arm is still: distance / (SPEED × ExtSpeed × ``max_linear_speed_mm_s``), or
+        ``motion_time_s``; recorded in ``last_motion_s`` on both clocks, 0 on the fast one."""
         speed = self.max_linear_speed_mm_s * pct / 100.0 * self.ext_speed / 100.0
         dist = float(np.linalg.norm(target[:3, 3] - self.rig.reported_flange()[:3, 3]))
-        if self.clock.fast:
-            duration = 0.0
-        elif self.motion_time_s is not None:
-            duration = float(self.motion_time_s)
+        if self.motion_time_s is not None:
+            modelled = float(self.motion_time_s)
         else:
-            duration = dist / speed if speed > 0 else math.inf
-        if not math.isfinite(duration):
+            modelled = dist / speed if speed > 0 else math.inf
+        if not math.isfinite(modelled):
             raise Refusal(E_INVALIDARG, f"a move of {dist:g} mm at {speed:g} mm/s never ends")
-        return duration
-
+        self.last_motion_s = modelled
+        return 0.0 if self.clock.fast else modelled

@@ -5,6 +5,7 @@ table, sends the keep-alives of a running motion and ends it on time."""
 from __future__ import annotations
 
 import logging
+import math
 import socket
 
 from ...drivers.denso.hresult import (
@@ -16,7 +17,7 @@ from ...drivers.denso.hresult import (
     S_OK,
     hresult_name,
 )
-from ...drivers.denso.packet import Fn, Packet, decode_packet, frame_serial, function_name
+from ...drivers.denso.packet import Packet, decode_packet, frame_serial, function_name
 from ...errors import ProtocolError
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
@@ -93,6 +94,8 @@ class DensoMock(DensoController, MockDevice):
                 if sess.job.serial is not None and sess.job.wdt_s:
                     nxt = min(nxt, sess.job.next_keepalive)
                 wait = min(wait, max(nxt - self.clock.now(), 0.001))
+            if self.coast is not None and not math.isinf(self.coast[1]):
+                wait = min(wait, max(self.coast[1] - self.clock.now(), 0.001))
             sess.sock.settimeout(wait)
             try:
                 data = sess.sock.recv(65536)
@@ -110,16 +113,27 @@ class DensoMock(DensoController, MockDevice):
         """The connection is gone: a NEXT motion carries on to its end, the arm and the
         handles are released (the listener closes the socket)."""
         job = sess.job
-        if job is not None and job.serial is None:
-            self.rig.move_flange(job.target)
+        if job is not None:
+            self.end_motion(job)
+            if job.serial is None and not job.halted:
+                self.arrive(job.target, job.end)
         sess.job = None
         sess.arm = False
         sess.handles.clear()
 
     def _advance(self, sess: Session) -> None:
-        """Send the keep-alives that are due and finish the motion when its time is up."""
+        """Send the keep-alives that are due and finish the motion when its time is up or a
+        Robot_Halt (from any connection) stopped it: a halted blocking move fails with
+        E_FAIL (a stand-in: the code a real RC8 answers could not be checked)."""
+        self.settle(request=False)
         job = sess.job
         if job is None:
+            return
+        if job.halted:
+            sess.job = None
+            self.end_motion(job)
+            if job.serial is not None:
+                sess.reply(job.serial, E_FAIL)
             return
         now = self.clock.now()
         if job.serial is not None and job.wdt_s:
@@ -130,7 +144,8 @@ class DensoMock(DensoController, MockDevice):
                 job.next_keepalive += job.wdt_s
         if now >= job.end:
             sess.job = None
-            self.rig.move_flange(job.target)
+            self.end_motion(job)
+            self.arrive(job.target, job.end + job.settle_s)
             if job.serial is not None:
                 sess.reply(job.serial, S_OK)
 
@@ -162,10 +177,13 @@ class DensoMock(DensoController, MockDevice):
             self._answer(sess, pkt)
 
     def _answer(self, sess: Session, pkt: Packet) -> None:
-        """Reply to one decoded request: E_BUSY_PROC while a motion runs (but to
-        Robot_Halt), the function's result, or the HRESULT it was refused with."""
+        """Reply to one decoded request: E_BUSY_PROC to any request (Robot_Halt included)
+        while this connection runs a move, as DENSO's reference b-CAP server does (Halt must
+        come over another connection), else the function's result or the HRESULT it was
+        refused with."""
         self._advance(sess)
-        if sess.job is not None and pkt.code != Fn.ROBOT_HALT:
+        self.settle(request=True)
+        if sess.job is not None:
             with self._lock:
                 self.stats["busy"] += 1
             sess.reply(pkt.serial, E_BUSY_PROC)

@@ -1,0 +1,88 @@
+"""The second b-CAP connection that carries Robot_Halt while a move runs.
+
+A b-CAP connection executes one request at a time: while it waits for a blocking Robot_Move,
+the controller answers any other request on it (Robot_Halt included) with E_BUSY_PROC
+0x809100AA (DENSO's reference b-CAP server, DENSORobot/orin_bcap ``bcap_server.c``). DENSO's
+own ROS driver (DENSORobot/denso_robot_ros, ``denso_robot_core``) therefore keeps a separate
+"watch" connection and sends Robot_Halt over it. :class:`HaltLink` is that connection:
+Service_Start (no watchdog) → Controller_Connect → Controller_GetRobot, no TakeArm (Halt needs
+none). Every wait on it is bounded by ``timeout_s``.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from ...errors import DeviceError
+from .client import BCAPClient
+
+log = logging.getLogger(__name__)
+
+
+class HaltLink:
+    """A b-CAP connection to ``host:port`` that only halts the robot ``robot_name``.
+
+    ``timeout_s`` bounds the TCP connect and each reply (so :meth:`open` waits at most
+    4 × ``timeout_s`` for an unreachable or silent controller, :meth:`halt` at most
+    ``timeout_s``). Errors are the client's (``ConnectionLost``, ``DeviceTimeout``,
+    ``DeviceError`` with the HRESULT), raised, never swallowed.
+    """
+
+    def __init__(self, host: str, port: int, provider: str, machine: str, robot_name: str,
+                 timeout_s: float) -> None:
+        self.client = BCAPClient(host, port, timeout_s=timeout_s)
+        self.provider = provider
+        self.machine = machine
+        self.robot_name = robot_name
+        self._ctrl: int | None = None
+        self._robot: int | None = None
+
+    @property
+    def ready(self) -> bool:
+        """True when connected with a robot handle."""
+        return self.client.connected and self._robot is not None
+
+    def open(self) -> HaltLink:
+        """Connect and get the robot handle; on failure the socket is closed and the error
+        raised."""
+        c = self.client
+        try:
+            c.connect()
+            c.service_start("")
+            self._ctrl = c.controller_connect("", self.provider, self.machine, "")
+            self._robot = c.controller_get_robot(self._ctrl, self.robot_name, "")
+        except DeviceError:
+            self.close(release=False)
+            raise
+        return self
+
+    def halt(self) -> None:
+        """Robot_Halt, waiting for its reply (raises on a failure HRESULT or no reply)."""
+        if not self.ready:
+            self.open()
+        assert self._robot is not None
+        self.client.robot_halt(self._robot)
+
+    def close(self, release: bool = True) -> None:
+        """Release the handles (best effort, bounded) and close the connection."""
+        c = self.client
+        steps = []
+        if release and c.connected:
+            if self._robot is not None:
+                steps.append(("Robot_Release", lambda h=self._robot: c.robot_release(h)))
+            if self._ctrl is not None:
+                steps.append(("Controller_Disconnect",
+                              lambda h=self._ctrl: c.controller_disconnect(h)))
+            steps.append(("Service_Stop", c.service_stop))
+        for what, fn in steps:
+            if not c.connected:
+                break
+            try:
+                fn()
+            except DeviceError as e:
+                log.warning("DENSO halt connection: %s failed: %s", what, e)
+        c.close()
+        self._ctrl = self._robot = None
+
+
+__all__ = ["HaltLink"]
