@@ -303,14 +303,18 @@ class BCAPClient:
     def robot_move(self, handle: int, comp: int, pose: Any, option: str = "",
                    timeout_s: float | None = None) -> None:
         """Robot_Move; comp 1 = MOVE P, 2 = MOVE L; ``pose`` a text like ``"@P P(…)"`` or a
-        VARIANT array ``[[x, y, z, rx, ry, rz, fig], "P", "@P"]`` (mm, deg). Without NEXT in
-        ``option`` the reply comes when the motion is done. Failures raise ``RobotFault``."""
+        VARIANT array ``[[x, y, z, rx, ry, rz, fig], "P", "@E"]`` (mm, deg; ``@E``: the reply
+        comes when the arm has reached the target and settled, ``@P`` / ``@0`` may reply
+        before). Without NEXT in ``option`` the reply comes when the motion is done. The
+        connection is busy meanwhile (E_BUSY_PROC to anything else, Robot_Halt included):
+        halt over another connection. Failures raise ``RobotFault``."""
         self.call(Fn.ROBOT_MOVE, Variant(VT_I4, handle), Variant(VT_I4, comp), pose, option,
                   timeout_s=timeout_s)
 
     def robot_halt(self, handle: int, option: str = "", wait: bool = True) -> None:
-        """Robot_Halt; ``wait=False`` sends it without waiting (usable while another thread
-        waits on a move over this connection)."""
+        """Robot_Halt; ``wait=False`` sends it without waiting for the reply. A controller
+        answers it with E_BUSY_PROC on a connection that runs a move: send it over another
+        connection (:class:`~tmscal.drivers.denso.halt.HaltLink`)."""
         if wait:
             self.call(Fn.ROBOT_HALT, Variant(VT_I4, handle), option)
         else:

@@ -7,9 +7,9 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
 * Service_Start / Service_Stop (``WDT=<ms>`` in the option turns on S_EXECUTING keep-alives;
   0 turns them off, other values outside 10..3,600,000 ms get E_INVALIDARG),
   Controller_Connect / Disconnect / GetRobot / GetRobotNames / GetVariable / Execute
-  (``GetErrorDescription``, ``ClearError``), Robot_Execute (TakeArm, GiveArm, Motor, ExtSpeed,
-  CurPos, CurJnt), Robot_Move (comp 1 = MOVE P, 2 = MOVE L; pose as text
-  ``"@P P(x, y, z, rx, ry, rz, fig)"`` or VARIANT array ``[[x, …, fig], "P", "@P"]``; options
+  (``GetErrorDescription``, ``ClearError``, ``ManualReset``), Robot_Execute (TakeArm,
+  GiveArm, Motor, ExtSpeed, CurPos, CurJnt), Robot_Move (comp 1 = MOVE P, 2 = MOVE L; pose as text
+  ``"@E P(x, y, z, rx, ry, rz, fig)"`` or VARIANT array ``[[x, …, fig], "P", "@E"]``; options
   ``SPEED=<percent>``, ``ACCEL=<percent>``, ``DECEL=<percent>`` and ``NEXT``), Robot_Halt,
   Robot_Speed, Robot_GetVariable
   (``@CURRENT_POSITION``, ``@CURRENT_ANGLE``), Robot_Release, Variable_GetValue / PutValue /
@@ -28,9 +28,14 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
   not change the timing. Every percentage must be finite and in [0.01, 100] (else
   E_INVALIDARG). The mock has no kinematics: CurJnt returns zeros, and a halted
   motion leaves the rig where it was (the blocking move then answers E_FAIL).
-* While a motion runs, any request but Robot_Halt gets E_BUSY_PROC (0x809100AA); with NEXT
-  the move answers at once but the connection stays busy until the motion ends. With a
-  watchdog, a blocking move sends one S_EXECUTING packet per WDT period it lasts.
+* While a motion runs, any request on its connection, Robot_Halt included, gets E_BUSY_PROC
+  (0x809100AA), as from DENSO's reference b-CAP server; Robot_Halt from any other connection
+  stops the arm. With NEXT the move answers at once but the connection stays busy until the
+  motion ends. A blocking ``@E`` move replies when the arm is still; ``@P`` / ``@0`` (pass)
+  reply up to ``SETTLE_S`` earlier (fast clock: at once, the arm at rest by the next request).
+  With a watchdog, a blocking move sends one S_EXECUTING packet per WDT period it lasts.
+  Faults ``latched_error`` (TakeArm / Motor / Move refused until ClearError) and
+  ``hold_move_at`` (a move that runs until halted); see ``docs/devices-denso.md``.
 * One reply per request, in one ``sendall``, with the request's serial; malformed requests
   get E_INVALIDPACKET, bad arguments E_INVALIDARG (NaN, ±inf and out-of-range numbers
   included), unknown handles E_HANDLE, anything the mock cannot handle E_FAIL; the socket is
