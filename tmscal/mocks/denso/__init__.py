@@ -45,8 +45,9 @@ Poses: the rig's ``base_from_flange`` 4×4 mm ↔ P-type via ``tmscal.geometry``
 """
 
 from .args import PCT_MAX, PCT_MIN
-from .controller import BAD_CURPOS, WDT_MAX_MS, WDT_MIN_MS, DensoFaults
+from .controller import WDT_MAX_MS, WDT_MIN_MS
 from .mock import DensoMock
+from .state import BAD_CURPOS, DensoFaults
 
 __all__ = ["DensoMock", "DensoFaults", "BAD_CURPOS", "PCT_MIN", "PCT_MAX", "WDT_MIN_MS",
            "WDT_MAX_MS"]

@@ -1,6 +1,7 @@
 """The simulated RC8 controller behind the DENSO mock: its shared state (motor, speeds,
 variables, the rig), the per-connection state (handles, arm, watchdog, motion) and one small
-handler per b-CAP function, looked up in a table by function ID.
+handler per b-CAP function, looked up in a table by function ID. The data classes (faults,
+motions, connections) live in ``state.py``.
 
 A handler takes the connection's :class:`Session`, the request's serial and its arguments
 (padded with EMPTY to four) and returns the reply's value (None: no value; ``DEFERRED``: the
@@ -13,10 +14,8 @@ import itertools
 import logging
 import math
 import re
-import socket
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -24,14 +23,13 @@ import numpy as np
 from ...drivers.denso.hresult import (
     E_ACCESSDENIED,
     E_CAO_OBJECT_NOTFOUND,
-    E_EMERGENCY_STOP,
     E_HANDLE,
     E_INVALIDARG,
     E_MOTOR_OFF,
     E_NOTIMPL,
     hresult_name,
 )
-from ...drivers.denso.packet import Fn, PacketFramer, encode_packet, function_name
+from ...drivers.denso.packet import Fn, function_name
 from ...drivers.denso.variant import (
     NUMERIC_VTS,
     VT_ARRAY,
@@ -49,13 +47,12 @@ from ...sim.rig import SimRig
 from ..clock import Clock
 from . import args
 from .args import PCT_MIN, Refusal
+from .state import DensoFaults, Job, Session
 
 log = logging.getLogger(__name__)
 
 #: Watchdog periods (ms) Service_Start accepts (0 = off).
 WDT_MIN_MS, WDT_MAX_MS = 10, 3_600_000
-#: Values of ``DensoFaults.bad_curpos``.
-BAD_CURPOS = ("nan", "inf", "short", "long", "bstr", "bool_array", "empty", "nested_bstr")
 #: A handler's answer when the reply is sent later (when a blocking move ends).
 DEFERRED = object()
 #: On the real-time clock, how long before the arm is still a pass (``@0``) or ``@P`` move
@@ -65,83 +62,6 @@ SETTLE_S = 0.05
 _CONTROLLER_VARIABLES = ("@VERSION", "@MODE")
 _ROBOT_VARIABLES = ("@CURRENT_POSITION", "@CURRENT_ANGLE")
 _USER_VAR = re.compile(r"^([IFDSPJV])(\d+)$", re.IGNORECASE)
-
-
-@dataclass(frozen=True)
-class DensoFaults:
-    """Injected faults, counted over all connections of one mock (1-based).
-
-    ``fail_move_at``: the k-th Robot_Move is refused with ``fail_move_hresult`` (default
-    0x83500178, not executable during emergency stop); ``move_fail_rate``: probability that
-    any move is refused the same way. ``drop_at_request``: at the k-th request the mock
-    closes that connection instead of answering; ``drop_rate``: probability per request.
-    Random faults draw from ``numpy.random.default_rng(seed)``.
-    ``bad_curpos``: every CurPos (and ``@CURRENT_POSITION``) reply is corrupted the named way:
-    "nan" / "inf" (x is NaN / +inf), "short" (5 values), "long" (9 values), "bstr" (a BSTR),
-    "bool_array" (a BOOL array), "empty" (EMPTY), "nested_bstr" (a VARIANT array with a BSTR
-    in it). None (default): correct replies. The mock reads its ``faults`` at every request,
-    so a test may swap them (``dataclasses.replace``) while it serves.
-    ``hold_move_at``: the k-th Robot_Move does not end by itself (a stalled or very slow arm):
-    its connection stays busy until a Robot_Halt, on either clock. ``latched_error``: an error
-    HRESULT the controller holds when the mock starts (one left over from before, e.g. an
-    emergency stop that was released): TakeArm, Motor on and Robot_Move are refused with it
-    until ``Controller_Execute("ClearError")`` (read once, when the mock is built).
-    """
-
-    fail_move_at: int | None = None
-    fail_move_hresult: int = E_EMERGENCY_STOP
-    move_fail_rate: float = 0.0
-    drop_at_request: int | None = None
-    drop_rate: float = 0.0
-    seed: int = 0
-    bad_curpos: str | None = None
-    hold_move_at: int | None = None
-    latched_error: int | None = None
-
-    def __post_init__(self) -> None:
-        if self.bad_curpos is not None and self.bad_curpos not in BAD_CURPOS:
-            raise ValueError(f"bad_curpos must be one of {', '.join(BAD_CURPOS)} or None, got "
-                             f"{self.bad_curpos!r}")
-
-
-@dataclass(eq=False)
-class Job:
-    """A motion in progress on one connection (times on the mock's clock, s). ``end`` is
-    when the reply is due and the connection is free again (``inf``: only a Robot_Halt ends
-    it); ``settle_s``: the arm is still this long after ``end`` (a pass or ``@P`` move: the
-    reply comes before the arm is still); ``halted``: set by Robot_Halt from any
-    connection, the owning connection then ends the job."""
-
-    target: np.ndarray  # base_from_flange 4×4 mm
-    start: float
-    end: float
-    serial: int | None  # blocking move: reply pending with this serial; None for NEXT
-    wdt_s: float | None
-    next_keepalive: float = 0.0
-    settle_s: float = 0.0
-    halted: bool = False
-
-    def __post_init__(self) -> None:
-        if self.wdt_s:
-            self.next_keepalive = self.start + self.wdt_s
-
-
-@dataclass
-class Session:
-    """One client connection: its handles, whether it holds the arm, its watchdog period
-    and the motion it runs."""
-
-    sock: socket.socket
-    peer: str
-    handles: dict[int, tuple[str, Any]] = field(default_factory=dict)
-    arm: bool = False
-    wdt_s: float | None = None
-    job: Job | None = None
-    framer: PacketFramer = field(default_factory=PacketFramer)
-
-    def reply(self, serial: int, code: int, value: Variant | None = None) -> None:
-        """Send one reply packet (in one ``sendall``)."""
-        self.sock.sendall(encode_packet(serial, code, [] if value is None else [value]))
 
 
 Handler = Callable[[Session, int, list[Variant]], Any]

@@ -23,7 +23,8 @@ from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
 from ..server import MockDevice, TCPListener
 from .args import Refusal
-from .controller import DEFERRED, DensoController, DensoFaults, Session
+from .controller import DEFERRED, DensoController
+from .state import DensoFaults, Session
 
 log = logging.getLogger(__name__)
 
