@@ -19,7 +19,6 @@ run the mock in another process (``tmscal mock``) or the robot in a subprocess.
 from __future__ import annotations
 
 import logging
-import re
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -39,32 +38,18 @@ from ...errors import (
 from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
 from ...timing import Deadline
 from ..base import Envelope, Robot
+from .states import (
+    MODE_ACTION,
+    ROBOT_MODE_RUNNING,
+    ROBOT_MODES,
+    RUNTIME_STATES,
+    SAFETY_MODES,
+    dashboard_value,
+    remote_check_applies,
+)
 
 log = logging.getLogger(__name__)
 
-#: UR safety modes (RTDE ``safety_mode``).
-SAFETY_MODES = {
-    1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
-    6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT",
-    10: "VALIDATE_JOINT_ID", 11: "UNDEFINED_SAFETY_MODE", 12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
-    13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
-}
-#: UR robot modes (RTDE ``robot_mode``; the dashboard's ``robotmode`` names them alike).
-ROBOT_MODES = {
-    -1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF",
-    4: "POWER_ON", 5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING", 8: "UPDATING_FIRMWARE",
-}
-_RUNNING = 7
-#: What the operator does at the pendant for a robot mode other than RUNNING.
-_MODE_ACTION = {
-    "POWER_OFF": "the robot is powered off: power it on and release the brakes at the pendant",
-    "POWER_ON": "the robot is powering on: wait, then release the brakes at the pendant",
-    "IDLE": "the robot's brakes are engaged: release them at the pendant",
-    "BOOTING": "the robot is booting: wait for it, then power it on at the pendant",
-}
-#: UR program runtime states (RTDE ``runtime_state``).
-RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED",
-                  5: "RESUMING"}
 #: What the driver asks the controller to stream (everything its checks read).
 RECEIVE_VARIABLES = ["timestamp", "actual_TCP_pose", "robot_mode", "safety_mode",
                      "safety_status_bits", "runtime_state", "robot_status_bits"]
@@ -239,7 +224,7 @@ class URRobot(Robot):
                     out[key] = str(fn()).strip() or None
                 except RuntimeError as e:
                     log.debug("ur %s: dashboard %s failed: %s", self.host, key, e)
-            if not self.upload_script or not _remote_check_applies(out["controller_version"]):
+            if not self.upload_script or not remote_check_applies(out["controller_version"]):
                 out["remote_control"] = None
             else:
                 out["remote_control"] = bool(db.isInRemoteControl())
@@ -259,14 +244,14 @@ class URRobot(Robot):
     def _state_fault(self, what: str, st: dict[str, Any]) -> RobotFault | None:
         """The ``RobotFault`` for a dashboard state (``_dashboard_check``) in which the control
         script cannot run, or None."""
-        mode = _after_colon(st.get("robot_mode"))
-        safety = _after_colon(st.get("safety_status"))
+        mode = dashboard_value(st.get("robot_mode"))
+        safety = dashboard_value(st.get("safety_status"))
         if safety is not None and safety not in ("NORMAL", "REDUCED"):
             return RobotFault(f"ur {self.host}: {what}: safety status {safety}: clear it at "
                               "the pendant (a protective stop: 'unlock protective stop'), then "
                               "run again", text=safety, device=self.name)
         if mode is not None and mode != "RUNNING":
-            action = _MODE_ACTION.get(mode, "the robot is not ready: bring it to RUNNING at "
+            action = MODE_ACTION.get(mode, "the robot is not ready: bring it to RUNNING at "
                                             "the pendant")
             return RobotFault(f"ur {self.host}: {what}: robot mode {mode}: {action}, then run "
                               "again", text=mode, device=self.name)
@@ -425,9 +410,9 @@ class URRobot(Robot):
             hint = (": clear it at the pendant, then resume" if protective else "")
             return RobotFault(f"ur {self.host}: {what}: robot in {name}{hint}", code=mode,
                               text=name, device=self.name)
-        if robot_mode != _RUNNING:
+        if robot_mode != ROBOT_MODE_RUNNING:
             rname = ROBOT_MODES.get(robot_mode, f"robot mode {robot_mode}")
-            action = _MODE_ACTION.get(rname, "the robot is not ready: bring it to RUNNING at "
+            action = MODE_ACTION.get(rname, "the robot is not ready: bring it to RUNNING at "
                                              "the pendant")
             return RobotFault(f"ur {self.host}: {what}: robot mode {rname}: {action}, then "
                               "resume", code=robot_mode, text=rname, device=self.name)
@@ -511,16 +496,3 @@ class URRobot(Robot):
             else:
                 time.sleep(_FRESH_POLL_S)
 
-
-def _after_colon(reply: str | None) -> str | None:
-    """``NORMAL`` from the dashboard's ``Safetystatus: NORMAL`` (None stays None)."""
-    if reply is None:
-        return None
-    return reply.split(":")[-1].strip().upper() or None
-
-
-def _remote_check_applies(version: str | None) -> bool:
-    """Whether the dashboard knows ``is in remote control``: PolyScope 5.6 and later (what
-    ur_rtde's own check requires; ``URSoftware 5.11.0.108249 (…)`` → True)."""
-    m = re.search(r"(\d+)\.(\d+)\.\d+", version or "")
-    return m is not None and int(m.group(1)) == 5 and int(m.group(2)) > 5
