@@ -18,9 +18,6 @@ from ..rigs import REPO
 
 pytestmark = pytest.mark.e2e
 
-UR_STOP = ("the UR driver sends a synchronous moveL, which ur_rtde's stopL cannot interrupt "
-           "(ur_rtde's move_async example); stop() returns only when the move has ended")
-
 
 def run_suite(cwd: Path, *args: str) -> tuple[int, str]:
     """``python -m pytest tests/acceptance ARGS`` from ``cwd``; (exit code, stdout+stderr)."""
@@ -42,8 +39,7 @@ def check_report(text: str, cfg: Path, robot: str, verdicts: dict[str, str]) -> 
 
 @pytest.mark.parametrize("base, robot", [
     pytest.param("mock-denso-polaris.yaml", {"port": 0}, id="denso"),
-    pytest.param("mock-ur-polaris.yaml", {"host": "127.0.0.61"}, id="ur",
-                 marks=pytest.mark.xfail(strict=True, reason=UR_STOP)),
+    pytest.param("mock-ur-polaris.yaml", {"host": "127.0.0.61"}, id="ur"),
 ])
 def test_suite_passes_on_real_time_mock_rig(tmp_path, mock_config, base, robot):
     cfg = mock_config(base, robot=robot, mock={"clock": "real"}, sampling={"settle_s": 0.2})

@@ -143,6 +143,8 @@ class URRobot(Robot):
         self._ctl: Any = None
         self._identity: dict[str, Any] = {}
         self._stuck = False     # a control call was abandoned: the library may be wedged
+        self._moving = threading.Event()   # an asynchronous moveL is being waited for
+        self._halt = threading.Event()     # stop() asked the waiting move to send stopL
 
     # --- lifecycle ----------------------------------------------------------------------------
 
@@ -279,15 +281,58 @@ class URRobot(Robot):
         target = tcp_pose_from_base_from_flange(pose, self.flange_from_tcp)
         speed, accel = speed_mm_s / 1000.0, self.accel_mm_s2 / 1000.0
         log.debug("ur %s: moveL %s at %.4f m/s, %.4f m/s²", self.host, target, speed, accel)
-        ok = self._call_watched("moveL", lambda: self._ctl.moveL(target, speed, accel, False),
-                                self.timeout_s)
-        if not ok:
-            self._diagnose_failed_move(target)
+        # asynchronous, so that stop() can halt it: a synchronous moveL cannot be stopped
+        # until it ends (ur_rtde's move_async example); the wait below polls its progress
+        self._halt.clear()
+        self._moving.set()
+        try:
+            ok = self._call_watched("moveL", lambda: self._ctl.moveL(target, speed, accel, True),
+                                    self.timeout_s)
+            if not ok:
+                self._diagnose_failed_move(target)
+            self._wait_async_move(target)
+        finally:
+            self._moving.clear()
         self._wait_fresh_data("controller data after moveL")
+        # an asynchronous move that a safety stop or a power-off ended also ends its progress
+        fault = self._fault(f"moveL to {target} aborted", self._safety())
+        if fault is not None:
+            raise fault
+
+    def _wait_async_move(self, target: list[float]) -> None:
+        """Poll the asynchronous moveL's progress until it ends (progress < 0). A stop()
+        meanwhile sends stopL from this thread (one thread talks to ur_rtde at a time) and
+        raises RobotFault; a safety stop, a lost link or ``timeout_s`` raise as for a
+        synchronous move."""
+        deadline = Deadline(self.timeout_s)
+        while True:
+            if self._halt.is_set():
+                self._call_watched("stopL", lambda: self._ctl.stopL(10.0, False), 5.0)
+                raise RobotFault(f"ur {self.host}: moveL to {target} halted by stop()",
+                                 device=self.name)
+            if self._call("getAsyncOperationProgress",
+                          self._ctl.getAsyncOperationProgress) < 0:
+                return
+            self._check_connected(f"moveL to {target}")
+            fault = self._fault(f"moveL to {target} aborted", self._safety())
+            if fault is not None:
+                raise fault
+            if deadline.expired():
+                raise DeviceTimeout(f"ur {self.host}: moveL to {target} did not finish within "
+                                    f"{self.timeout_s:.1f} s", device=self.name)
+            self._halt.wait(_POLL_S)
 
     def _stop(self) -> None:
         if self._ctl is None or self._stuck:
             return
+        if self._moving.is_set():  # the waiting move sends stopL; wait (bounded) for it
+            self._halt.set()
+            deadline = Deadline(6.0)
+            while self._moving.is_set() and not deadline.expired():
+                time.sleep(_POLL_S)
+            if not self._moving.is_set():
+                return
+            log.warning("ur %s: the move did not end within 6 s of stop()", self.host)
         try:
             self._call_watched("stopL", lambda: self._ctl.stopL(10.0, False), 5.0)
         except DeviceError as e:
