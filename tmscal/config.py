@@ -337,10 +337,12 @@ def _check_driver(src: str, kind: str, name: str) -> None:
                   f"{name!r}")
 
 
-def _parse_tracker(data: Any, src: str, base_dir: Path | None) -> TrackerConfig | None:
+def _parse_tracker(data: Any, src: str, base_dir: Path | None,
+                   check_files: bool = True) -> TrackerConfig | None:
     """The tracker section (None when absent): a registered tracker driver, reply bx or tx,
-    an acceptable port, at least one tool with an existing ROM file (relative paths against
-    ``base_dir``), plausible rate and baud, no reserved option."""
+    an acceptable port, at least one tool with a ROM file (relative paths against
+    ``base_dir``; that the files exist is checked unless ``check_files`` is False, as for a
+    command that opens only the robot), plausible rate and baud, no reserved option."""
     if data is None:
         return None
     tracker = build(TrackerConfig, data, src, "tracker")
@@ -353,7 +355,7 @@ def _parse_tracker(data: Any, src: str, base_dir: Path | None) -> TrackerConfig 
             raise err(src, "tracker.port", f"{show(tracker.port)}: {problem}")
     if not tracker.tools:
         raise err(src, "tracker.tools", "name at least one tool, e.g. {marker: file.rom}")
-    tracker.tools = {name: _rom_path(rom, src, name, base_dir)
+    tracker.tools = {name: _rom_path(rom, src, name, base_dir, check_files)
                      for name, rom in tracker.tools.items()}
     positive(src, "tracker.frame_rate_hz", tracker.frame_rate_hz, at_most=10_000)
     positive(src, "tracker.baud", tracker.baud)
@@ -389,7 +391,8 @@ def _log_wire_path(tracker: TrackerConfig, src: str, base_dir: Path | None) -> s
     return str(p)
 
 
-def _rom_path(rom: Any, src: str, name: str, base_dir: Path | None) -> str | None:
+def _rom_path(rom: Any, src: str, name: str, base_dir: Path | None,
+              must_exist: bool = True) -> str | None:
     """The absolute path of tool ``name``'s ROM file (None: a tool already loaded)."""
     if rom is None:
         return None
@@ -398,7 +401,7 @@ def _rom_path(rom: Any, src: str, name: str, base_dir: Path | None) -> str | Non
     p = Path(rom)
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
-    if not p.is_file():
+    if must_exist and not p.is_file():
         raise err(src, f"tracker.tools.{name}", f"ROM file not found: {p}")
     return str(p)
 
@@ -507,12 +510,15 @@ def _check_robot_caps(robot: RobotConfig | None, safety: SafetyConfig, src: str)
                   f"safety.max_accel_mm_s2 {safety.max_accel_mm_s2}")
 
 
-def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None) -> RigConfig:
+def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None,
+                 check_files: bool = True) -> RigConfig:
     """Validate a config mapping (as loaded from YAML) into a ``RigConfig``. Raises
-    ConfigError naming ``src`` and the key (see the module docstring for the rules)."""
+    ConfigError naming ``src`` and the key (see the module docstring for the rules).
+    ``check_files=False`` skips the check that the tools' ROM files exist (``tmscal robot``
+    needs only the robot; ``make_tracker`` checks them before a tracker opens)."""
     _check_top_level(data, src)
     robot = _parse_robot(data.get("robot"), src)
-    tracker = _parse_tracker(data.get("tracker"), src, base_dir)
+    tracker = _parse_tracker(data.get("tracker"), src, base_dir, check_files)
     plan = _parse_plan(data.get("plan"), src)
     sampling = _parse_sampling(data.get("sampling"), src)
     safety = _check_safety(data, src, robot is not None)
@@ -531,9 +537,9 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None)
                      safety=safety, run=run, mock=mock, raw=dict(data))
 
 
-def load_config(path: str | os.PathLike[str]) -> RigConfig:
+def load_config(path: str | os.PathLike[str], *, check_files: bool = True) -> RigConfig:
     """Load and validate a YAML rig config. Raises ConfigError naming the file, the line and
-    the key; nothing is opened or written."""
+    the key; nothing is opened or written. ``check_files=False``: see ``parse_config``."""
     p = Path(path)
     try:
         if p.stat().st_size > _MAX_BYTES:
@@ -554,7 +560,7 @@ def load_config(path: str | os.PathLike[str]) -> RigConfig:
     except (ValueError, OverflowError, TypeError) as e:  # e.g. an int beyond the digit limit
         raise ConfigError(f"{p}: invalid YAML ({show(str(e), 120)})") from None
     try:
-        cfg = parse_config(data, str(p), p.parent)
+        cfg = parse_config(data, str(p), p.parent, check_files)
     except ConfigError as e:
         raise with_line(e, str(p), text) from None
     cfg.path = p

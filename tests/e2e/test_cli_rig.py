@@ -98,3 +98,22 @@ def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_co
     v = rotvec_pose_from_matrix(TMS_RIG_P0)  # the mock's TCP offset is zero: TCP = flange
     assert f"RX {v[3]:.4f}  RY {v[4]:.4f}  RZ {v[5]:.4f} rad (rotation vector)" in pendant
     assert f"X {v[0] * 1000:.2f}  Y {v[1] * 1000:.2f}  Z {v[2] * 1000:.2f} mm" in pendant
+
+
+def test_robot_needs_only_the_robot_section(tmp_path, mock_config):
+    """A real-rig config whose tracker ROM files are not there yet: `tmscal robot` still
+    connects (it needs no tracker), while `tmscal track` names the missing ROM."""
+    import yaml
+
+    base = mock_config("mock-denso-polaris.yaml", robot={"port": 0})
+    with start_mock_rig(load_config(base), tracker_transport="pty") as mr:
+        cfg = point_config(base, mr.endpoints, "pointed.yaml")
+        data = yaml.safe_load(cfg.read_text())
+        data["tracker"]["tools"]["marker"] = str(tmp_path / "not-yet" / "marker.rom")
+        cfg.write_text(yaml.safe_dump(data))
+        r = CliRunner().invoke(main, ["robot", str(cfg)])
+        assert r.exit_code == 0, r.output
+        assert "x    500.00" in r.output
+        r = CliRunner().invoke(main, ["track", str(cfg), "--frames", "1", "--plain"])
+        assert r.exit_code == 1
+        assert "tracker.tools.marker" in r.output and "ROM file not found" in r.output

@@ -9,6 +9,7 @@ argument that has its own key or carries a limit.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -110,6 +111,10 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
     problem = tracker_port_problem(p)
     if problem:
         raise ConfigError(f"{cfg.path}: key 'tracker.port': {p!r}: {problem}")
+    for name, rom in t.tools.items():  # checked here too: a config may be loaded without it
+        if rom is not None and not Path(rom).is_file():
+            raise ConfigError(f"{cfg.path}: key 'tracker.tools.{name}': ROM file not found: "
+                              f"{rom}")
     for k in t.options:
         if k in TRACKER_RESERVED_OPTIONS:
             raise ConfigError(f"{cfg.path}: key 'tracker.options.{k}': '{k}' cannot be set "

@@ -253,7 +253,7 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
                                      "X,Y,Z,ROLL,PITCH,YAW (mm, deg)",
                                      param_hint="--move-to") from None
         target = matrix_from_denso_p(vals)
-    cfg = load_config(config)
+    cfg = load_config(config, check_files=False)  # the robot needs no tracker files
     with make_robot(cfg, envelope_for(cfg, None), host) as rb:
         click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
         here = rb.flange_pose()
@@ -374,7 +374,8 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 
 @main.command()
 @click.option("--config", "config", type=INPUT_FILE, default=None,
-              help="Mock rig config (default: configs/mock-ur-polaris.yaml).")
+              help="Mock rig config (default: the packaged mock-ur-polaris.yaml, in "
+                   "tmscal/data/configs/).")
 @click.option("--poses", type=click.IntRange(3, 100000), default=None,
               help="Override plan.poses.")
 @click.option("--samples", type=click.IntRange(1), default=None,
