@@ -108,7 +108,7 @@ def test_retries_count_per_fault_not_per_run(tmp_path):
     reconnect: the run completes (it stopped at the (retries+1)-th drop before)."""
     cfg = load_config(_denso_cfg(
         tmp_path, plan={"poses": 24}, run={"retries": 1, "reconnect_wait_s": 0.0},
-        mock={"robot": {"faults": {"drop_rate": 0.02, "seed": 3}}}))
+        mock={"robot": {"faults": {"drop_rate": 0.02, "seed": 26}}}))
     out = tmp_path / "s.jsonl"
     with start_mock_rig(cfg, tracker_transport="pty") as mr:
         res = acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
