@@ -109,7 +109,7 @@ class RobotConfig:
 class TrackerConfig:
     """Tracker driver, port (device path, pty, or socket://host:port) and tools
     (our name → ROM file path, absolute, or None for a tool already loaded). ``log_wire``:
-    a new file (absolute once parsed) that records the serial traffic (docs/devices-ndi.md);
+    a new file (absolute once parsed) that records the serial traffic (docs/devices.md);
     ``options`` go to the driver (NDI: ``reset_timeout_s``, ``init_timeout_s`` …)."""
 
     driver: str = "ndi"

@@ -1,4 +1,4 @@
-"""A Polaris that takes as long as a real one (docs/devices-ndi.md): seconds to answer RESET
+"""A Polaris that takes as long as a real one (docs/devices.md): seconds to answer RESET
 after a break (ndicapi waits up to 7 s), INIT / PINIT / TSTART taking seconds (PlusLib: "First
 init can take up to 5 seconds"), and RESET arriving as the answer to a command after the
 device reset. Our driver against the Polaris mock over a real pty, on the fast clock with

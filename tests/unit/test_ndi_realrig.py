@@ -1,4 +1,4 @@
-"""What a real Polaris asks of the driver that the mock used not to (docs/devices-ndi.md): no
+"""What a real Polaris asks of the driver that the mock used not to (docs/devices.md): no
 COMM over socket://, TX instead of BX on firmware whose BX fails with three or more tools,
 TX ``UNOCCUPIED`` rows, the newer error codes, and the wire log (``tracker.log_wire``).
 Our driver against our Polaris mock over a real pty or loopback TCP, on the fast clock."""

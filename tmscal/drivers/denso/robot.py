@@ -13,7 +13,7 @@ blocking ``Robot_Move`` comp 2 (MOVE L) with the pose as a VARIANT array
 configuration; ``@E``: the reply comes when the arm has reached the target and settled, as in
 DENSO's value-move sample, not ``@P``/``@0``, which may reply while it still moves) and the
 option ``SPEED=<percent>``. Close (best effort): the halt connection, then Motor off, GiveArm,
-Robot_Release, Controller_Disconnect, Service_Stop. See ``docs/devices-denso.md``.
+Robot_Release, Controller_Disconnect, Service_Stop. See ``docs/devices.md``.
 
 Speed and acceleration (DENSO's RC8 manuals: the controller scales motion by percentages).
 The real speed is SPEED × ExtSpeed of the arm's maximum, the real acceleration (and

@@ -23,7 +23,7 @@ DEVICE = "ndi"
 
 #: ``ERRORxx`` code -> meaning (NDI Combined API). The texts follow NDI's Polaris API guide as
 #: ndicapi's ``ndiErrorString`` gives them (PlusToolkit/ndicapi; 0x29 and 0x34-0x39 from its
-#: newer table, see docs/devices-ndi.md).
+#: newer table, see docs/devices.md).
 ERROR_TEXTS: dict[int, str] = {
     0x01: "invalid command",
     0x02: "command too long",

@@ -19,7 +19,7 @@ to ``retries`` times (the command is re-sent), then raised as ``ProtocolError`` 
 command means the device reset (power, a break) and lost its tools: :class:`DeviceReset`
 (a ``ConnectionLost``, so a run reconnects), naming the command. The input is flushed before
 every command, so a late reply is never taken for the next command's. Device facts relied on:
-docs/devices-ndi.md.
+docs/devices.md.
 """
 
 from __future__ import annotations

@@ -102,7 +102,7 @@ class URRobot(Robot):
         Longest a single move, or a wait for controller data, may take (s); beyond it the
         driver raises ``DeviceTimeout``.
 
-    Robot state (docs/devices-ur.md): ``open`` asks the dashboard server first and raises
+    Robot state (docs/devices.md): ``open`` asks the dashboard server first and raises
     ``RobotFault`` naming the cause and the fix at the pendant when remote control is off
     (script upload only), the robot is not powered and brake-released, or a protective or
     emergency stop is active; these are never treated as link losses. After a protective stop

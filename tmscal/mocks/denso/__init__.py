@@ -35,7 +35,7 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
   reply up to ``SETTLE_S`` earlier (fast clock: at once, the arm at rest by the next request).
   With a watchdog, a blocking move sends one S_EXECUTING packet per WDT period it lasts.
   Faults ``latched_error`` (TakeArm / Motor / Move refused until ClearError) and
-  ``hold_move_at`` (a move that runs until halted); see ``docs/devices-denso.md``.
+  ``hold_move_at`` (a move that runs until halted); see ``docs/devices.md``.
 * One reply per request, in one ``sendall``, with the request's serial; malformed requests
   get E_INVALIDPACKET, bad arguments E_INVALIDARG (NaN, ±inf and out-of-range numbers
   included), unknown handles E_HANDLE, anything the mock cannot handle E_FAIL; the socket is

@@ -3,7 +3,7 @@
 After a serial break (or power-up) a Polaris answers nothing until its reset is done and then
 sends ``RESETBE6F`` on its own; ndicapi waits up to 7 s for it (``ndiSerialProbe``), other
 clients sleep 3 s. INIT, PINIT and TSTART can each take seconds (PlusLib's
-``vtkPlusNDITracker``: "First init can take up to 5 seconds"). See docs/devices-ndi.md.
+``vtkPlusNDITracker``: "First init can take up to 5 seconds"). See docs/devices.md.
 
 On the real-time clock a reset takes :data:`REAL_TIME_RESET_S` unless configured; every other
 delay defaults to 0 on both clocks (ndicapi's probe gives INIT ~200 ms before it resets with a
