@@ -104,9 +104,10 @@ def _robot(c: RawBCAP) -> Variant:
 
 
 def _move_1mm(c: RawBCAP, r: Variant, rig: SimRig) -> None:
-    """A normal blocking 1 mm MOVE L at full speed (1 ms of motion); the rig follows."""
+    """A normal blocking 1 mm MOVE L (@E: the reply comes when the arm is still) at full
+    speed (1 ms of motion); the rig follows."""
     target = [501.0, 0.0, 400.0, 180.0, 0.0, 0.0, -1.0]
-    replies = c.call(Fn.ROBOT_MOVE, r, Variant(VT_I4, 2), f"@P P({', '.join(map(str, target))})",
+    replies = c.call(Fn.ROBOT_MOVE, r, Variant(VT_I4, 2), f"@E P({', '.join(map(str, target))})",
                      "SPEED=100")
     assert replies[-1].code == S_OK
     assert np.allclose(rig.flange[:3, 3], [501.0, 0.0, 400.0], atol=1e-9)
