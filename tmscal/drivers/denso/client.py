@@ -342,4 +342,18 @@ class BCAPClient:
         self.call(Fn.VARIABLE_RELEASE, Variant(VT_I4, handle))
 
 
-__all__ = ["BCAPClient", "DEFAULT_PORT", "finite_numbers"]
+def close_down(client: BCAPClient, steps: list[tuple[str, Any]], what: str) -> None:
+    """Run ``steps`` ((name, call) pairs: Robot_Release, Controller_Disconnect, Service_Stop
+    …) while the link is up, best effort: a failed step is logged (naming ``what``), not
+    raised, so the rest still run; then close the connection."""
+    for name, fn in steps:
+        if not client.connected:
+            break
+        try:
+            fn()
+        except (DeviceError, OSError) as e:
+            log.warning("%s: %s failed: %s", what, name, e)
+    client.close()
+
+
+__all__ = ["BCAPClient", "DEFAULT_PORT", "close_down", "finite_numbers"]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 
 from ...errors import DeviceError
-from .client import BCAPClient
+from .client import BCAPClient, close_down
 
 log = logging.getLogger(__name__)
 
@@ -74,14 +74,7 @@ class HaltLink:
                 steps.append(("Controller_Disconnect",
                               lambda h=self._ctrl: c.controller_disconnect(h)))
             steps.append(("Service_Stop", c.service_stop))
-        for what, fn in steps:
-            if not c.connected:
-                break
-            try:
-                fn()
-            except DeviceError as e:
-                log.warning("DENSO halt connection: %s failed: %s", what, e)
-        c.close()
+        close_down(c, steps, "DENSO halt connection")
         self._ctrl = self._robot = None
 
 

@@ -40,7 +40,7 @@ import numpy as np
 from ...errors import ConnectionLost, DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
-from .client import DEFAULT_PORT, BCAPClient
+from .client import DEFAULT_PORT, BCAPClient, close_down
 from .halt import HaltLink
 from .variant import to_variant
 
@@ -240,14 +240,7 @@ class DensoRobot(Robot):
             steps.append(("Controller_Disconnect", lambda: c.controller_disconnect(h)))
         if self._service:
             steps.append(("Service_Stop", c.service_stop))
-        for what, fn in steps:
-            if not c.connected:
-                break
-            try:
-                fn()
-            except (DeviceError, OSError) as e:
-                log.warning("DENSO close: %s failed: %s", what, e)
-        c.close()
+        close_down(c, steps, "DENSO close")
         self._client = None
         self._robot = self._ctrl = None
         self._service = self._arm = self._motor = False
