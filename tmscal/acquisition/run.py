@@ -351,17 +351,8 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
                 lambda: (f"The session {out} holds {len(writer.session.poses)} poses; "
                          f"{hint}"), on_phase)
             faults += n_faults
-            rec = _valid_or_skipped(rec)
-            writer.append(rec)
+            _save_pose(writer, rec, watch, total, on_pose, hint)
             new += 1
-            if on_pose:
-                on_pose(len(writer.session.indices() & set(range(total))), total, rec)
-            warning, stop_reason = watch.add(rec)
-            if warning:
-                log.warning("pose %d: %s", i, warning)
-            if stop_reason:
-                raise AcquisitionStopped(f"pose {i}: {stop_reason}. The session {out} holds "
-                                         f"{len(writer.session.poses)} poses; {hint}")
         clean = True
         recs = [p for p in writer.session.poses if p.index < total]
         return AcquireResult(path=out, recorded=sum(p.skipped is None for p in recs),
@@ -373,6 +364,24 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
         dev.close(stop_robot=not clean)
         if writer is not None:
             writer.close()
+
+
+def _save_pose(writer: SessionWriter, rec: PoseRecord, watch: SkipWatch, total: int,
+               on_pose: Callable[[int, int, PoseRecord], None] | None, hint: str) -> None:
+    """Append pose ``rec`` (recorded as skipped if the reader would reject it), report it,
+    and apply the skip thresholds: a warning is logged; past ``run.stop_skip_share`` the run
+    stops with AcquisitionStopped naming the reason and how to resume."""
+    rec = _valid_or_skipped(rec)
+    writer.append(rec)
+    if on_pose:
+        on_pose(len(writer.session.indices() & set(range(total))), total, rec)
+    warning, stop_reason = watch.add(rec)
+    if warning:
+        log.warning("pose %d: %s", rec.index, warning)
+    if stop_reason:
+        raise AcquisitionStopped(f"pose {rec.index}: {stop_reason}. The session "
+                                 f"{writer.path} holds {len(writer.session.poses)} poses; "
+                                 f"{hint}")
 
 
 def _create_session(out: Path, cfg: RigConfig, dev: _Devices, spec: PlanSpec,
