@@ -14,6 +14,7 @@ X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -25,8 +26,16 @@ from .metrics import coil_placement_errors, holdout_errors, noise_floor, truth_e
 
 METHODS = ("qr24", "qr36")
 
-__all__ = ["solve", "Calibration", "METHODS", "design_matrix", "holdout_errors",
+__all__ = ["solve", "Applied", "Calibration", "METHODS", "design_matrix", "holdout_errors",
            "truth_errors", "coil_placement_errors", "noise_floor", "check_inputs"]
+
+
+class Applied(StrEnum):
+    """Which matrices a calibration applies: the raw linear solution (the paper's way: raw
+    matrices, the product orthonormalised) or the orthonormal ones."""
+
+    RAW = "raw"
+    ORTHONORMAL = "orthonormal"
 
 
 @dataclass
@@ -51,11 +60,11 @@ class Calibration:
     Y_raw: np.ndarray | None = None
     Z_probe: np.ndarray | None = None
     Z_probe_raw: np.ndarray | None = None
-    applied: str = "raw"
+    applied: Applied = Applied.RAW
 
     def used(self) -> dict[str, np.ndarray | None]:
         """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal)."""
-        if self.applied == "raw":
+        if self.applied == Applied.RAW:
             return {"X": self.X_raw, "Y": self.Y_raw, "Z": self.Z_raw,
                     "Z_probe": self.Z_probe_raw}
         return {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
@@ -117,11 +126,11 @@ def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool
         Z_raw, (X_raw, Y_raw) = solve_linear(A, B, C)
         Z, (X, Y) = orthonormal_from_raw(A, [B, C], Z_raw, [X_raw, Y_raw])
         return Calibration("qr36", len(A), X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw, Y=Y,
-                           Y_raw=Y_raw, applied="orthonormal" if orthonormal else "raw")
+                           Y_raw=Y_raw, applied=Applied.ORTHONORMAL if orthonormal else Applied.RAW)
     Z_raw, (X_raw,) = solve_linear(A, B)
     Z, (X,) = orthonormal_from_raw(A, [B], Z_raw, [X_raw])
     cal = Calibration("qr24", len(A), X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw,
-                      applied="orthonormal" if orthonormal else "raw")
+                      applied=Applied.ORTHONORMAL if orthonormal else Applied.RAW)
     if C is not None:
         ZP_raw, (Y_raw,) = solve_linear(A, C)
         ZP, (Y,) = orthonormal_from_raw(A, [C], ZP_raw, [Y_raw])

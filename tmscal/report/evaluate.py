@@ -74,7 +74,7 @@ class SolveResult:
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
         out: dict[str, Any] = {
-            "method": self.method, "applied": self.applied, "n_solve": self.n_solve,
+            "method": self.method, "applied": str(self.applied), "n_solve": self.n_solve,
             "n_test": self.n_test, "errors_on": self.errors_on, "n_skipped": self.n_skipped,
             "X": _mat(self.X), "Y": _mat(self.Y), "Z": _mat(self.Z),
             "raw": {k: _mat(v) for k, v in self.raw.items()}, "errors": self.errors,
