@@ -16,6 +16,7 @@ import os
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import ClassVar
 
@@ -32,7 +33,16 @@ from .model import MODELS, MeasurementVolume, PolarisFaults
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PolarisFirmware", "MAX_HANDLES"]
+
+class MockState(StrEnum):
+    """The mock Polaris's mode: SETUP after a reset (only INIT and a few queries are
+    accepted), READY after INIT (tools are loaded and enabled), TRACKING after TSTART."""
+
+    SETUP = "setup"
+    READY = "ready"
+    TRACKING = "tracking"
+
+__all__ = ["PolarisFirmware", "MockState", "MAX_HANDLES"]
 
 MAX_HANDLES = 12
 _FIRST_HANDLE = 0x01
@@ -156,7 +166,7 @@ class PolarisFirmware:
     # --- state -------------------------------------------------------------------------------
     def _power_up(self) -> None:
         with self._lock:
-            self.state = "setup"  # "setup" → INIT → "ready" → TSTART → "tracking"
+            self.state = MockState.SETUP  # SETUP → INIT → READY → TSTART → TRACKING
             self._handles: dict[int, _Handle] = {}
             self._frames.restart()
 
@@ -258,9 +268,9 @@ class PolarisFirmware:
         spec = self._COMMANDS.get(cmd.name)
         if spec is None:
             raise _Reply(ErrorCode.INVALID_COMMAND)
-        if self.state == "setup" and not spec.in_setup:
+        if self.state == MockState.SETUP and not spec.in_setup:
             raise _Reply(ErrorCode.SYSTEM_NOT_INITIALIZED)
-        if spec.not_tracking and self.state == "tracking":
+        if spec.not_tracking and self.state == MockState.TRACKING:
             raise _Reply(ErrorCode.INVALID_MODE)
         return spec.handler(self, cmd.params.strip())
 
@@ -280,7 +290,7 @@ class PolarisFirmware:
 
     # --- system ------------------------------------------------------------------------------
     def _cmd_init(self, prm: str) -> bytes:
-        self.state = "ready"
+        self.state = MockState.READY
         return p.OKAY_REPLY
 
     def _cmd_reset(self, prm: str) -> bytes:
@@ -431,13 +441,13 @@ class PolarisFirmware:
             raise _Reply(ErrorCode.PARAMETER_OUT_OF_RANGE)
         if prm == "80":
             self._frames.restart(observations=False)
-        self.state = "tracking"
+        self.state = MockState.TRACKING
         return p.OKAY_REPLY
 
     def _cmd_tstop(self, prm: str) -> bytes:
-        if self.state != "tracking":
+        if self.state != MockState.TRACKING:
             raise _Reply(ErrorCode.INVALID_MODE)
-        self.state = "ready"
+        self.state = MockState.READY
         return p.OKAY_REPLY
 
     def _options(self, prm: str) -> int:
@@ -453,7 +463,7 @@ class PolarisFirmware:
 
     def _tracking_records(self, prm: str) -> tuple[list[p.HandleRecord], int]:
         opt = self._options(prm)
-        if self.state != "tracking":
+        if self.state != MockState.TRACKING:
             raise _Reply(ErrorCode.INVALID_MODE)
         enabled = [(h.number, h.body)
                    for h in sorted(self._handles.values(), key=lambda h: h.number) if h.enabled]
