@@ -13,7 +13,8 @@ X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
@@ -24,10 +25,15 @@ from ..geometry import RIGID_TOL_DEFAULT, check_poses
 from .linear import design_matrix, orthonormal_from_raw, solve_linear
 from .metrics import coil_placement_errors, holdout_errors, noise_floor, truth_errors
 
-METHODS = ("qr24", "qr36")
+#: method name → solver ``fn(A, B, C, orthonormal: bool, **options) -> Calibration`` (inputs
+#: already checked by ``check_inputs``); filled by ``register_method``. ``METHODS`` iterates
+#: over the names.
+SOLVERS: dict[str, Callable[..., Calibration]] = {}
+METHODS = SOLVERS
 
-__all__ = ["solve", "Applied", "Calibration", "METHODS", "design_matrix", "holdout_errors",
-           "truth_errors", "coil_placement_errors", "noise_floor", "check_inputs"]
+__all__ = ["solve", "register_method", "SOLVERS", "Applied", "Calibration", "METHODS",
+           "design_matrix", "holdout_errors", "truth_errors", "coil_placement_errors",
+           "noise_floor", "check_inputs"]
 
 
 class Applied(StrEnum):
@@ -61,6 +67,17 @@ class Calibration:
     Z_probe: np.ndarray | None = None
     Z_probe_raw: np.ndarray | None = None
     applied: Applied = Applied.RAW
+    #: parameter covariance of a statistical solver (e.g. ``ml``), in the order and units its
+    #: ``extra["parameters"]`` names; None for the closed-form methods
+    covariance: np.ndarray | None = None
+    #: predicted uncertainty, e.g. {"coil_centre_mm": {"sigma": …, "p95": …},
+    #: "coil_axis_deg": {…}}; None when the method gives none
+    uncertainty: dict[str, Any] | None = None
+    #: the tracker distortion a solver found, e.g. {"model": "scale", "matrix": 3×3,
+    #: "scale_percent": 0.08}; None when not modelled
+    distortion: dict[str, Any] | None = None
+    #: method-specific facts (iterations, restarts, the information criterion, …)
+    extra: dict[str, Any] = field(default_factory=dict)
 
     def used(self) -> dict[str, np.ndarray | None]:
         """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal)."""
@@ -103,22 +120,52 @@ def check_inputs(A: Any, B: Any, C: Any = None) -> tuple[np.ndarray, np.ndarray,
     return A, B, C
 
 
-def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool = False
-          ) -> Calibration:
+def register_method(name: str) -> Callable[[Callable[..., Calibration]],
+                                           Callable[..., Calibration]]:
+    """Decorator: register ``fn(A, B, C, orthonormal, **options) -> Calibration`` as
+    ``solve(..., method=name)`` and ``tmscal solve --method name``."""
+    def deco(fn: Callable[..., Calibration]) -> Callable[..., Calibration]:
+        SOLVERS[name] = fn
+        return fn
+    return deco
+
+
+def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool = False,
+          **options: Any) -> Calibration:
     """Solve the calibration from poses A (base_from_flange), B (tracker_from_marker) and
     optionally C (tracker_from_probe), each (n, 4, 4) in mm.
 
     method "qr36" (needs C): X, Y, Z jointly (Wang et al. 2018). "qr24": marker alone (X, Z),
-    and, if C is given, the probe separately (Y, Z_probe). ``orthonormal`` selects which
-    matrices are applied by :meth:`Calibration.errors` (default: the raw matrices, the paper's
-    way).
+    and, if C is given, the probe separately (Y, Z_probe). Other registered methods are
+    listed in ``METHODS`` (docs/methods.md); ``options`` go to the method. ``orthonormal``
+    selects which matrices are applied by :meth:`Calibration.errors` (default: the raw
+    matrices, the paper's way).
     Raises CalibrationError for unusable data (fewer than 3 poses, degenerate rotations,
-    non-rigid or NaN poses, qr36 without C).
+    non-rigid or NaN poses, qr36 without C) and for an unknown method or option.
     """
     method = method.lower()
-    if method not in METHODS:
-        raise CalibrationError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+    if method not in SOLVERS:
+        raise CalibrationError(f"unknown method {method!r}; known: {', '.join(SOLVERS)}")
     A, B, C = check_inputs(A, B, C)
+    try:
+        return SOLVERS[method](A, B, C, orthonormal, **options)
+    except TypeError as e:
+        if options and "argument" in str(e):
+            raise CalibrationError(f"method {method!r}: {e}") from None
+        raise
+
+
+def _qr(method: str) -> Callable[..., Calibration]:
+    def run(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bool
+            ) -> Calibration:
+        return _solve_qr_impl(A, B, C, method, orthonormal)
+    run.__doc__ = f"{method.upper()} (Wang et al. 2018; Ernst et al. 2012)."
+    return run
+
+
+def _solve_qr_impl(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: str,
+                   orthonormal: bool) -> Calibration:
+    """QR36 (X, Y, Z jointly) or QR24 (each body on its own), as ``solve`` describes."""
     if method == "qr36":
         if C is None:
             raise CalibrationError("qr36 needs probe poses C (this data is marker-only); "
@@ -126,7 +173,8 @@ def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool
         Z_raw, (X_raw, Y_raw) = solve_linear(A, B, C)
         Z, (X, Y) = orthonormal_from_raw(A, [B, C], Z_raw, [X_raw, Y_raw])
         return Calibration("qr36", len(A), X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw, Y=Y,
-                           Y_raw=Y_raw, applied=Applied.ORTHONORMAL if orthonormal else Applied.RAW)
+                           Y_raw=Y_raw,
+                           applied=Applied.ORTHONORMAL if orthonormal else Applied.RAW)
     Z_raw, (X_raw,) = solve_linear(A, B)
     Z, (X,) = orthonormal_from_raw(A, [B], Z_raw, [X_raw])
     cal = Calibration("qr24", len(A), X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw,
@@ -136,3 +184,7 @@ def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool
         ZP, (Y,) = orthonormal_from_raw(A, [C], ZP_raw, [Y_raw])
         cal.Y, cal.Y_raw, cal.Z_probe, cal.Z_probe_raw = Y, Y_raw, ZP, ZP_raw
     return cal
+
+
+SOLVERS["qr24"] = _qr("qr24")
+SOLVERS["qr36"] = _qr("qr36")
