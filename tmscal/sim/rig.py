@@ -119,18 +119,66 @@ def tms_rig_truth(distance_mm: float = 1500.0) -> Truth:
 @dataclass(frozen=True)
 class Noise:
     """Noise model: tracker fiducial σ (mm), robot positioning error σ (deg, mm) per move,
-    optional robot reading jitter σ (deg, mm) per read. Defaults are those of Wang et al. (2018)."""
+    optional robot reading jitter σ (deg, mm) per read. Defaults are those of Wang et al. (2018).
+
+    Tracker distortion (default none): every tracker-frame position p (the sphere centres) is
+    measured as D p, about the tracker origin, with D = diag(sx, sy, sz) + the shear
+    [xy, xz, yz] above the diagonal (D[0, 1], D[0, 2], D[1, 2]). ``tracker_scale`` is one
+    factor (isotropic, e.g. 1.001 for +0.1 %) or three; ``tracker_shear`` three
+    dimensionless entries. The pose is then fitted rigidly (Horn), as a tracker does, so an
+    isotropic scale multiplies the tracked translations and leaves the rotations."""
 
     fiducial_sigma_mm: float = 0.05
     robot_rot_sigma_deg: float = 0.05
     robot_trans_sigma_mm: float = 0.05
     robot_read_rot_sigma_deg: float = 0.0
     robot_read_trans_sigma_mm: float = 0.0
+    tracker_scale: float | tuple[float, float, float] = 1.0
+    tracker_shear: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        scale = _three(self.tracker_scale, "tracker_scale", broadcast=True)
+        if not all(0.5 <= v <= 2.0 for v in scale):
+            raise ValueError(f"tracker_scale {list(scale)}: each factor must be in 0.5…2")
+        shear = _three(self.tracker_shear, "tracker_shear", broadcast=False)
+        if not all(abs(v) <= 0.5 for v in shear):
+            raise ValueError(f"tracker_shear {list(shear)}: each entry must be in −0.5…0.5")
+        object.__setattr__(self, "tracker_scale", scale)
+        object.__setattr__(self, "tracker_shear", shear)
+
+    @property
+    def tracker_distortion(self) -> np.ndarray:
+        """D (3×3): the tracker measures a tracker-frame position p as D p."""
+        sx, sy, sz = self.tracker_scale  # type: ignore[misc]
+        xy, xz, yz = self.tracker_shear
+        return np.array([[sx, xy, xz], [0.0, sy, yz], [0.0, 0.0, sz]])
+
+    @property
+    def distorted(self) -> bool:
+        """True when the tracker distortion is not the identity."""
+        return not np.array_equal(self.tracker_distortion, np.eye(3))
 
     @classmethod
     def none(cls) -> Noise:
         """No noise at all (exact observations)."""
         return cls(0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _three(value: object, name: str, broadcast: bool) -> tuple[float, float, float]:
+    """A finite float triple from a number (if ``broadcast``) or a sequence of three."""
+    if isinstance(value, bool):
+        raise ValueError(f"{name}: expected a number or a list of three numbers")
+    if isinstance(value, (int, float)) and broadcast:
+        vals = [float(value)] * 3
+    else:
+        try:
+            vals = [float(v) for v in value]  # type: ignore[union-attr]
+        except (TypeError, ValueError):
+            what = "a number or a list of three numbers" if broadcast else "a list of three"
+            raise ValueError(f"{name}: expected {what}, got {value!r}") from None
+    if len(vals) != 3 or not all(np.isfinite(vals)):
+        raise ValueError(f"{name}: expected three finite numbers, got {value!r}")
+    return (vals[0], vals[1], vals[2])
 
 
 def _perturbation(rng: np.random.Generator, rot_sigma_deg: float, trans_sigma_mm: float,
@@ -209,17 +257,21 @@ class SimRig:
 
     def observe(self, body: str, n: int | None = None) -> np.ndarray:
         """Noisy tracker_from_<body> (4×4 mm), or n independent observations (n, 4, 4):
-        fiducials at the true pose + N(0, σ) per coordinate, pose by Horn's method."""
+        fiducials at the true pose, distorted by the tracker distortion D (``Noise``), + N(0, σ)
+        per coordinate, pose by Horn's method."""
         T = self.true_body(body)
         assert self.tools is not None
         pts = np.asarray(self.tools[body], dtype=np.float64)
         m = 1 if n is None else n
         world = (T[:3, :3] @ pts.T).T + T[:3, 3]
+        distorted = self.noise.distorted
+        if distorted:
+            world = world @ self.noise.tracker_distortion.T
         with self._lock:
             noisy = world[None] + (self.rng.normal(0.0, self.noise.fiducial_sigma_mm,
                                                    (m,) + world.shape)
                                    if self.noise.fiducial_sigma_mm > 0 else 0.0)
-        if self.noise.fiducial_sigma_mm == 0:
+        if self.noise.fiducial_sigma_mm == 0 and not distorted:
             out = np.repeat(T[None], m, axis=0)
         else:
             out = absolute_orientation(pts, noisy)
