@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 import numpy as np
@@ -23,6 +24,35 @@ from . import (
 )
 
 # --- simulate -------------------------------------------------------------------------------
+
+class _Triple(click.ParamType):
+    """Three comma-separated finite numbers in [lo, hi] ('1.001,1,1'); with ``broadcast`` one
+    number stands for all three."""
+
+    name = "x[,y,z]"
+
+    def __init__(self, lo: float, hi: float, broadcast: bool = False) -> None:
+        self.lo, self.hi, self.broadcast = lo, hi, broadcast
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> tuple[float, float, float]:
+        if isinstance(value, tuple):
+            return value
+        parts = [p.strip() for p in str(value).split(",")]
+        if self.broadcast and len(parts) == 1:
+            parts *= 3
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            self.fail(f"{value!r}: expected numbers separated by commas", param, ctx)
+        if len(vals) != 3:
+            self.fail(f"{value!r}: expected {'one or ' if self.broadcast else ''}three "
+                      "numbers", param, ctx)
+        for v in vals:
+            if not (np.isfinite(v) and self.lo <= v <= self.hi):
+                self.fail(f"{value!r}: each number must be in {self.lo:g}…{self.hi:g}",
+                          param, ctx)
+        return (vals[0], vals[1], vals[2])
+
 
 @main.command()
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
@@ -47,14 +77,22 @@ from . import (
               help="Translation range ±mm per axis (default 100 for eq14, 500 for random).")
 @click.option("--rotation", type=_Finite(0, 180), default=10.0, show_default=True,
               help="eq14 rotation range ±degrees per axis.")
+@click.option("--tracker-scale", type=_Triple(0.5, 2.0, broadcast=True), default="1",
+              show_default=True,
+              help="Tracker distortion: scale of tracker-frame positions about the tracker "
+                   "origin, one factor (e.g. 1.001 = +0.1 %) or three 'sx,sy,sz'.")
+@click.option("--tracker-shear", type=_Triple(-0.5, 0.5), default="0,0,0", show_default=True,
+              help="Tracker distortion: shear 'xy,xz,yz' (dimensionless), added above the "
+                   "diagonal of the scale matrix (docs/methods.md).")
 @click.option("--marker-only", is_flag=True, help="Simulate the marker only (no probe).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @handle_errors
 def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
              fiducial_sigma: float, robot_rot_sigma: float, robot_trans_sigma: float,
-             radius: float | None, rotation: float, marker_only: bool, force: bool) -> None:
+             radius: float | None, rotation: float, tracker_scale: tuple[float, ...],
+             tracker_shear: tuple[float, ...], marker_only: bool, force: bool) -> None:
     """Write a simulated session (the simulation of Wang et al. 2018, docs/methods.md); the
-    header carries the truth."""
+    header carries the truth (and the tracker distortion, when one is simulated)."""
     from ..session import make_header, records_from_arrays, write_session
     from ..sim import Noise
     from ..sim import simulate as run_sim
@@ -63,7 +101,8 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
     if force and output.exists():
         output.unlink()
     rng = np.random.default_rng(seed)
-    noise = Noise(fiducial_sigma, robot_rot_sigma, robot_trans_sigma)
+    noise = Noise(fiducial_sigma, robot_rot_sigma, robot_trans_sigma,
+                  tracker_scale=tuple(tracker_scale), tracker_shear=tuple(tracker_shear))
     truth, d = run_sim(poses, rng, plan=plan, noise=noise, samples=samples,
                        with_probe=not marker_only, radius_mm=radius, rotation_deg=rotation)
     bodies = ["marker"] if marker_only else ["marker", "probe"]
@@ -73,7 +112,9 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
                              "fiducial_sigma_mm": fiducial_sigma,
                              "robot_rot_sigma_deg": robot_rot_sigma,
                              "robot_trans_sigma_mm": robot_trans_sigma,
-                             "radius_mm": radius, "rotation_deg": rotation}},
+                             "radius_mm": radius, "rotation_deg": rotation,
+                             "tracker_scale": list(noise.tracker_scale),  # type: ignore
+                             "tracker_shear": list(noise.tracker_shear)}},
         devices={"robot": {"driver": "sim"}, "tracker": {"driver": "sim"}})
     recs = records_from_arrays(d["A"], d["marker"], d.get("probe"), d["commanded"], samples)
     write_session(output, header, recs, overwrite=force)
