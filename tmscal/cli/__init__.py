@@ -255,4 +255,4 @@ def main(verbose: int) -> None:
 
 
 
-from . import offline, rig  # noqa: E402,F401  (registers the commands)
+from . import compare, offline, rig  # noqa: E402,F401  (registers the commands)

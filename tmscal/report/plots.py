@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_study", "plot_residuals", "METRICS_CAPTION"]
+__all__ = ["plot_study", "plot_residuals", "plot_compare", "METRICS_CAPTION"]
 
 #: the metric definitions printed under the study figure (docs/methods.md)
 METRICS_CAPTION = (
@@ -149,3 +149,90 @@ def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
     fig.text(0.5, 0.0, textwrap.fill(caption, 140), ha="center", va="top", fontsize=8)
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
+
+
+def _curve(ax: Any, ns: list[int], d: dict[str, list[float]], col: str, label: str | None
+           ) -> None:
+    """A mean curve with its ±SD band (NaNs leave gaps)."""
+    mean = np.asarray(d["mean"], dtype=float)
+    sd = np.asarray(d.get("sd") or [np.nan] * len(mean), dtype=float)
+    ax.plot(ns, mean, "o-", color=col, lw=1.4, ms=3.5, label=label)
+    ok = np.isfinite(sd)
+    if ok.any():
+        ax.fill_between(np.asarray(ns)[ok], (mean - sd)[ok], (mean + sd)[ok], color=col,
+                        alpha=0.15, lw=0)
+
+
+def plot_compare(res: dict[str, Any], paths: dict[str, str], title: str | None = None
+                 ) -> None:
+    """The figures of ``tmscal compare`` (``report.compare.compare_arrays``), as Figure 2 of the
+    Panda/Vicra TMS study: ``paths["errors"]``: held-out position e_t (mm) and orientation
+    θ_t (deg) against n; ``paths["time"]``: solve time (ms) against n; ``paths["truth"]``
+    (only with a truth): the ground-truth translation error of Y (X when marker-only) and the
+    bound when there is one. One colour per method, mean ± SD over folds as a band."""
+    plt = _pyplot()
+    ns = res["ns"]
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    col = {m: colours[i % len(colours)] for i, m in enumerate(res["methods"])}
+    head = (title or "comparison") + f": {res['n_poses']} poses, {res['folds']} folds"
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5), layout="constrained")
+    for m, r in res["methods"].items():
+        for ax, key in zip(axes, ("e_t_mm", "theta_t_deg")):
+            if key in r:
+                _curve(ax, ns, r[key], col[m], m.upper() if ax is axes[0] else None)
+    for ax, lab in zip(axes, ("(a) position error e_t (mm)", "(b) orientation error θ_t "
+                                                                "(deg)")):
+        _compare_axes(ax, lab, ns)
+    fig.legend(loc="outside lower center", ncol=max(1, len(res["methods"])), frameon=False)
+    fig.suptitle(head + "\nheld-out error, mean ± SD over folds (docs/methods.md)",
+                 fontsize=11)
+    fig.savefig(paths["errors"], dpi=150)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(6.5, 4.8), layout="constrained")
+    for m, r in res["methods"].items():
+        if "time_ms" in r:
+            _curve(ax, ns, r["time_ms"], col[m], m.upper())
+    _compare_axes(ax, "solve time (ms)", ns)
+    ax.legend(frameon=False, fontsize=9)
+    ax.set_title(head + "\nwall time per solve, mean ± SD over folds", fontsize=10)
+    fig.savefig(paths["time"], dpi=150)
+    plt.close(fig)
+    if res["truth"] and "truth" in paths:
+        _plot_compare_truth(plt, res, paths["truth"], col, head)
+
+
+def _plot_compare_truth(plt: Any, res: dict[str, Any], path: str, col: dict[str, str],
+                        head: str) -> None:
+    ns = res["ns"]
+    key = "Y_trans_mm" if "probe" in res["bodies"] else "X_trans_mm"
+    fig, ax = plt.subplots(figsize=(6.5, 4.8), layout="constrained")
+    for m, r in res["methods"].items():
+        t = r.get("truth", {})
+        if key in t:
+            _curve(ax, ns, t[key], col[m], m.upper())
+    bound = res.get("bound") or {}
+    for k, v in bound.items():
+        if k != "n" and k.split(".")[0] in (key[0], key, f"{key[0]}_trans_mm"):
+            ax.plot(ns, v, "k--", lw=1.2, label=f"Cramér–Rao bound ({k})")
+            break
+    _compare_axes(ax, f"error of {key[0]}'s translation against the truth (mm)", ns)
+    ax.legend(frameon=False, fontsize=9)
+    ax.set_title(head + "\nground-truth error, mean ± SD over folds", fontsize=10)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def _compare_axes(ax: Any, label: str, ns: list[int]) -> None:
+    from matplotlib.ticker import FuncFormatter
+
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    ax.set_xlabel("poses solved on (n)")
+    ax.set_ylabel(label)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_major_formatter(plain)
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(FuncFormatter(_minor_label))
+    ax.set_xticks(ns)
+    ax.grid(True, which="major", alpha=0.4)
+    ax.grid(True, which="minor", alpha=0.15)

@@ -1,0 +1,151 @@
+"""``tmscal compare`` and ``tmscal.report.compare``: the fold protocol, the skip note on
+marker-only sessions, the optional bound, the table, the JSON and the figures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tmscal import calib
+from tmscal.calib.study import cross_validate
+from tmscal.cli import main
+from tmscal.errors import CalibrationError
+from tmscal.report.compare import compare_arrays, default_ns, format_compare
+from tmscal.sim import Noise, simulate
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def poses():
+    truth, d = simulate(60, np.random.default_rng(11), plan="eq14", noise=Noise())
+    return truth, d
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("compare")
+    both, marker = tmp / "sim.jsonl", tmp / "marker.jsonl"
+    assert run("simulate", "-o", both, "--poses", 60, "--seed", 4).exit_code == 0
+    assert run("simulate", "-o", marker, "--poses", 60, "--seed", 4,
+               "--marker-only").exit_code == 0
+    return both, marker
+
+
+def test_at_the_largest_n_the_folds_are_those_of_cross_validation(poses) -> None:
+    _, d = poses
+    A, B, C = d["A"], d["marker"], d["probe"]
+    res = compare_arrays(A, B, C, ["qr24", "qr36"], ns=[48], folds=5)
+    for m in ("qr24", "qr36"):
+        cv = cross_validate(A, B, C, method=m, k=5)
+        for k in ("e_t_mm", "theta_t_deg"):
+            assert res["methods"][m][k]["mean"][0] == pytest.approx(cv["mean"][k], rel=1e-9)
+            assert res["methods"][m][k]["sd"][0] == pytest.approx(cv["sd"][k], rel=1e-9)
+        assert res["methods"][m]["time_ms"]["mean"][0] > 0
+
+
+def test_noise_free_poses_give_zero_errors_and_exact_truth() -> None:
+    truth, d = simulate(40, np.random.default_rng(2), plan="eq14", noise=Noise.none())
+    res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[10, 32], folds=5,
+                         truth=truth.as_dict() | {k: getattr(truth, k) for k in "XYZ"})
+    r = res["methods"]["qr36"]
+    assert max(r["e_t_mm"]["mean"]) < 1e-6
+    assert max(r["truth"]["Y_trans_mm"]["mean"]) < 1e-6
+    assert max(r["truth"]["coil_placement_mm"]["mean"]) < 1e-6
+
+
+def test_more_poses_bring_the_truth_error_down(poses) -> None:
+    truth, d = poses
+    t = {k: getattr(truth, k) for k in "XYZ"}
+    res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[5, 48], folds=5,
+                         truth=t)
+    y = res["methods"]["qr36"]["truth"]["Y_trans_mm"]["mean"]
+    assert y[1] < y[0]
+
+
+def test_marker_only_skips_methods_that_need_the_probe(poses) -> None:
+    truth, d = poses
+    res = compare_arrays(d["A"], d["marker"], None, ["qr24", "qr36"], ns=[10], folds=3,
+                         truth={"X": truth.X, "Z": truth.Z})
+    assert list(res["methods"]) == ["qr24"] and "qr36" in res["skipped"]
+    assert "probe" in res["skipped"]["qr36"]
+    assert "X_trans_mm" in res["methods"]["qr24"]["truth"]
+    text = format_compare(res)
+    assert "skipped qr36:" in text and "truth X mm" in text
+
+
+def test_bad_counts_are_calibration_errors(poses) -> None:
+    _, d = poses
+    with pytest.raises(CalibrationError, match="--n 49"):
+        compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[49], folds=5)
+    with pytest.raises(CalibrationError, match="unknown method 'nope'"):
+        compare_arrays(d["A"], d["marker"], d["probe"], ["nope"], ns=[10])
+    assert default_ns(48) == [5, 7, 10, 14, 20, 30, 48]
+    assert default_ns(50) == [5, 7, 10, 14, 20, 30, 50]
+
+
+def test_a_bound_function_when_calib_has_one_is_shown(poses, monkeypatch) -> None:
+    truth, d = poses
+    seen = []
+
+    def fake_bound(A, B, C, truth):
+        seen.append(len(A))
+        return {"Y": {"trans_mm": 1.0 / len(A)}}
+
+    monkeypatch.setattr(calib, "cramer_rao_bound", fake_bound, raising=False)
+    t = {k: getattr(truth, k) for k in "XYZ"}
+    res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[10, 40], folds=5,
+                         truth=t)
+    assert seen == [10, 40]
+    assert res["bound"]["Y.trans_mm"] == [0.1, 0.025]
+    text = format_compare(res)
+    assert "bound mm" in text and "0.0250" in text
+
+
+def test_table_lines_fit_and_name_every_method(poses) -> None:
+    truth, d = poses
+    res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr24", "qr36"], ns=[7, 20],
+                         folds=4, truth={k: getattr(truth, k) for k in "XYZ"})
+    text = format_compare(res)
+    assert max(len(ln) for ln in text.splitlines()) <= 100
+    rows = [ln.split() for ln in text.splitlines() if ln.strip().split()[:1] in (["7"], ["20"])]
+    assert sorted((r[0], r[1]) for r in rows) == [("20", "qr24"), ("20", "qr36"),
+                                                 ("7", "qr24"), ("7", "qr36")]
+
+
+def test_cli_json_and_plots(sessions, tmp_path) -> None:
+    both, marker = sessions
+    r = run("compare", both, "--methods", "qr24,qr36", "--n", "7,20", "--folds", 3, "--json")
+    assert r.exit_code == 0, r.output
+    res = json.loads(r.output)
+    assert res["ns"] == [7, 20] and set(res["methods"]) == {"qr24", "qr36"}
+    assert res["truth"] is True and res["session"] == str(both)
+    out = tmp_path / "figs"
+    r = run("compare", marker, "--methods", "qr24,qr36", "--n", "7,20", "--plot", out)
+    assert r.exit_code == 0, r.output
+    assert "skipped qr36" in r.output
+    for f in ("compare-errors.png", "compare-time.png", "compare-truth.png"):
+        assert (out / f).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    r = run("compare", marker, "--methods", "qr24", "--n", "7", "--plot", out)
+    assert r.exit_code == 2 and "already exists" in r.output and "--force" in r.output
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--n", "x"], ["--n", "whole numbers"]),
+    (["--n", "500"], ["--n 500"]),
+    (["--methods", "nope"], ["unknown method 'nope'"]),
+    (["--folds", "1"], ["--folds"]),
+])
+def test_cli_bad_input_is_one_error_line(sessions, args, words) -> None:
+    both, _ = sessions
+    r = run("compare", both, *args)
+    assert r.exit_code != 0
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), r.output
+    for w in words:
+        assert w in lines[0]

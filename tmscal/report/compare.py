@@ -1,0 +1,320 @@
+"""The method comparison of ``tmscal compare`` (docs/methods.md, "Comparing the methods"): on
+one session, every registered method's held-out position and orientation error (mean ± SD over
+folds) and its solve time against the number of poses solved on, as the Panda/Vicra TMS study
+compared QR24, SGO and QUAT; with a truth in the session, the ground-truth errors (and the
+Cramér–Rao bound when ``tmscal.calib`` offers one) beside them.
+
+Protocol: the usable poses, in order, are cut into k contiguous folds (``numpy.array_split``);
+for each n and each fold, a method is solved on the first n poses that are not in the fold and
+tested on the fold. Frames and metrics as in docs/methods.md: A = base_from_flange,
+B = tracker_from_marker, C = tracker_from_probe; mm and degrees.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .. import calib
+from ..calib import coil_placement_errors, solve, truth_errors
+from ..errors import CalibrationError
+from ..session import Session
+
+__all__ = ["compare_session", "compare_arrays", "format_compare", "default_ns", "find_bound",
+           "json_safe", "handheld_options"]
+
+#: the error curves compared: key → (label, unit)
+METRICS = {"e_t_mm": ("position e_t", "mm"), "theta_t_deg": ("orientation θ_t", "deg")}
+_DEFAULT_NS = (5, 7, 10, 14, 20, 30, 50, 100, 150, 250, 500)
+
+
+def default_ns(n_train_max: int) -> list[int]:
+    """The pose counts compared by default: 5, 7, 10, 14, 20, 30, 50, 100, 150, 250, 500 up to
+    the largest training set, and that set itself."""
+    ns = [n for n in _DEFAULT_NS if n <= n_train_max]
+    if n_train_max >= 3 and (not ns or ns[-1] != n_train_max):
+        ns.append(n_train_max)
+    return ns
+
+
+def find_bound() -> Callable[..., Any] | None:
+    """The Cramér–Rao bound function of ``tmscal.calib`` if it has one (``cramer_rao_bound``),
+    else None: the comparison then leaves the bound out."""
+    for owner in (calib, getattr(calib, "ml", None)):
+        fn = getattr(owner, "cramer_rao_bound", None) if owner is not None else None
+        if callable(fn):
+            return fn
+    return None
+
+
+def compare_session(session: Session, methods: Sequence[str] | None = None,
+                    ns: Sequence[int] | None = None, folds: int = 5,
+                    progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
+    """The comparison on a session's usable poses (probe poses when every one has them).
+    Returns the dict of :func:`compare_arrays` with "session" (its path) added."""
+    need_probe = "probe" in session.bodies
+    A, B, C, _ = session.arrays(need_probe=need_probe)
+    if len(A) == 0:
+        raise CalibrationError(f"{session.path}: no usable poses in the session")
+    out = compare_arrays(A, B, C, methods, ns=ns, folds=folds, truth=session.truth,
+                         progress=progress)
+    out["session"] = str(session.path)
+    return out
+
+
+def _folds(n: int, k: int) -> list[np.ndarray]:
+    if k < 2:
+        raise CalibrationError(f"--folds {k}: the comparison needs at least 2 folds")
+    folds = np.array_split(np.arange(n), min(k, n))
+    if n - max(len(f) for f in folds) < 3:
+        raise CalibrationError(f"{n} poses are too few for {k} folds (each fold must leave at "
+                               "least 3 poses to solve on)")
+    return folds
+
+
+def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
+                   methods: Sequence[str] | None = None, ns: Sequence[int] | None = None,
+                   folds: int = 5, truth: dict[str, np.ndarray] | None = None,
+                   progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
+    """Compare methods on poses A, B[, C] (n, 4, 4) mm.
+
+    Returns {"n_poses", "folds", "fold_sizes", "ns", "bodies", "methods": {name: {"n": [..],
+    "e_t_mm": {"mean", "sd"}, "theta_t_deg": {…}, "time_ms": {…}, "failed": {n: reason},
+    ["truth": {"X_trans_mm", "Y_trans_mm", "coil_placement_mm", …: {"mean", "sd"}}]}},
+    "skipped": {name: reason} (e.g. a method that needs probe poses on a marker-only session),
+    "bound": {…} or None, "truth": bool}. Errors are the hold-out errors of docs/methods.md
+    (e_t = marker + probe (+ e_z for QR24), θ_t likewise); time is wall time per solve."""
+    methods = list(calib.METHODS) if methods is None else [m.lower() for m in methods]
+    unknown = [m for m in methods if m not in calib.METHODS]
+    if unknown:
+        raise CalibrationError(f"unknown method {unknown[0]!r}; known: "
+                               f"{', '.join(calib.METHODS)}")
+    fs = _folds(len(A), folds)
+    n_train_max = len(A) - max(len(f) for f in fs)
+    ns = default_ns(n_train_max) if ns is None else sorted(set(int(n) for n in ns))
+    too_big = [n for n in ns if n > n_train_max or n < 3]
+    if too_big:
+        raise CalibrationError(f"--n {too_big[0]}: each fold leaves {n_train_max} poses to "
+                               f"solve on (and a solve needs at least 3); use n in 3…"
+                               f"{n_train_max} or fewer folds")
+    out: dict[str, Any] = {"n_poses": len(A), "folds": len(fs),
+                           "fold_sizes": [len(f) for f in fs], "ns": ns,
+                           "bodies": ["marker"] + ([] if C is None else ["probe"]),
+                           "methods": {}, "skipped": {}, "truth": bool(truth), "bound": None}
+    for m in methods:
+        try:
+            res = _compare_method(m, A, B, C, fs, ns, truth, progress)
+        except CalibrationError as e:
+            out["skipped"][m] = str(e)
+            continue
+        out["methods"][m] = res
+    if truth:
+        out["bound"] = _bound(A, B, C, fs, ns, truth)
+    return out
+
+
+def _compare_method(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
+                    fs: list[np.ndarray], ns: Sequence[int], truth: dict[str, Any] | None,
+                    progress: Callable[[int], Any] | None) -> dict[str, Any]:
+    """One method's curves. Raises CalibrationError (the method is skipped) when it fails at
+    every n, e.g. a method that needs probe poses on a marker-only session."""
+    rows: dict[str, list[list[float]]] = {}
+    failed: dict[int, str] = {}
+    for n in ns:
+        per_fold: dict[str, list[float]] = {}
+        for test in fs:
+            train = np.setdiff1d(np.arange(len(A)), test)[:n]
+            try:
+                vals = _one_solve(m, A, B, C, train, test, truth)
+            except CalibrationError as e:
+                failed[n] = str(e)
+                vals = {}
+            for k, v in vals.items():
+                per_fold.setdefault(k, []).append(v)
+            if progress is not None:
+                progress(1)
+        for k, v in per_fold.items():
+            rows.setdefault(k, [[] for _ in ns])[ns.index(n)] = v
+    if len(failed) == len(ns) and not rows:
+        raise CalibrationError(next(iter(failed.values())))
+    res: dict[str, Any] = {"n": list(ns), "failed": failed}
+    for k, per_n in rows.items():
+        stats = {"mean": [float(np.mean(v)) if v else float("nan") for v in per_n],
+                 "sd": [float(np.std(v, ddof=1)) if len(v) > 1 else float("nan")
+                        for v in per_n]}
+        if k.startswith("truth:"):
+            res.setdefault("truth", {})[k[6:]] = stats
+        else:
+            res[k] = stats
+    return res
+
+
+def _one_solve(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
+               train: np.ndarray, test: np.ndarray, truth: dict[str, Any] | None
+               ) -> dict[str, float]:
+    """Solve on ``train``, test on ``test``: {"e_t_mm", "theta_t_deg", "time_ms",
+    "truth:<k>"…}."""
+    Ctr = None if C is None else C[train]
+    opts = handheld_options(m, B[train[:1]], None if Ctr is None else Ctr[:1])
+    t0 = time.perf_counter()
+    cal = solve(A[train], B[train], Ctr, method=m, **opts)
+    dt = time.perf_counter() - t0
+    err = cal.errors(A[test], B[test], None if C is None else C[test])
+    vals = {"e_t_mm": err["e_t_mm"], "theta_t_deg": err["theta_t_deg"], "time_ms": 1e3 * dt}
+    if truth:
+        te = truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth)
+        for k, d in te.items():
+            vals[f"truth:{k}_trans_mm"] = d["trans_mm"]
+            vals[f"truth:{k}_rot_deg"] = d["rot_deg"]
+        if C is not None and cal.Y is not None and truth.get("Y") is not None:
+            u = cal.used()
+            coil = coil_placement_errors(C[test], u["Y"], u["Z"], truth["Y"], truth["Z"])
+            vals["truth:coil_placement_mm"] = float(coil.mean())
+    return vals
+
+
+def handheld_options(method: str, B_a: np.ndarray, C_a: np.ndarray | None) -> dict[str, Any]:
+    """The options that give a method which takes the handheld measurement (``handheld_B``,
+    ``handheld_C``: the marker and the probe at the coil centre seen together, as in the
+    handheld coil calibration Wang et al. 2018 compare against) the poses B_a[0], C_a[0];
+    {} for other methods or without probe poses."""
+    import inspect
+
+    fn = calib.SOLVERS.get(method)
+    if fn is None or C_a is None or len(C_a) == 0:
+        return {}
+    params = inspect.signature(fn).parameters
+    if "handheld_B" in params and "handheld_C" in params:
+        return {"handheld_B": B_a[0], "handheld_C": C_a[0]}
+    return {}
+
+
+def _bound(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, fs: list[np.ndarray],
+           ns: Sequence[int], truth: dict[str, Any]) -> dict[str, Any] | None:
+    """The Cramér–Rao bound at each n (on the first fold's training poses), as the calib
+    module's bound function gives it: {"n": [..], "<key>": [..]} for each number it returns;
+    None when there is no bound function or it cannot be evaluated."""
+    fn = find_bound()
+    if fn is None:
+        return None
+    out: dict[str, Any] = {"n": list(ns)}
+    for n in ns:
+        train = np.setdiff1d(np.arange(len(A)), fs[0])[:n]
+        try:
+            b = fn(A[train], B[train], None if C is None else C[train], truth)
+        except (CalibrationError, TypeError, ValueError, KeyError):
+            return None
+        flat = _flat_numbers(b)
+        for k, v in flat.items():
+            out.setdefault(k, [float("nan")] * len(ns))[ns.index(n)] = v
+    return out
+
+
+def _flat_numbers(d: Any, prefix: str = "") -> dict[str, float]:
+    """The scalar numbers of a (nested) dict, keys joined by '.'."""
+    out: dict[str, float] = {}
+    if isinstance(d, dict):
+        for k, v in d.items():
+            out.update(_flat_numbers(v, f"{prefix}{k}."))
+    elif isinstance(d, (int, float, np.floating)) and not isinstance(d, bool):
+        out[prefix.rstrip(".")] = float(d)
+    return out
+
+
+def _pm(mean: float, sd: float, w: int = 18) -> str:
+    if not np.isfinite(mean):
+        return f"{'—':>{w}}"
+    s = f"{mean:.4f}" + (f" ± {sd:.4f}" if np.isfinite(sd) else "")
+    return f"{s:>{w}}"
+
+
+def format_compare(res: dict[str, Any]) -> str:
+    """The ``tmscal compare`` table: one block per n, one row per method (held-out e_t, θ_t
+    mean ± SD over folds, solve time; with truth the mean ground-truth error of Y's (or, on a
+    marker-only session, X's) translation and the coil placement error, and the bound)."""
+    where = res.get("session", "the poses")
+    sizes = sorted({min(res["fold_sizes"]), max(res["fold_sizes"])})
+    intro = (f"method comparison on {where}: {res['n_poses']} poses, {res['folds']} contiguous "
+             f"folds of {'–'.join(map(str, sizes))} poses; for each n, each method is solved "
+             "on the first n poses outside a fold and tested on the fold. Mean ± SD over "
+             "folds; e_t, θ_t: hold-out errors (marker + probe, + e_z for QR24; "
+             "docs/methods.md); time: wall time per solve.")
+    lines = textwrap.wrap(intro, 98, subsequent_indent="  ") + [""]
+    tkey = "Y_trans_mm" if "probe" in res["bodies"] else "X_trans_mm"
+    head = (f"  {'n':>4}  {'method':<9}{'e_t mm':>18}{'θ_t deg':>18}{'time ms':>18}")
+    if res["truth"]:
+        head += f"{'truth ' + tkey[0] + ' mm':>14}" + (
+            f"{'coil mm':>10}" if "probe" in res["bodies"] else "")
+    bound = res.get("bound")
+    bkey = _bound_key(bound, tkey)
+    if bkey:
+        head += f"{'bound mm':>10}"
+    lines.append(head)
+    for i, n in enumerate(res["ns"]):
+        for m, r in res["methods"].items():
+            row = f"  {n:>4}  {m:<9}"
+            for k in ("e_t_mm", "theta_t_deg", "time_ms"):
+                d = r.get(k, {"mean": [float("nan")] * len(res["ns"]), "sd": []})
+                row += _pm(d["mean"][i], d["sd"][i] if d["sd"] else float("nan"))
+            if res["truth"]:
+                t = r.get("truth", {})
+                row += _cell(t, tkey, i, 14)
+                if "probe" in res["bodies"]:
+                    row += _cell(t, "coil_placement_mm", i, 10)
+            if bkey:
+                row += f"{bound[bkey][i]:>10.4f}"
+            if n in r.get("failed", {}):
+                row += "  (failed on some folds)"
+            lines.append(row)
+        lines.append("")
+    if any("handheld_B" in handheld_options(m, np.eye(4)[None], np.eye(4)[None])
+           for m in res["methods"]):
+        lines += textwrap.wrap("handheld: Y from the first training pose's marker and probe "
+                               "(one measurement with the probe at the coil centre)", 98,
+                               initial_indent="  ", subsequent_indent="    ")
+    for m, why in res["skipped"].items():
+        lines += textwrap.wrap(f"skipped {m}: {why}", 98, initial_indent="  ",
+                               subsequent_indent="    ")
+    if res["truth"]:
+        notes = [f"truth: the mean error of the solved {tkey[0]}'s translation against the "
+                 "session's truth"
+                 + ("; coil: the coil placement error (mm) on the fold's targets"
+                    if "probe" in res["bodies"] else ""),
+                 "bound: " + (f"the Cramér–Rao bound of {bkey} (the best any unbiased "
+                              "method can do)" if bkey else
+                              "no Cramér–Rao bound in tmscal.calib; not shown")]
+        lines += [w for ln in notes for w in textwrap.wrap(ln, 98, initial_indent="  ",
+                                                           subsequent_indent="    ")]
+    return "\n".join(lines).rstrip()
+
+
+def _cell(t: dict[str, Any], key: str, i: int, w: int) -> str:
+    v = t.get(key, {}).get("mean", [])
+    return f"{v[i]:>{w}.4f}" if v and np.isfinite(v[i]) else f"{'—':>{w}}"
+
+
+def _bound_key(bound: dict[str, Any] | None, tkey: str) -> str | None:
+    """The bound's entry for the translation shown in the truth column, if it has one."""
+    if not bound:
+        return None
+    body = tkey[0]
+    for k in bound:
+        if k != "n" and k.split(".")[0] in (body, f"{body}_trans_mm", tkey):
+            return k
+    return None
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every NaN or infinity as None (strict JSON) and keys as strings."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
