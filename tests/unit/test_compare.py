@@ -149,3 +149,66 @@ def test_cli_bad_input_is_one_error_line(sessions, args, words) -> None:
     assert len(lines) == 1 and lines[0].startswith("error: "), r.output
     for w in words:
         assert w in lines[0]
+
+
+# --- tmscal solve: every registered method, method options, uncertainty and distortion ------
+
+@pytest.fixture
+def fake_method(monkeypatch):
+    """A registered method that is QR36 plus the optional fields of a statistical solver
+    (given values) and that records the options it was called with."""
+    calls: list[dict] = []
+
+    def fake(A, B, C, orthonormal, **options):
+        calls.append(options)
+        cal = calib.solve(A, B, C, method="qr36", orthonormal=orthonormal)
+        cal.method = "fake"
+        cal.uncertainty = {"coil_centre_mm": {"sigma": 0.0123, "p95": 0.0456},
+                           "coil_axis_deg": {"sigma": 0.0321, "p95": 0.0654},
+                           "target_note": "the session's mean probe pose"}
+        cal.distortion = {"model": "scale", "matrix": np.eye(3) * 1.0008,
+                          "scale_percent": 0.08}
+        return cal
+
+    monkeypatch.setitem(calib.SOLVERS, "fake", fake)
+    return calls
+
+
+def test_solve_offers_every_registered_method_and_prints_uncertainty(sessions, fake_method,
+                                                                     tmp_path):
+    both, _ = sessions
+    r = run("solve", "--help")
+    for m in calib.METHODS:
+        assert m in r.output
+    out = tmp_path / "cal.yaml"
+    r = run("solve", both, "--method", "fake", "--train", 40, "-o", out)
+    assert r.exit_code == 0, r.output
+    assert "tracker scale +0.080 %" in r.output
+    rows = {ln.split("(")[0].strip(): ln.split() for ln in r.output.splitlines()
+            if ln.strip().startswith(("coil centre", "coil axis"))}
+    assert rows["coil centre"][-2:] == ["0.0123", "0.0456"]
+    assert rows["coil axis"][-2:] == ["0.0321", "0.0654"]
+    import yaml
+    doc = yaml.safe_load(out.read_text())
+    assert doc["distortion"]["scale_percent"] == 0.08
+    assert np.allclose(doc["distortion"]["matrix"], np.eye(3) * 1.0008)
+    res = json.loads(run("solve", both, "--method", "fake", "--train", 40, "--json").output)
+    assert res["uncertainty"]["coil_centre_mm"]["p95"] == 0.0456
+    assert "uncertainty" not in json.loads(run("solve", both, "--train", 40, "--json").output)
+
+
+def test_solve_passes_method_options_and_the_handheld_pose(sessions, fake_method):
+    both, _ = sessions
+    from tmscal.session import read_session
+    pose = next(p for p in read_session(both).poses if p.index == 3)
+    r = run("solve", both, "--method", "fake", "--train", 40, "--option", "distortion=axis",
+            "--option", "max_iter=7", "--handheld-pose", 3)
+    assert r.exit_code == 0, r.output
+    opts = fake_method[-1]
+    assert opts["distortion"] == "axis" and opts["max_iter"] == 7
+    np.testing.assert_array_equal(opts["handheld_B"], pose.B)
+    np.testing.assert_array_equal(opts["handheld_C"], pose.C)
+    msg = [ln for ln in run("solve", both, "--handheld-pose", 999).output.splitlines() if ln]
+    assert len(msg) == 1 and "--handheld-pose 999" in msg[0]
+    msg = [ln for ln in run("solve", both, "--option", "nokey").output.splitlines() if ln]
+    assert len(msg) == 1 and "--option" in msg[0] and "KEY=VALUE" in msg[0]

@@ -124,10 +124,64 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 
 # --- solve ----------------------------------------------------------------------------------
 
+class _MethodChoice(click.Choice):
+    """The registered calibration methods (``tmscal.calib.METHODS``), read when used so that
+    every method registered is offered."""
+
+    def __init__(self) -> None:
+        super().__init__([], case_sensitive=False)
+
+    @property  # type: ignore[override]
+    def choices(self) -> list[str]:
+        from ..calib import METHODS
+        return list(METHODS)
+
+    @choices.setter
+    def choices(self, value: Any) -> None:
+        pass
+
+
+def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
+    """``--option KEY=VALUE`` pairs as method options, each VALUE read as YAML (numbers,
+    lists, true/false, strings)."""
+    import yaml
+
+    out: dict[str, Any] = {}
+    for p in pairs:
+        key, sep, val = p.partition("=")
+        if not sep or not key.strip().isidentifier():
+            raise click.BadParameter(f"{p!r}: expected KEY=VALUE", param_hint="--option")
+        try:
+            out[key.strip()] = yaml.safe_load(val)
+        except yaml.YAMLError:
+            raise click.BadParameter(f"{p!r}: the value is not a number, list or word",
+                                     param_hint="--option") from None
+    return out
+
+
+def _handheld_options(session: Any, index: int) -> dict[str, Any]:
+    """The handheld measurement of pose ``index`` of a session: its marker and probe poses."""
+    from ..errors import CalibrationError
+
+    for p in session.poses:
+        if p.index == index and p.B is not None and p.C is not None:
+            return {"handheld_B": p.B, "handheld_C": p.C}
+    raise CalibrationError(f"--handheld-pose {index}: the session has no pose {index} with "
+                           "both marker and probe")
+
+
 @main.command()
 @click.argument("session_file", type=INPUT_FILE)
-@click.option("--method", type=click.Choice(["qr36", "qr24"]), default="qr36",
-              show_default=True, help="qr36: X, Y, Z jointly; qr24: each body on its own.")
+@click.option("--method", type=_MethodChoice(), default="qr36", show_default=True,
+              help="qr36: X, Y, Z jointly (Wang et al. 2018); qr24: each body on its own "
+                   "(Ernst et al. 2012); and every other registered method (sgo, quat, shah, "
+                   "li, handheld, ml; docs/methods.md). tmscal compare runs them side by side.")
+@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
+              help="A method option (repeatable), VALUE read as YAML, e.g. --option "
+                   "distortion=scale for ml (docs/methods.md lists each method's options).")
+@click.option("--handheld-pose", type=click.IntRange(0), default=None, metavar="INDEX",
+              help="handheld: take the extra measurement (marker and probe seen together, "
+                   "the probe at the coil centre) from this session pose.")
 @click.option("--train", type=int, default=None,
               help="Solve on poses [0, N) and report errors held out on the rest (default: "
                    "solve on all poses, errors by cross-validation, see --folds).")
@@ -149,19 +203,23 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
-def solve(session_file: Path, method: str, train: int | None, folds: int, in_sample: bool,
-          orthonormal: bool, as_json: bool, output: Path | None, plot: Path | None,
-          force: bool, strict: bool) -> None:
+def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_pose: int | None,
+          train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
+          output: Path | None, plot: Path | None, force: bool, strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
     docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses."""
     from ..report.evaluate import pose_residuals, solve_session
     from ..report.text import calibration_yaml, format_result, plot_residuals
     from ..session import sha256_of
 
+    opts = _parse_options(options)
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)
     session = _read_session(session_file, strict)
-    cal, res = solve_session(session, method=method, train=train, orthonormal=orthonormal,
-                             folds=folds, in_sample=in_sample)
+    if handheld_pose is not None:
+        opts.update(_handheld_options(session, handheld_pose))
+    cal, res = solve_session(session, method=method.lower(), train=train,
+                             orthonormal=orthonormal, folds=folds, in_sample=in_sample,
+                             options=opts)
     if output is not None:
         _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
     if plot is not None:

@@ -25,7 +25,8 @@ __all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "p
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
                                                            np.ndarray | None]:
     """(A, B, C) of the usable poses of a session, in index order; C None for marker-only
-    sessions. Raises CalibrationError when qr36 is asked of marker-only data."""
+    sessions. Raises CalibrationError when qr36 is asked of marker-only data (other methods
+    that need probe poses say so themselves when solved)."""
     need_probe = method == "qr36"
     if need_probe and "probe" not in session.bodies:
         raise CalibrationError(f"{session.path}: marker-only session (bodies: "
@@ -33,6 +34,19 @@ def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarra
                                "--method qr24")
     A, B, C, _ = session.arrays(need_probe=need_probe)
     return A, B, C
+
+
+def _plain(v: Any) -> Any:
+    """Arrays and numpy scalars inside dicts and lists as plain JSON / YAML types."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _plain(v.tolist())
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
 
 
 def _mat(M: np.ndarray | None) -> list | None:
@@ -70,6 +84,12 @@ class SolveResult:
     errors_sd: dict[str, Any] | None = None
     cv: dict[str, Any] | None = None
     outliers: list[dict[str, Any]] = field(default_factory=list)
+    #: a statistical solver's predicted uncertainty and tracker distortion
+    #: (``Calibration.uncertainty`` / ``.distortion``, docs/methods.md); None otherwise
+    uncertainty: dict[str, Any] | None = None
+    distortion: dict[str, Any] | None = None
+    #: the method options the calibration was solved with (e.g. the handheld measurement)
+    options: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
@@ -85,12 +105,15 @@ class SolveResult:
             out["Z_probe"] = _mat(self.Z_probe)
         if self.truth is not None:
             out["truth"] = self.truth
+        for k in ("uncertainty", "distortion", "options"):
+            if getattr(self, k) is not None:
+                out[k] = _plain(getattr(self, k))
         return out
 
 
 def solve_session(session: Session, method: str = "qr36", train: int | None = None,
-                  orthonormal: bool = False, folds: int = 5,
-                  in_sample: bool = False) -> tuple[Calibration, SolveResult]:
+                  orthonormal: bool = False, folds: int = 5, in_sample: bool = False,
+                  options: dict[str, Any] | None = None) -> tuple[Calibration, SolveResult]:
     """Solve a session and estimate its errors (docs/methods.md).
 
     The reported calibration is solved on poses [0, train) (default: all). Its errors are:
@@ -98,8 +121,10 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     solved on (optimistic); by default, ``folds``-fold cross-validated
     (``calib.study.cross_validate``: contiguous folds, mean and SD over folds). Returns the
     Calibration and a ``SolveResult`` (also the errors against the truth when the session has
-    one, and the outlier poses). Raises CalibrationError for unusable data or bad counts."""
+    one, and the outlier poses). ``options`` go to the method (``calib.solve``). Raises
+    CalibrationError for unusable data or bad counts."""
     A, B, C = session_arrays(session, method)
+    options = dict(options or {})
     n = len(A)
     if n == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
@@ -112,10 +137,10 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     if n_solve > n:
         raise CalibrationError(f"--train {train}: the session has only {n} usable poses")
     cal = solve(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
-                orthonormal=orthonormal)
+                orthonormal=orthonormal, **options)
     sd = cv = None
     if train is None and not in_sample:
-        r = cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal)
+        r = _cross_validate(A, B, C, method, folds, orthonormal, options)
         errors, sd = _nest(r["mean"]), _nest(r["sd"])
         cv = {"folds": r["folds"], "split": r["split"], "fold_sizes": r["fold_sizes"]}
         errors_on, n_test = f"cross-validated ({r['folds']} folds)", n
@@ -134,8 +159,23 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         errors_on=errors_on, n_skipped=sum(p.skipped is not None for p in session.poses),
         X=cal.X, Y=cal.Y, Z=cal.Z, raw=raw, errors=errors, Z_probe=cal.Z_probe,
         truth=_truth_errors(session, cal, C), errors_sd=sd, cv=cv,
-        outliers=find_outliers(pose_residuals(session, cal)))
+        outliers=find_outliers(pose_residuals(session, cal)),
+        uncertainty=cal.uncertainty, distortion=cal.distortion,
+        options={k: _plain(v) for k, v in options.items()} or None)
     return cal, res
+
+
+def _cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: str,
+                    folds: int, orthonormal: bool, options: dict[str, Any]) -> dict[str, Any]:
+    """``calib.study.cross_validate``, with the method options when it takes them."""
+    if not options:
+        return cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal)
+    try:
+        return cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal,
+                              **options)
+    except TypeError:
+        raise CalibrationError("cross-validation with method options is not available; "
+                               "use --train N or --in-sample") from None
 
 
 def _truth_errors(session: Session, cal: Calibration,

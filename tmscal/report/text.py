@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from .evaluate import SolveResult
 
 __all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "plot_residuals",
-           "format_matrix"]
+           "format_matrix", "distortion_text"]
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
@@ -100,6 +100,51 @@ def _truth_rows(res: SolveResult) -> list[str]:
     return lines
 
 
+def _pct(v: float) -> str:
+    return f"{v:+.3f} %"
+
+
+def distortion_text(d: dict[str, Any]) -> str:
+    """The tracker distortion a solver found, in one line: "tracker scale +0.080 %" for an
+    isotropic scale, per-axis percentages, or the 3×3 matrix of an affine model."""
+    model = str(d.get("model", "?"))
+    if model == "none":
+        return "tracker distortion: none (rigid tracker model chosen)"
+    if model == "scale" and "scale_percent" in d:
+        return f"tracker scale {_pct(float(d['scale_percent']))}"
+    if model == "axis" and d.get("axis_scale_percent") is not None:
+        x, y, z = (float(v) for v in d["axis_scale_percent"])
+        return f"tracker scale per axis: x {_pct(x)}, y {_pct(y)}, z {_pct(z)}"
+    if d.get("matrix") is not None:
+        M = np.asarray(d["matrix"], dtype=float)
+        rows = "; ".join(" ".join(f"{v:.6f}" for v in r) for r in M)
+        mean = f", mean scale {_pct(float(d['scale_percent']))}" if "scale_percent" in d \
+            else ""
+        return f"tracker distortion ({model}): D = [{rows}]{mean}"
+    return f"tracker distortion: {model}"
+
+
+def _uncertainty_rows(res: SolveResult) -> list[str]:
+    """The predicted uncertainty (1-σ and 95 %) of a statistical solver, and the distortion."""
+    lines: list[str] = []
+    u = res.uncertainty or {}
+    rows = [(k, v) for k, v in u.items()
+            if isinstance(v, dict) and "sigma" in v and "p95" in v]
+    if rows:
+        where = u.get("target_note")
+        lines.append(f"  {'predicted uncertainty (' + res.method + ')':<{_W}}"
+                     f"{'1-σ':>15}{'95 %':>15}")
+        for k, v in rows:
+            name, _, unit = k.rpartition("_")
+            label = f"{name.replace('_', ' ')} ({unit})"
+            lines.append(_row(label, float(v["sigma"]), float(v["p95"])))
+        if where:
+            lines.append(f"  (at {where}; from the solver's linearised covariance)")
+    if res.distortion:
+        lines.append(f"  {distortion_text(res.distortion)}")
+    return lines
+
+
 def _outlier_lines(res: SolveResult) -> list[str]:
     from .outliers import RULE
     if not res.outliers:
@@ -134,6 +179,15 @@ def _legend(res: SolveResult) -> list[str]:
         lines.append("  coil placement: to put the coil at a tracked pose C the robot "
                      "commands A = Ẑ C Ŷ⁻¹; the error is how far the coil centre then lands "
                      "from where it was wanted, with the true Y, Z (mm)")
+    if res.uncertainty:
+        lines.append("  predicted uncertainty: propagated from the solver's parameter "
+                     "covariance (linearised); 1-σ is the RMS error, 95 % the radius holding "
+                     "95 % of the predicted errors, of where the coil centre (mm) and its axis "
+                     "(deg) land when the robot places it")
+    if res.distortion:
+        lines.append("  tracker distortion: the map D of tracker-frame positions the solver "
+                     "found (measured = D · true), as a scale in %; the raw matrices and the "
+                     "export carry it")
     lines.append("  " + applied)
     return [w for ln in lines for w in textwrap.wrap(ln, 98, subsequent_indent="      ",
                                                     ) or [""]]
@@ -149,6 +203,9 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
         lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "
                      "and are not used)")
     lines += [""] + _error_rows(res)
+    extra = _uncertainty_rows(res)
+    if extra:
+        lines += [""] + extra
     if res.truth is not None:
         lines += [""] + _truth_rows(res)
     lines += [""] + _outlier_lines(res) + [""] + _legend(res)
@@ -221,4 +278,7 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -
     }
     if res.truth is not None:
         doc["truth_errors"] = res.truth
+    for k in ("uncertainty", "distortion", "options"):
+        if k in j:
+            doc[k] = j[k]
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
