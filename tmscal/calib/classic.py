@@ -36,6 +36,8 @@ from scipy.optimize import least_squares
 
 from ..errors import CalibrationError
 from ..geometry import (
+    RIGID_TOL_DEFAULT,
+    check_poses,
     invert,
     make_pose,
     matrix_from_quaternion,
@@ -250,9 +252,12 @@ def solve_handheld(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonorm
     base = str(base).lower()
     if base == "handheld" or base not in SOLVERS:
         raise CalibrationError(f"handheld: unknown base method {base!r}")
-    from . import check_inputs
-    Ba, Ca = (check_inputs(np.asarray(M, dtype=np.float64)[None], np.eye(4)[None])[0][0]
-              for M in (handheld_B, handheld_C))
+    try:
+        Ba, Ca = (check_poses(np.asarray(M, dtype=np.float64)[None], name,
+                              tol=RIGID_TOL_DEFAULT)[0]
+                  for M, name in ((handheld_B, "handheld_B"), (handheld_C, "handheld_C")))
+    except ValueError as e:
+        raise CalibrationError(str(e)) from None
     cal = SOLVERS[base](A, B, None, orthonormal)
     rel = invert(Ba) @ Ca
     cal.Y = cal.X @ rel
