@@ -16,7 +16,8 @@ except ``handheld``, whose raw matrices are those of its base method.
   squares for the translations. Two bodies: the SVD of [Σ R_Bi ⊗ R_Ai, Σ R_Ci ⊗ R_Ai] (9 × 18)
   gives one R_Z and R_X, R_Y together; the translations are solved jointly with one t_Z.
 - ``li``: Li, Wang & Wu (2010), as OpenCV's LI: one 12n × 24 linear system in vec R_X, vec R_Z,
-  t_X, t_Z (no side inverted), solved by SVD least squares; the rotations are orthonormalised
+  t_X, t_Z (no side inverted), solved by least squares (QR; OpenCV uses the SVD, the same
+  minimiser at full rank); the rotations are orthonormalised
   and, as in OpenCV, the translations are kept (``resolve=True`` re-solves them with the
   rotations fixed). Two bodies: the 24n × 36 system with a shared Z.
 - ``handheld``: X, Z from a marker-only calibration (``base``, default ``qr24``) and
@@ -137,7 +138,11 @@ def solve_li(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
     bodies = bodies_of(A, B, C)
     m = len(bodies)
     M, b = li_system(A, bodies)
-    w = np.linalg.lstsq(M, b, rcond=None)[0]
+    Qm, Rm = np.linalg.qr(M)  # full column rank after the diversity check
+    if abs(np.diag(Rm)).min() <= 1e-12 * abs(np.diag(Rm)).max():
+        raise CalibrationError("the linear system is rank deficient (degenerate poses: too "
+                               "little rotation or translation diversity)")
+    w = np.linalg.solve(Rm, Qm.T @ b)
     R_Xs = [normalize_rotation(w[9 * j:9 * (j + 1)].reshape(3, 3)) for j in range(m)]
     R_Z = normalize_rotation(w[9 * m:9 * (m + 1)].reshape(3, 3))
     if resolve:
