@@ -93,18 +93,39 @@ def test_a_bound_function_when_calib_has_one_is_shown(poses, monkeypatch) -> Non
     truth, d = poses
     seen = []
 
-    def fake_bound(A, B, C, truth):
-        seen.append(len(A))
-        return {"Y": {"trans_mm": 1.0 / len(A)}}
+    def fake_bound(A, B, C, truth, noise):
+        seen.append((len(A), noise["robot_sigma_mm"]))
+        return {"X_trans_mm": 2.0 / len(A), "Y_trans_mm": 1.0 / len(A)}
 
-    monkeypatch.setattr(calib, "cramer_rao_bound", fake_bound, raising=False)
+    import tmscal.report.compare as cmp
+    monkeypatch.setattr(cmp, "find_bound", lambda: fake_bound)
     t = {k: getattr(truth, k) for k in "XYZ"}
     res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[10, 40], folds=5,
-                         truth=t)
-    assert seen == [10, 40]
-    assert res["bound"]["Y.trans_mm"] == [0.1, 0.025]
+                         truth=t, noise={"robot_sigma_mm": 0.05})
+    assert seen == [(10, 0.05), (40, 0.05)]
+    assert res["bound"]["Y_trans_mm"] == [0.1, 0.025]
     text = format_compare(res)
-    assert "bound mm" in text and "0.0250" in text
+    assert any(ln.split()[:2] == ["40", "bound"] and ln.split()[-1] == "0.0250"
+               for ln in text.splitlines())
+    # without a noise model there is no bound
+    res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[10], folds=5, truth=t)
+    assert res["bound"] is None and " bound " not in format_compare(res).split("truth:")[0]
+
+
+def test_the_real_bound_is_below_the_spread_of_qr36(sessions) -> None:
+    """On a simulated session the Cramér–Rao bound (tmscal.calib.bound, when present) of Y's
+    RMS translation error is positive, falls with n, and the mean truth error of QR36 over 5
+    folds is not below a third of it (statistical: the mean of a norm is ≥ ~0.9 × its RMS
+    for 3-D Gaussian errors; a third leaves room for 5 folds' spread)."""
+    pytest.importorskip("tmscal.calib.bound")
+    both, _ = sessions
+    from tmscal.report.compare import compare_session
+    from tmscal.session import read_session
+    res = compare_session(read_session(both), ["qr36"], ns=[10, 48], folds=5)
+    b = res["bound"]["Y_trans_mm"]
+    assert 0 < b[1] < b[0]
+    y = res["methods"]["qr36"]["truth"]["Y_trans_mm"]["mean"]
+    assert y[0] > b[0] / 3 and y[1] > b[1] / 3
 
 
 def test_table_lines_fit_and_name_every_method(poses) -> None:

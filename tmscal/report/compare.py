@@ -2,7 +2,7 @@
 one session, every registered method's held-out position and orientation error (mean ± SD over
 folds) and its solve time against the number of poses solved on, as the Panda/Vicra TMS study
 compared QR24, SGO and QUAT; with a truth in the session, the ground-truth errors (and the
-Cramér–Rao bound when ``tmscal.calib`` offers one) beside them.
+Cramér–Rao bound when ``tmscal.calib.bound`` offers one) beside them.
 
 Protocol: the usable poses, in order, are cut into k contiguous folds (``numpy.array_split``);
 for each n and each fold, a method is solved on the first n poses that are not in the fold and
@@ -26,7 +26,7 @@ from ..errors import CalibrationError
 from ..session import Session
 
 __all__ = ["compare_session", "compare_arrays", "format_compare", "default_ns", "find_bound",
-           "json_safe", "handheld_options"]
+           "json_safe", "handheld_options", "session_noise"]
 
 #: the error curves compared: key → (label, unit)
 METRICS = {"e_t_mm": ("position e_t", "mm"), "theta_t_deg": ("orientation θ_t", "deg")}
@@ -42,14 +42,50 @@ def default_ns(n_train_max: int) -> list[int]:
     return ns
 
 
-def find_bound() -> Callable[..., Any] | None:
-    """The Cramér–Rao bound function of ``tmscal.calib`` if it has one (``cramer_rao_bound``),
-    else None: the comparison then leaves the bound out."""
-    for owner in (calib, getattr(calib, "ml", None)):
-        fn = getattr(owner, "cramer_rao_bound", None) if owner is not None else None
-        if callable(fn):
-            return fn
-    return None
+def find_bound() -> Callable[..., dict[str, float]] | None:
+    """The Cramér–Rao bound of ``tmscal.calib.bound`` (``crb`` and ``translation_rms_bound``)
+    as ``fn(A, B, C, truth, noise) -> {"X_trans_mm": …[, "Y_trans_mm": …]}`` (the smallest RMS
+    translation error, mm, an unbiased method can have), or None when tmscal.calib has no
+    bound: the comparison then leaves it out."""
+    import importlib
+
+    try:
+        b = importlib.import_module("tmscal.calib.bound")
+    except ImportError:
+        return None
+    if not all(hasattr(b, n) for n in ("crb", "translation_rms_bound")):
+        return None
+
+    def fn(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, truth: dict[str, Any],
+           noise: dict[str, Any]) -> dict[str, float]:
+        cov = b.crb(A, B, C, truth, noise)
+        nb = 2 if C is not None and truth.get("Y") is not None else 1
+        out = {"X_trans_mm": b.translation_rms_bound(cov, "X", nb)}
+        if nb == 2:
+            out["Y_trans_mm"] = b.translation_rms_bound(cov, "Y", nb)
+        return out
+    return fn
+
+
+def session_noise(session: Session) -> dict[str, Any] | None:
+    """The noise of a session written by ``tmscal simulate`` in the terms of the bound (and of
+    ``ml``'s options), from its header (``config.simulate``); None for other sessions or when
+    tmscal.calib has no ``bound.sim_noise_options``."""
+    import importlib
+
+    from ..sim import TOOL_8700340_MM
+
+    sim = (session.header.get("config") or {}).get("simulate")
+    if not isinstance(sim, dict):
+        return None
+    try:
+        b = importlib.import_module("tmscal.calib.bound")
+        return dict(b.sim_noise_options(float(sim["fiducial_sigma_mm"]),
+                                        float(sim["robot_rot_sigma_deg"]),
+                                        float(sim["robot_trans_sigma_mm"]), TOOL_8700340_MM,
+                                        int(sim.get("samples", 1))))
+    except (ImportError, AttributeError, KeyError, TypeError, ValueError):
+        return None
 
 
 def compare_session(session: Session, methods: Sequence[str] | None = None,
@@ -62,7 +98,7 @@ def compare_session(session: Session, methods: Sequence[str] | None = None,
     if len(A) == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
     out = compare_arrays(A, B, C, methods, ns=ns, folds=folds, truth=session.truth,
-                         progress=progress)
+                         noise=session_noise(session), progress=progress)
     out["session"] = str(session.path)
     return out
 
@@ -80,6 +116,7 @@ def _folds(n: int, k: int) -> list[np.ndarray]:
 def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
                    methods: Sequence[str] | None = None, ns: Sequence[int] | None = None,
                    folds: int = 5, truth: dict[str, np.ndarray] | None = None,
+                   noise: dict[str, Any] | None = None,
                    progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
     """Compare methods on poses A, B[, C] (n, 4, 4) mm.
 
@@ -87,7 +124,10 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
     "e_t_mm": {"mean", "sd"}, "theta_t_deg": {…}, "time_ms": {…}, "failed": {n: reason},
     ["truth": {"X_trans_mm", "Y_trans_mm", "coil_placement_mm", …: {"mean", "sd"}}]}},
     "skipped": {name: reason} (e.g. a method that needs probe poses on a marker-only session),
-    "bound": {…} or None, "truth": bool}. Errors are the hold-out errors of docs/methods.md
+    "bound": {"n", "X_trans_mm", ["Y_trans_mm"]} (the Cramér–Rao bound of the RMS
+    translation error, mm, on the first fold's training poses) or None, "truth": bool}; the
+    bound needs ``truth`` and ``noise`` (the robot and tracker noise as ``ml``'s options).
+    Errors are the hold-out errors of docs/methods.md
     (e_t = marker + probe (+ e_z for QR24), θ_t likewise); time is wall time per solve."""
     methods = list(calib.METHODS) if methods is None else [m.lower() for m in methods]
     unknown = [m for m in methods if m not in calib.METHODS]
@@ -113,8 +153,8 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
             out["skipped"][m] = str(e)
             continue
         out["methods"][m] = res
-    if truth:
-        out["bound"] = _bound(A, B, C, fs, ns, truth)
+    if truth and noise:
+        out["bound"] = _bound(A, B, C, fs, ns, truth, noise)
     return out
 
 
@@ -195,41 +235,29 @@ def handheld_options(method: str, B_a: np.ndarray, C_a: np.ndarray | None) -> di
 
 
 def _bound(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, fs: list[np.ndarray],
-           ns: Sequence[int], truth: dict[str, Any]) -> dict[str, Any] | None:
-    """The Cramér–Rao bound at each n (on the first fold's training poses), as the calib
-    module's bound function gives it: {"n": [..], "<key>": [..]} for each number it returns;
-    None when there is no bound function or it cannot be evaluated."""
+           ns: Sequence[int], truth: dict[str, Any], noise: dict[str, Any]
+           ) -> dict[str, Any] | None:
+    """The bound at each n, on the first fold's training poses: {"n": [..], "<X|Y>_trans_mm":
+    [..]}; None when there is no bound function or it cannot be evaluated."""
     fn = find_bound()
     if fn is None:
         return None
     out: dict[str, Any] = {"n": list(ns)}
-    for n in ns:
+    for i, n in enumerate(ns):
         train = np.setdiff1d(np.arange(len(A)), fs[0])[:n]
         try:
-            b = fn(A[train], B[train], None if C is None else C[train], truth)
-        except (CalibrationError, TypeError, ValueError, KeyError):
-            return None
-        flat = _flat_numbers(b)
-        for k, v in flat.items():
-            out.setdefault(k, [float("nan")] * len(ns))[ns.index(n)] = v
-    return out
+            b = fn(A[train], B[train], None if C is None else C[train], truth, noise)
+        except (CalibrationError, TypeError, ValueError, KeyError, np.linalg.LinAlgError):
+            b = {}
+        for k, v in b.items():
+            out.setdefault(k, [float("nan")] * len(ns))[i] = float(v)
+    return out if len(out) > 1 else None
 
 
-def _flat_numbers(d: Any, prefix: str = "") -> dict[str, float]:
-    """The scalar numbers of a (nested) dict, keys joined by '.'."""
-    out: dict[str, float] = {}
-    if isinstance(d, dict):
-        for k, v in d.items():
-            out.update(_flat_numbers(v, f"{prefix}{k}."))
-    elif isinstance(d, (int, float, np.floating)) and not isinstance(d, bool):
-        out[prefix.rstrip(".")] = float(d)
-    return out
-
-
-def _pm(mean: float, sd: float, w: int = 18) -> str:
+def _pm(mean: float, sd: float, w: int = 18, digits: int = 4) -> str:
     if not np.isfinite(mean):
         return f"{'—':>{w}}"
-    s = f"{mean:.4f}" + (f" ± {sd:.4f}" if np.isfinite(sd) else "")
+    s = f"{mean:.{digits}f}" + (f" ± {sd:.{digits}f}" if np.isfinite(sd) else "")
     return f"{s:>{w}}"
 
 
@@ -246,31 +274,30 @@ def format_compare(res: dict[str, Any]) -> str:
              "docs/methods.md); time: wall time per solve.")
     lines = textwrap.wrap(intro, 98, subsequent_indent="  ") + [""]
     tkey = "Y_trans_mm" if "probe" in res["bodies"] else "X_trans_mm"
-    head = (f"  {'n':>4}  {'method':<9}{'e_t mm':>18}{'θ_t deg':>18}{'time ms':>18}")
+    head = (f"  {'n':>4}  {'method':<9}{'e_t mm':>18}{'θ_t deg':>18}{'time ms':>20}")
     if res["truth"]:
         head += f"{'truth ' + tkey[0] + ' mm':>14}" + (
             f"{'coil mm':>10}" if "probe" in res["bodies"] else "")
     bound = res.get("bound")
     bkey = _bound_key(bound, tkey)
-    if bkey:
-        head += f"{'bound mm':>10}"
     lines.append(head)
     for i, n in enumerate(res["ns"]):
         for m, r in res["methods"].items():
             row = f"  {n:>4}  {m:<9}"
             for k in ("e_t_mm", "theta_t_deg", "time_ms"):
                 d = r.get(k, {"mean": [float("nan")] * len(res["ns"]), "sd": []})
-                row += _pm(d["mean"][i], d["sd"][i] if d["sd"] else float("nan"))
+                row += _pm(d["mean"][i], d["sd"][i] if d["sd"] else float("nan"),
+                           w=20 if k == "time_ms" else 18, digits=2 if k == "time_ms" else 4)
             if res["truth"]:
                 t = r.get("truth", {})
                 row += _cell(t, tkey, i, 14)
                 if "probe" in res["bodies"]:
                     row += _cell(t, "coil_placement_mm", i, 10)
-            if bkey:
-                row += f"{bound[bkey][i]:>10.4f}"
             if n in r.get("failed", {}):
                 row += "  (failed on some folds)"
             lines.append(row)
+        if bkey:
+            lines.append(f"  {n:>4}  {'bound':<9}{'':>56}{bound[bkey][i]:>14.4f}")
         lines.append("")
     if any("handheld_B" in handheld_options(m, np.eye(4)[None], np.eye(4)[None])
            for m in res["methods"]):
@@ -285,9 +312,11 @@ def format_compare(res: dict[str, Any]) -> str:
                  "session's truth"
                  + ("; coil: the coil placement error (mm) on the fold's targets"
                     if "probe" in res["bodies"] else ""),
-                 "bound: " + (f"the Cramér–Rao bound of {bkey} (the best any unbiased "
-                              "method can do)" if bkey else
-                              "no Cramér–Rao bound in tmscal.calib; not shown")]
+                 "bound: " + (f"the Cramér–Rao bound of the RMS error of {tkey[0]}'s "
+                              "translation (the best any unbiased method can do), on the "
+                              "first fold's training poses, in the truth column" if bkey else
+                              "no Cramér–Rao bound (needs tmscal.calib.bound and a session "
+                              "from tmscal simulate, whose header gives the noise)")]
         lines += [w for ln in notes for w in textwrap.wrap(ln, 98, initial_indent="  ",
                                                            subsequent_indent="    ")]
     return "\n".join(lines).rstrip()
@@ -300,13 +329,7 @@ def _cell(t: dict[str, Any], key: str, i: int, w: int) -> str:
 
 def _bound_key(bound: dict[str, Any] | None, tkey: str) -> str | None:
     """The bound's entry for the translation shown in the truth column, if it has one."""
-    if not bound:
-        return None
-    body = tkey[0]
-    for k in bound:
-        if k != "n" and k.split(".")[0] in (body, f"{body}_trans_mm", tkey):
-            return k
-    return None
+    return tkey if bound and tkey in bound else None
 
 
 def json_safe(obj: Any) -> Any:

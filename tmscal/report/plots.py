@@ -211,10 +211,8 @@ def _plot_compare_truth(plt: Any, res: dict[str, Any], path: str, col: dict[str,
         if key in t:
             _curve(ax, ns, t[key], col[m], m.upper())
     bound = res.get("bound") or {}
-    for k, v in bound.items():
-        if k != "n" and k.split(".")[0] in (key[0], key, f"{key[0]}_trans_mm"):
-            ax.plot(ns, v, "k--", lw=1.2, label=f"Cramér–Rao bound ({k})")
-            break
+    if key in bound:
+        ax.plot(ns, bound[key], "k--", lw=1.2, label="Cramér–Rao bound (RMS)")
     _compare_axes(ax, f"error of {key[0]}'s translation against the truth (mm)", ns)
     ax.legend(frameon=False, fontsize=9)
     ax.set_title(head + "\nground-truth error, mean ± SD over folds", fontsize=10)
