@@ -188,3 +188,18 @@ def test_unknown_option_is_a_calibration_error(method):
     _, d = simulated(10, seed=5, plan="random", noise=Noise.none())
     with pytest.raises(CalibrationError, match="bogus"):
         solve(d["A"], d["marker"], None, method=method, bogus=1)
+
+
+@pytest.mark.parametrize("bodies", [1, 2])
+def test_li_resolved_equals_the_orthonormal_qr_solution(bodies):
+    """Li's rows are QR24's rows times R_Ai per pose (an orthogonal map), so both linear
+    systems have the same least-squares minimiser; with the rotations projected and the
+    translations re-solved, li(resolve=True) must equal QR24 (one body) or QR36 (two)
+    orthonormal on noisy data, to 1e-6 mm and 1e-6° (conditioning of the two systems)."""
+    _, d = simulated(25, seed=9, plan="eq14", noise=Noise())
+    C = d["probe"] if bodies == 2 else None
+    li = solve(d["A"], d["marker"], C, method="li", resolve=True)
+    qr = solve(d["A"], d["marker"], C, method="qr36" if bodies == 2 else "qr24")
+    for M in ("X", "Z") + (("Y",) if bodies == 2 else ()):
+        dt, dr = pose_errors(getattr(li, M), getattr(qr, M))
+        assert dt < 1e-6 and dr < 1e-6

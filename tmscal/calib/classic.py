@@ -19,7 +19,10 @@ except ``handheld``, whose raw matrices are those of its base method.
   t_X, t_Z (no side inverted), solved by least squares (QR; OpenCV uses the SVD, the same
   minimiser at full rank); the rotations are orthonormalised
   and, as in OpenCV, the translations are kept (``resolve=True`` re-solves them with the
-  rotations fixed). Two bodies: the 24n × 36 system with a shared Z.
+  rotations fixed). Two bodies: the 24n × 36 system with a shared Z. Its rows are QR24's rows
+  (docs/methods.md) times R_Ai per pose, an orthogonal map, so the least-squares minimiser is
+  the same: ``resolve=True`` gives QR24's (QR36's) orthonormal solution, and OpenCV's kept
+  translations are what costs LI its accuracy.
 - ``handheld``: X, Z from a marker-only calibration (``base``, default ``qr24``) and
   Y = X · B_a⁻¹ · C_a from one extra measurement (``handheld_B``, ``handheld_C``) with the probe
   held at the coil centre (the comparison of Wang et al. 2018).
