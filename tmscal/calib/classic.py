@@ -199,34 +199,67 @@ def quat_rotations(RA: np.ndarray, RNs: list[np.ndarray]) -> tuple[np.ndarray, l
     return matrix_from_quaternion(Vt[0]), R_Xs
 
 
+def _hat(v: np.ndarray) -> np.ndarray:
+    """Skew matrices (…, 3, 3) of vectors (…, 3)."""
+    x, y, z = np.moveaxis(v, -1, 0)
+    o = np.zeros_like(x)
+    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1),
+                     np.stack([-y, x, o], -1)], -2)
+
+
+def _right_jacobian(w: np.ndarray) -> np.ndarray:
+    """Right Jacobian of SO(3) at w (3,): d exp(ŵ) = exp(ŵ) (J_r dw)^."""
+    th = float(np.linalg.norm(w))
+    W = _hat(w)
+    if th < 1e-8:
+        return np.eye(3) - 0.5 * W
+    return (np.eye(3) - (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * W @ W)
+
+
 def _refine(A: np.ndarray, bodies: list[np.ndarray], Z: np.ndarray, Xs: list[np.ndarray],
-           trans_scale_mm: float) -> tuple[np.ndarray, list[np.ndarray], dict[str, Any]]:
+            trans_scale_mm: float) -> tuple[np.ndarray, list[np.ndarray], dict[str, Any]]:
     """Nonlinear least squares over (R, t) of Z and each X: rotation residuals
     R_Ai R_X − R_Z R_Bi (Frobenius), translation residuals (R_Ai t_X + t_Ai − R_Z t_Bi − t_Z) / s.
-    Rotations are updated as R exp(ŵ) from the start; scipy least_squares (trust region)."""
-    m = len(bodies)
+    Rotations are updated as R exp(ŵ) from the start; scipy least_squares (trust region) with
+    the analytic Jacobian."""
+    m, n = len(bodies), len(A)
     RA, tA = A[:, :3, :3], A[:, :3, 3]
-    starts = [Z] + list(Xs)
+    R0 = np.stack([Z[:3, :3]] + [X[:3, :3] for X in Xs])
+    k = 3 * (m + 1)
 
-    def unpack(p: np.ndarray) -> list[np.ndarray]:
-        R = matrix_from_rotvec(p[:3 * (m + 1)].reshape(m + 1, 3))
-        R = np.stack([s[:3, :3] for s in starts]) @ R
-        t = p[3 * (m + 1):].reshape(m + 1, 3)
-        return [make_pose(R[k], t[k]) for k in range(m + 1)]
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return R0 @ matrix_from_rotvec(p[:k].reshape(m + 1, 3)), p[k:].reshape(m + 1, 3)
 
     def residuals(p: np.ndarray) -> np.ndarray:
-        Zp, *Xp = unpack(p)
+        R, t = unpack(p)
         out = []
-        for N, X in zip(bodies, Xp):
-            out.append((RA @ X[:3, :3] - Zp[:3, :3] @ N[:, :3, :3]).reshape(-1))
-            tr = RA @ X[:3, 3] + tA - N[:, :3, 3] @ Zp[:3, :3].T - Zp[:3, 3]
+        for j, N in enumerate(bodies):
+            out.append((RA @ R[j + 1] - R[0] @ N[:, :3, :3]).reshape(-1))
+            tr = RA @ t[j + 1] + tA - N[:, :3, 3] @ R[0].T - t[0]
             out.append(tr.reshape(-1) / trans_scale_mm)
         return np.concatenate(out)
 
-    p0 = np.concatenate([np.zeros(3 * (m + 1))] + [s[:3, 3] for s in starts])
-    res = least_squares(residuals, p0, method="trf", x_scale="jac")
-    Zr, *Xr = unpack(res.x)
-    return Zr, Xr, {"refine_nfev": int(res.nfev), "refine_status": int(res.status)}
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        R, _ = unpack(p)
+        # dR_k/dw_k[a] = R_k hat(J_r(w_k)[:, a])
+        dR = [R[i] @ _hat(_right_jacobian(p[3 * i:3 * i + 3]).T) for i in range(m + 1)]
+        blocks = []
+        for j, N in enumerate(bodies):
+            Jr = np.zeros((n, 3, 3, 2 * k))
+            Jr[..., 3 * (j + 1):3 * (j + 2)] = np.einsum("nab,cbd->nadc", RA, dR[j + 1])
+            Jr[..., 0:3] = -np.einsum("cab,nbd->nadc", dR[0], N[:, :3, :3])
+            Jt = np.zeros((n, 3, 2 * k))
+            Jt[..., k + 3 * (j + 1):k + 3 * (j + 2)] = RA
+            Jt[..., k:k + 3] = -np.eye(3)
+            Jt[..., 0:3] = -np.einsum("cab,nb->nac", dR[0], N[:, :3, 3])
+            blocks += [Jr.reshape(9 * n, 2 * k), Jt.reshape(3 * n, 2 * k) / trans_scale_mm]
+        return np.vstack(blocks)
+
+    p0 = np.concatenate([np.zeros(k), np.stack([Z[:3, 3]] + [X[:3, 3] for X in Xs]).ravel()])
+    res = least_squares(residuals, p0, jac=jacobian, method="trf", x_scale="jac")
+    R, t = unpack(res.x)
+    poses = [make_pose(R[i], t[i]) for i in range(m + 1)]
+    return poses[0], poses[1:], {"refine_nfev": int(res.nfev), "refine_status": int(res.status)}
 
 
 @register_method("quat")
