@@ -80,18 +80,42 @@ class Calibration:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def used(self) -> dict[str, np.ndarray | None]:
-        """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal)."""
+        """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal).
+
+        With a tracker ``distortion`` (measured positions = D · true), the applied Z undoes
+        it: Z · G with G = D⁻¹ on the 3×3 block (a solver that reports a distortion already
+        puts G into its Z_raw), so Z N of a measured N is the undistorted pose."""
         if self.applied == Applied.RAW:
             return {"X": self.X_raw, "Y": self.Y_raw, "Z": self.Z_raw,
                     "Z_probe": self.Z_probe_raw}
-        return {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
+        out = {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
+        if self.distortion is not None and self.distortion.get("matrix") is not None:
+            G4 = np.eye(4)
+            G4[:3, :3] = np.linalg.inv(np.asarray(self.distortion["matrix"], dtype=float))
+            out = {k: (None if v is None else v @ G4) if k in ("Z", "Z_probe") else v
+                   for k, v in out.items()}
+        return out
 
     def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
                ) -> dict[str, Any]:
         """Hold-out errors of Wang et al. (2018) on the poses given (n, 4, 4), as defined in
         docs/methods.md: per body "trans_mm", "rot_deg";
+        with a ``distortion`` the measured poses are undistorted first (positions by D⁻¹,
+        orientations as the tracker's rigid fit of the tool distorted them, with the tool
+        moments when the solver had them) and Z is applied without the G it carries;
         "e_t_mm", "theta_t_deg"; "e_z_mm", "theta_z_deg" for QR24 on two bodies."""
         u = self.used()
+        d = self.distortion
+        if d is not None and d.get("matrix") is not None and d.get("model") != "none":
+            from .ml import undistort  # the tracker's rigid fit of distorted fiducials, undone
+            G = np.linalg.inv(np.asarray(d["matrix"], dtype=float))
+            G4 = np.eye(4)
+            G4[:3, :3] = np.linalg.inv(G)
+            M = d.get("tool_moments") or {}
+            B = undistort(B, G, "affine", M.get("marker"))
+            C = None if C is None else undistort(C, G, "affine", M.get("probe"))
+            u = {k: v @ G4 if k in ("Z", "Z_probe") and v is not None else v
+                 for k, v in u.items()}  # Z without the G it carries
         bodies = {"marker": B}
         X_of = {"marker": u["X"]}
         Z_of = {"marker": u["Z"]}
@@ -186,5 +210,8 @@ def _solve_qr_impl(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: s
     return cal
 
 
+from . import ml  # noqa: E402,F401  (registers "ml")
+
 SOLVERS["qr24"] = _qr("qr24")
 SOLVERS["qr36"] = _qr("qr36")
+from . import classic, sgo  # noqa: E402,F401  (registers the methods)

@@ -1,0 +1,205 @@
+"""The maximum-likelihood solver (``ml``) with tracker distortion and its uncertainty, and the
+Cramér–Rao bound (tmscal.calib.ml, tmscal.calib.bound). Seeded simulations of the protocol of
+Wang et al. (2018); every tolerance is stated where it is asserted. Poses 4×4 mm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tmscal.calib import Applied, Calibration, coil_placement_errors, solve
+from tmscal.calib.bound import crb, sim_noise_options, tool_tracker_cov, translation_rms_bound
+from tmscal.calib.ml import tool_moment
+from tmscal.errors import CalibrationError
+from tmscal.geometry import absolute_orientation, make_pose, rot_z
+from tmscal.sim import TOOL_8700340_MM, Noise, Truth, simulate
+
+NOISE = Noise()  # the paper's: fiducials 0.05 mm, robot 0.05 mm / 0.05°
+SIM_OPTS = sim_noise_options(NOISE.fiducial_sigma_mm, NOISE.robot_rot_sigma_deg,
+                             NOISE.robot_trans_sigma_mm, TOOL_8700340_MM)
+
+
+def _scaled(N: np.ndarray, s: float) -> np.ndarray:
+    """Tracker poses with their positions scaled by s about the tracker origin (a tracker
+    whose length scale is off by s; an isotropic scale leaves orientations alone)."""
+    out = N.copy()
+    out[:, :3, 3] *= s
+    return out
+
+
+@pytest.mark.parametrize("distortion", ["none", "auto"])
+def test_noise_free_data_recovers_truth(distortion):
+    truth, d = simulate(40, np.random.default_rng(21), plan="eq14", noise=Noise.none())
+    cal = solve(d["A"], d["marker"], d["probe"], method="ml", distortion=distortion)
+    for k in "XYZ":
+        assert np.abs(getattr(cal, k) - getattr(truth, k)).max() < 1e-6, k
+    assert np.abs(cal.distortion["matrix"] - np.eye(3)).max() < 1e-9
+    errs = cal.errors(d["A"], d["marker"], d["probe"])
+    assert errs["e_t_mm"] < 1e-6
+
+
+def test_noise_free_marker_only_recovers_x_and_z():
+    truth, d = simulate(30, np.random.default_rng(22), plan="random", noise=Noise.none(),
+                        with_probe=False)
+    cal = solve(d["A"], d["marker"], method="ml", distortion="scale")
+    assert cal.extra["start"] == "qr24" and cal.Y is None
+    assert np.abs(cal.X - truth.X).max() < 1e-6 and np.abs(cal.Z - truth.Z).max() < 1e-6
+    assert abs(cal.distortion["scale_percent"]) < 1e-7
+    assert "marker_centre_mm" in cal.uncertainty
+
+
+@pytest.fixture(scope="module")
+def scaled_session():
+    """160 noisy poses of a tracker whose scale is 1.001 (+0.1 %); train on the first 80."""
+    truth, d = simulate(160, np.random.default_rng(5), plan="eq14", noise=NOISE)
+    B, C = _scaled(d["marker"], 1.001), _scaled(d["probe"], 1.001)
+    return truth, d["A"], B, C
+
+
+@pytest.mark.parametrize("distortion", ["scale", "auto"])
+def test_tracker_scale_is_found_and_holds_out_like_raw_qr36(scaled_session, distortion):
+    _, A, B, C = scaled_session
+    tr, te = slice(0, 80), slice(80, None)
+    cal = solve(A[tr], B[tr], C[tr], method="ml", distortion=distortion)
+    # the scale to 0.03 percentage points (its predicted SD here is about 0.006)
+    assert abs(cal.distortion["scale_percent"] - 0.1) < 0.03
+    if distortion == "auto":
+        assert cal.distortion["model"] != "none"
+        assert min(cal.extra["bic"], key=cal.extra["bic"].get) == cal.distortion["model"]
+    e_ml = cal.errors(A[te], B[te], C[te])["e_t_mm"]
+    e_qr = solve(A[tr], B[tr], C[tr], method="qr36").errors(A[te], B[te], C[te])["e_t_mm"]
+    assert e_ml <= 1.02 * e_qr
+    # applying the orthonormal matrices still undoes the distortion
+    cal.applied = Applied.ORTHONORMAL
+    assert cal.errors(A[te], B[te], C[te])["e_t_mm"] == pytest.approx(e_ml, rel=1e-6)
+    # the rigid model cannot absorb the scale: its held-out error is clearly worse
+    rigid = solve(A[tr], B[tr], C[tr], method="ml", distortion="none")
+    assert rigid.errors(A[te], B[te], C[te])["e_t_mm"] > 1.1 * e_ml
+
+
+def test_errors_and_used_undo_a_known_distortion():
+    """Noise-free poses of a tracker that sees its fiducials through a symmetric D (per-axis
+    scale and shear) and fits each tool rigidly: a Calibration with the true X, Y, Z and that
+    D (and the tool) has no held-out error, raw or orthonormal; one without D has."""
+    truth, d = simulate(20, np.random.default_rng(3), plan="eq14", noise=Noise.none())
+    D = np.array([[1.002, 0.0005, 0.0], [0.0005, 0.999, 0.0], [0.0, 0.0, 1.001]])
+    tool = TOOL_8700340_MM
+    bodies = []
+    for N in (d["marker"], d["probe"]):  # distort the fiducials, fit the pose as a tracker does
+        pts = np.einsum("nij,kj->nki", N[:, :3, :3], tool) + N[:, None, :3, 3]
+        bodies.append(absolute_orientation(tool, pts @ D.T))
+    G4 = np.eye(4)
+    G4[:3, :3] = np.linalg.inv(D)
+    M = tool_moment(tool)
+    kw = dict(X=truth.X, Z=truth.Z, Y=truth.Y, applied=Applied.ORTHONORMAL)
+    with_d = Calibration("t", 20, X_raw=truth.X, Z_raw=truth.Z @ G4, distortion={
+        "model": "affine", "matrix": D, "tool_moments": {"marker": M, "probe": M}}, **kw)
+    without = Calibration("t", 20, X_raw=truth.X, Z_raw=truth.Z, **kw)
+    e_with = with_d.errors(d["A"], *bodies)
+    # exact in position; orientation to second order in D − I (≈ 4e-6 rad here)
+    assert e_with["e_t_mm"] < 1e-6 and e_with["theta_t_deg"] < 2e-3
+    e_without = without.errors(d["A"], *bodies)
+    assert e_without["e_t_mm"] > 0.05 and e_without["theta_t_deg"] > 0.02
+    with_d.applied = Applied.RAW
+    assert with_d.errors(d["A"], *bodies)["e_t_mm"] < 1e-6
+    assert np.allclose(with_d.used()["Z"], truth.Z @ G4)
+    # and ml with the affine model and the tool recovers this D (to 1e-5 per entry)
+    cal = solve(d["A"], *bodies, method="ml", distortion="affine", tools_mm=tool)
+    assert np.abs(cal.distortion["matrix"] - D).max() < 1e-5
+    assert cal.errors(d["A"], *bodies)["theta_t_deg"] < 2e-3
+
+
+@pytest.fixture(scope="module")
+def sessions():
+    """200 sessions of 20 noisy poses (one rig, fresh poses and noise each): the ml estimate,
+    its predicted uncertainty, the true coil-placement error at its target, and the bound."""
+    rng = np.random.default_rng(2024)
+    truth = Truth.random(rng)
+    T = {"X": truth.X, "Y": truth.Y, "Z": truth.Z}
+    out = []
+    for _ in range(200):
+        _, d = simulate(20, rng, plan="eq14", noise=NOISE, truth=truth)
+        cal = solve(d["A"], d["marker"], d["probe"], method="ml", distortion="none", **SIM_OPTS)
+        u = cal.uncertainty
+        e = coil_placement_errors(u["target"][None], cal.Y, cal.Z, truth.Y, truth.Z)[0]
+        bound = crb(d["A"], d["marker"], d["probe"], T, SIM_OPTS)
+        out.append({"coil_err": e, "p95": u["coil_centre_mm"]["p95"],
+                    "y_err2": float(np.sum((cal.Y[:3, 3] - truth.Y[:3, 3]) ** 2)),
+                    "bound2": translation_rms_bound(bound) ** 2,
+                    "vf": cal.extra["variance_factor"]})
+    return out
+
+
+def test_predicted_95_percent_interval_of_the_coil_centre_covers_95_percent(sessions):
+    covered = np.mean([s["coil_err"] <= s["p95"] for s in sessions])
+    # 200 sessions: binomial SD 1.5 points; allow about ±3 SD
+    assert 0.90 <= covered <= 0.99, covered
+    # the noise model matches the simulation: variance factor near 1 (SD ≈ 0.08 per session)
+    assert 0.9 < np.mean([s["vf"] for s in sessions]) < 1.1
+
+
+def test_ml_is_within_1_2_of_the_cramer_rao_bound_for_y_translation_at_n20(sessions):
+    rms = np.sqrt(np.mean([s["y_err2"] for s in sessions]))
+    bound = np.sqrt(np.mean([s["bound2"] for s in sessions]))
+    # 200 sessions: the RMS error is known to about ±3 %; an unbiased method cannot go below
+    # the bound by more than that either
+    assert 0.9 * bound < rms < 1.2 * bound, (rms, bound)
+
+
+def test_crb_shrinks_with_more_poses_and_tool_covariance_is_horn_like():
+    rng = np.random.default_rng(8)
+    truth, d = simulate(200, rng, plan="eq14", noise=Noise.none())
+    T = {"X": truth.X, "Y": truth.Y, "Z": truth.Z}
+    b20 = translation_rms_bound(crb(d["A"][:20], None, d["probe"][:20], T, SIM_OPTS))
+    b200 = translation_rms_bound(crb(d["A"], None, d["probe"], T, SIM_OPTS))
+    assert b200 < b20 / np.sqrt(200 / 20) * 1.3  # ≈ 1/√n, with slack for the pose draw
+    cov = tool_tracker_cov(TOOL_8700340_MM, 0.05)
+    # Monte Carlo of Horn's fit with 0.05 mm fiducial noise, 4000 draws: SD within 10 %
+    pts = TOOL_8700340_MM[None] + rng.normal(0, 0.05, (4000, 4, 3))
+    P = absolute_orientation(TOOL_8700340_MM, pts)
+    assert np.std(P[:, :3, 3], axis=0) == pytest.approx(np.sqrt(np.diag(cov)[3:]), rel=0.1)
+
+
+def test_degenerate_inputs_give_clear_calibration_errors():
+    _, d = simulate(10, np.random.default_rng(1), plan="random", noise=Noise())
+    A, B, C = d["A"], d["marker"], d["probe"]
+    with pytest.raises(CalibrationError, match="at least 3 poses"):
+        solve(A[:2], B[:2], C[:2], method="ml")
+    Rs = [make_pose(rot_z(a), [10.0 * a, 0.0, 5.0]) for a in np.linspace(0.1, 1.0, 6)]
+    A1 = np.stack(Rs)
+    with pytest.raises(CalibrationError, match="rotation diversity"):
+        solve(A1, A1, A1, method="ml")
+    with pytest.raises(CalibrationError, match="unknown distortion"):
+        solve(A, B, C, method="ml", distortion="cubic")
+    with pytest.raises(CalibrationError, match="robot_sigma_mm"):
+        solve(A, B, C, method="ml", robot_sigma_mm=0.0)
+    with pytest.raises(CalibrationError, match="tracker_cov"):
+        solve(A, B, C, method="ml", tracker_cov=-np.eye(6))
+    with pytest.raises(CalibrationError, match="spreads"):
+        solve(A, B, C, method="ml", spreads=[{}] * 3)
+    with pytest.raises(CalibrationError, match="not identifiable|parameters"):
+        solve(A[:3], B[:3], method="ml", distortion="affine")
+    with pytest.raises(CalibrationError, match="unexpected keyword|argument"):
+        solve(A, B, C, method="ml", sigma=1.0)
+
+
+def test_spreads_set_the_tracker_noise_per_pose():
+    """Pose records' spreads: a pose with a 10× larger spread gets 100× less weight, which
+    moves the estimate less than leaving that pose's noise unmodelled would."""
+    rng = np.random.default_rng(12)
+    truth, d = simulate(30, rng, plan="eq14", noise=Noise(robot_rot_sigma_deg=1e-4,
+                                                          robot_trans_sigma_mm=1e-4))
+    B = d["marker"].copy()
+    B[0] = make_pose(B[0, :3, :3], B[0, :3, 3] + [2.0, -2.0, 1.0])  # one pose 3 mm off
+    rec = [{"spread": {"marker": {"trans_mm": 0.05, "rot_deg": 0.03},
+                       "probe": {"trans_mm": 0.05, "rot_deg": 0.03}}, "samples": {"B": 1, "C": 1}}
+           for _ in range(30)]
+    rec[0] = {"spread": {"marker": {"trans_mm": 5.0, "rot_deg": 0.03},
+                         "probe": {"trans_mm": 0.05, "rot_deg": 0.03}}, "samples": {"B": 1}}
+    kw = dict(distortion="none", robot_sigma_mm=1e-4, robot_sigma_deg=1e-4)
+    w = solve(d["A"], B, d["probe"], method="ml", spreads=rec, **kw)
+    u = solve(d["A"], B, d["probe"], method="ml", **kw)
+    err_w = np.linalg.norm(w.X[:3, 3] - truth.X[:3, 3])
+    err_u = np.linalg.norm(u.X[:3, 3] - truth.X[:3, 3])
+    assert w.extra["noise"]["tracker"] == "spreads"
+    assert err_w < 0.5 * err_u

@@ -1,0 +1,95 @@
+"""The Cramér–Rao bound of the calibration for a session with known truth, and the noise model
+of a simulated rig in the terms of the ``ml`` solver (docs/methods.md).
+
+Frames and units as everywhere: A = base_from_flange, B = tracker_from_marker, C =
+tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker;
+4×4, mm.
+
+The bound is the inverse Fisher information of the linearised measurement model of
+:mod:`tmscal.calib.ml` at the true parameters: F = Jᵀ S⁻¹ J, J the Jacobian of the residuals
+of the noise-free tracker poses Z⁻¹ A_i W at the truth, S the per-pose residual covariance of
+the robot and tracker noise. No unbiased estimator has a covariance below F⁻¹ (in the order
+and units of ``parameter_names``: per transform a right rotation vector in rad, then a
+translation offset in mm).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .ml import (
+    Problem,
+    _tracker_covs,
+    _whitener,
+    covariance_from_jacobian,
+    noise_covariance,
+    parameter_names,
+)
+
+__all__ = ["crb", "tool_tracker_cov", "sim_noise_options", "translation_rms_bound"]
+
+
+def tool_tracker_cov(tool_mm: np.ndarray, fiducial_sigma_mm: float, samples: int = 1
+                     ) -> np.ndarray:
+    """Covariance (6×6, body frame, [rot rad; trans mm]) of a pose fitted by absolute
+    orientation to k fiducials ``tool_mm`` (k, 3) with isotropic noise σ per coordinate,
+    averaged over ``samples`` observations: rotation σ² (Σ |p|² I − p pᵀ)⁻¹ about the
+    centroid, translation σ²/k I (the body origin at the centroid: uncorrelated)."""
+    p = np.asarray(tool_mm, dtype=float)
+    p = p - p.mean(axis=0)
+    s2 = fiducial_sigma_mm ** 2 / max(int(samples), 1)
+    M = np.sum(p * p) * np.eye(3) - p.T @ p
+    cov = np.zeros((6, 6))
+    cov[:3, :3] = s2 * np.linalg.inv(M)
+    cov[3:, 3:] = s2 / len(p) * np.eye(3)
+    return cov
+
+
+def sim_noise_options(fiducial_sigma_mm: float, robot_rot_sigma_deg: float,
+                      robot_trans_sigma_mm: float, tool_mm: np.ndarray, samples: int = 1
+                      ) -> dict[str, Any]:
+    """``ml`` options matching the simulated rig's noise (tmscal.sim.Noise): the rig turns the
+    flange about a random axis by an angle ~ N(0, σ), i.e. σ/√3 per axis of the rotation
+    vector; translation σ per component; the tracker as :func:`tool_tracker_cov`."""
+    return {"robot_sigma_mm": robot_trans_sigma_mm,
+            "robot_sigma_deg": robot_rot_sigma_deg / np.sqrt(3.0),
+            "tracker_cov": tool_tracker_cov(tool_mm, fiducial_sigma_mm, samples)}
+
+
+def crb(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | None,
+        truth: Mapping[str, np.ndarray | None], noise: Mapping[str, Any]) -> np.ndarray:
+    """Cramér–Rao bound (covariance, parameters as ``parameter_names(bodies, "none")``) for
+    robot poses A (n, 4, 4) and the truth {"X", "Z"[, "Y"]}; ``noise`` holds ``ml``'s noise
+    options (robot_sigma_mm, robot_sigma_deg, and tracker_cov or tracker_sigma_mm and
+    tracker_sigma_deg). The model is linearised at the noise-free tracker poses the truth
+    gives, so B and C are not used beyond saying which bodies were measured: the probe
+    counts when C is given and the truth has a "Y"."""
+    A = np.asarray(A, dtype=float)
+    if B is not None and len(B) != len(A):
+        raise ValueError(f"crb: B has {len(B)} poses but A has {len(A)}")
+    Ws = [np.asarray(truth["X"], dtype=float)]
+    if C is not None and truth.get("Y") is not None:
+        Ws.append(np.asarray(truth["Y"], dtype=float))
+    Z = np.asarray(truth["Z"], dtype=float)
+    bodies = [np.linalg.inv(Z) @ A @ W for W in Ws]
+    names = ["marker", "probe"][:len(Ws)]
+    opts = {"tracker_cov": None, "spreads": None, "tracker_sigma_mm": None,
+            "tracker_sigma_deg": None, **dict(noise)}
+    tracker = _tracker_covs(len(A), names, opts)
+    S = noise_covariance(Ws, float(opts["robot_sigma_mm"]),
+                         float(np.radians(opts["robot_sigma_deg"])), tracker)
+    prob = Problem(A, bodies, Ws, Z, "none")
+    J = prob.jacobian(np.zeros(prob.n_params), _whitener(S))
+    return covariance_from_jacobian(J, "the calibration")
+
+
+def translation_rms_bound(cov: np.ndarray, which: str = "Y", bodies: int = 2) -> float:
+    """√(trace) of a transform's translation block of a bound from :func:`crb`: the smallest
+    RMS translation error (mm) an unbiased method can have."""
+    names = parameter_names(bodies, "none")
+    idx = [names.index(f"{which}.t{a} (mm)") for a in "xyz"]
+    return float(np.sqrt(np.trace(cov[np.ix_(idx, idx)])))
+
