@@ -4,8 +4,11 @@ calibration cannot."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
 
 from tmscal.calib import solve
 from tmscal.config import construct
@@ -77,3 +80,20 @@ def test_raw_qr36_absorbs_an_isotropic_scale_a_rigid_solution_cannot(seed: int) 
     # … the rigid one cannot: its held-out error grows several-fold
     assert rigid1 > 3.0 * rigid0
     assert rigid1 > 3.0 * raw1
+
+
+def test_a_mock_rig_config_sets_the_distortion(mock_config) -> None:
+    from tmscal.config import load_config
+    from tmscal.mocks.rig import build_sim_rig
+
+    base = "mock-ur-polaris.yaml"
+    mock = yaml.safe_load((Path(__file__).parents[2] / "configs" / base).read_text())["mock"]
+    mock["noise"] = {"fiducial_sigma_mm": 0.0, "robot_rot_sigma_deg": 0.0,
+                     "robot_trans_sigma_mm": 0.0, "tracker_scale": [1.002, 1.0, 1.0]}
+    rig = build_sim_rig(load_config(mock_config(base, mock=mock)))
+    clean = SimRig(rig.truth, noise=Noise.none(), start=rig.commanded)
+    T, M = clean.observe("marker"), rig.observe("marker")
+    np.testing.assert_allclose(M[:3, 3], np.array([1.002, 1.0, 1.0]) * T[:3, 3], atol=1e-6)
+    bad = dict(mock, noise={"tracker_scale": [1.0, 1.0]})
+    with pytest.raises(ConfigError, match="mock.noise.*tracker_scale"):
+        build_sim_rig(load_config(mock_config(base, mock=bad)))
