@@ -109,7 +109,7 @@ def distortion_text(d: dict[str, Any]) -> str:
     isotropic scale, per-axis percentages, or the 3×3 matrix of an affine model."""
     model = str(d.get("model", "?"))
     if model == "none":
-        return "tracker distortion: none (rigid tracker model chosen)"
+        return "tracker distortion: none (a rigid tracker model)"
     if model == "scale" and "scale_percent" in d:
         return f"tracker scale {_pct(float(d['scale_percent']))}"
     if model == "axis" and d.get("axis_scale_percent") is not None:
