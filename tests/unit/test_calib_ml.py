@@ -65,7 +65,8 @@ def test_tracker_scale_is_found_and_holds_out_like_raw_qr36(scaled_session, dist
     assert abs(cal.distortion["scale_percent"] - 0.1) < 0.03
     if distortion == "auto":
         assert cal.distortion["model"] != "none"
-        assert min(cal.extra["bic"], key=cal.extra["bic"].get) == cal.distortion["model"]
+        ic = cal.extra[cal.extra["criterion"]]
+        assert min(ic, key=ic.get) == cal.distortion["model"]
     e_ml = cal.errors(A[te], B[te], C[te])["e_t_mm"]
     e_qr = solve(A[tr], B[tr], C[tr], method="qr36").errors(A[te], B[te], C[te])["e_t_mm"]
     assert e_ml <= 1.02 * e_qr
@@ -169,6 +170,8 @@ def test_degenerate_inputs_give_clear_calibration_errors():
     A1 = np.stack(Rs)
     with pytest.raises(CalibrationError, match="rotation diversity"):
         solve(A1, A1, A1, method="ml")
+    with pytest.raises(CalibrationError, match="unknown criterion"):
+        solve(A, B, C, method="ml", criterion="hqic")
     with pytest.raises(CalibrationError, match="unknown distortion"):
         solve(A, B, C, method="ml", distortion="cubic")
     with pytest.raises(CalibrationError, match="robot_sigma_mm"):

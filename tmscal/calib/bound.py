@@ -1,5 +1,6 @@
-"""The Cramér–Rao bound of the calibration for a session with known truth, and the noise model
-of a simulated rig in the terms of the ``ml`` solver (docs/methods.md).
+"""The Cramér–Rao bound of the calibration for a session with known truth, the noise model of
+a simulated rig in the terms of the ``ml`` solver, and the predicted coil-placement
+uncertainty ``ml`` reports (docs/methods.md).
 
 Frames and units as everywhere: A = base_from_flange, B = tracker_from_marker, C =
 tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker;
@@ -20,16 +21,21 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry import orthonormalize, rotvec_from_matrix
 from .ml import (
+    G_STEP,
+    STEPS,
     Problem,
     _tracker_covs,
     _whitener,
     covariance_from_jacobian,
     noise_covariance,
     parameter_names,
+    undistort,
 )
 
-__all__ = ["crb", "tool_tracker_cov", "sim_noise_options", "translation_rms_bound"]
+__all__ = ["crb", "tool_tracker_cov", "sim_noise_options", "translation_rms_bound",
+           "uncertainty_at"]
 
 
 def tool_tracker_cov(tool_mm: np.ndarray, fiducial_sigma_mm: float, samples: int = 1
@@ -93,3 +99,49 @@ def translation_rms_bound(cov: np.ndarray, which: str = "Y", bodies: int = 2) ->
     idx = [names.index(f"{which}.t{a} (mm)") for a in "xyz"]
     return float(np.sqrt(np.trace(cov[np.ix_(idx, idx)])))
 
+
+def _placement_error(prob: Problem, th: np.ndarray, N_ref: np.ndarray, j: int
+                     ) -> np.ndarray:
+    """[rotation vector (rad, base), translation (mm)] of the body's pose when the robot is
+    commanded with parameters θ to put body j at tracker pose N_ref, relative to where the
+    estimate (θ = 0) puts it."""
+    Ws, Z, G = prob.unpack(th)
+    W0, Z0, G0 = prob.unpack(np.zeros_like(th))
+    M = (prob.moments or [None] * len(Ws))[j]
+    want = Z0 @ undistort(N_ref[None], G0, prob.model, M)[0]
+    actual = orthonormalize(Z @ undistort(N_ref[None], G, prob.model, M)[0]
+                            @ np.linalg.inv(Ws[j])) @ W0[j]
+    rot = rotvec_from_matrix(actual[:3, :3] @ want[:3, :3].T)
+    return np.concatenate([rot, actual[:3, 3] - want[:3, 3]])
+
+
+def _norm_quantile(cov: np.ndarray, q: float = 0.95) -> float:
+    """q-quantile of ‖e‖ for e ~ N(0, cov) (Monte Carlo, 40,000 draws, fixed seed)."""
+    lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)
+    z = np.random.default_rng(0).standard_normal((40_000, len(lam)))
+    return float(np.quantile(np.sqrt((z * z) @ lam), q))
+
+
+def uncertainty_at(prob: Problem, P: np.ndarray, N_ref: np.ndarray, j: int
+                   ) -> dict[str, Any]:
+    """Predicted 1-σ (RMS) and 95 % radius of the position error (mm) and of the axis (z)
+    error (deg) of body j when it is placed at tracker pose N_ref, from the covariance P."""
+    k = len(P)
+    Je = np.zeros((6, k))
+    for i in range(k):
+        h = G_STEP if i >= 6 * (len(prob.Ws) + 1) else STEPS[(i % 6) // 3]
+        e = np.zeros(k)
+        e[i] = h
+        Je[:, i] = (_placement_error(prob, e, N_ref, j)
+                    - _placement_error(prob, -e, N_ref, j)) / (2 * h)
+    cov = Je @ P @ Je.T
+    ct = cov[3:, 3:]
+    _, Z0, G0 = prob.unpack(np.zeros(k))
+    M = (prob.moments or [None] * len(prob.Ws))[j]
+    axis = (Z0 @ undistort(N_ref[None], G0, prob.model, M)[0])[:3, 2]
+    U = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]  # ⊥ the axis
+    ca = np.degrees(1.0) ** 2 * (U.T @ cov[:3, :3] @ U)
+    return {"position_mm": {"sigma": float(np.sqrt(np.trace(ct))), "p95": _norm_quantile(ct),
+                            "covariance": ct},
+            "axis_deg": {"sigma": float(np.sqrt(np.trace(ca))), "p95": _norm_quantile(ca)},
+            "target": N_ref}
