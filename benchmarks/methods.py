@@ -31,6 +31,7 @@ from tmscal import calib
 from tmscal.calib import solve, truth_errors
 from tmscal.errors import CalibrationError
 from tmscal.geometry import make_pose, orthonormalize
+from tmscal.report.compare import placement_inputs
 from tmscal.sim import TOOL_8700340_MM, Noise, simulate
 
 NS = (7, 14, 20, 50, 250)
@@ -71,17 +72,17 @@ def _bound_fn() -> Callable[..., float] | None:
     return fn
 
 
-def _figures(A: np.ndarray, B: np.ndarray, C: np.ndarray, Y: np.ndarray, Z: np.ndarray,
-             Z_probe: np.ndarray, truth: dict[str, np.ndarray], e_t: float, dt: float
-             ) -> dict[str, float]:
+def _figures(C: np.ndarray, Y: np.ndarray, Z: np.ndarray, truth: dict[str, np.ndarray],
+             e_t: float, dt: float, C_cmd: np.ndarray | None = None) -> dict[str, float]:
     """The coil placement error: the robot is told to put the coil at the measured target C
-    (A = (Ẑ C Ŷ⁻¹)⊥); it lands at A Y, where the target really is at Z D⁻¹ C (D: the tracker
-    distortion; without one this is ``calib.coil_placement_errors``)."""
+    (A = (Ẑ C_cmd Ŷ⁻¹)⊥, C_cmd = C undistorted by a solver that found a distortion); it
+    lands at A Y, where the target really is at Z D⁻¹ C (D: the tracker distortion; without
+    one this is ``calib.coil_placement_errors``)."""
     G = np.linalg.inv(truth["D"])
     C_true = C.copy()
     C_true[:, :3, 3] = C[:, :3, 3] @ G.T
     C_true[:, :3, :3] = orthonormalize(G @ C[:, :3, :3])
-    A_cmd = orthonormalize(Z_probe @ C @ np.linalg.inv(Y))
+    A_cmd = orthonormalize(Z @ (C if C_cmd is None else C_cmd) @ np.linalg.inv(Y))
     coil = np.linalg.norm((A_cmd @ truth["Y"])[:, :3, 3] - (truth["Z"] @ C_true)[:, :3, 3],
                           axis=1)
     te = truth_errors({"Y": Y}, {"Y": truth["Y"]})
@@ -97,9 +98,8 @@ def run_ours(m: str, d: dict[str, np.ndarray], n: int, truth: dict[str, np.ndarr
     dt = time.perf_counter() - t0
     sl = slice(N_TEST_FROM, None)
     e_t = cal.errors(A[sl], B[sl], C[sl])["e_t_mm"]
-    u = cal.used()
-    Zp = u["Z_probe"] if u["Z_probe"] is not None else u["Z"]
-    return _figures(A[sl], B[sl], C[sl], u["Y"], u["Z"], Zp, truth, e_t, dt)
+    C_cmd, Y, Z = placement_inputs(cal, C[sl])  # QR24: the marker's Z, as tmscal solve does
+    return _figures(C[sl], Y, Z, truth, e_t, dt, C_cmd=C_cmd)
 
 
 def run_opencv(fn: Callable[..., Any], d: dict[str, np.ndarray], n: int,
@@ -115,7 +115,7 @@ def run_opencv(fn: Callable[..., Any], d: dict[str, np.ndarray], n: int,
     sl = slice(N_TEST_FROM, None)
     e_t = holdout_errors(A[sl], {"marker": B[sl], "probe": C[sl]}, {"marker": X, "probe": Y},
                          {"marker": ZM, "probe": ZP})["e_t_mm"]
-    return _figures(A[sl], B[sl], C[sl], Y, ZM, ZP, truth, e_t, dt)
+    return _figures(C[sl], Y, ZM, truth, e_t, dt)  # the marker's Z, as for QR24
 
 
 def table(methods: list[str], seeds: int, scale: float) -> None:

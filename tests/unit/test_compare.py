@@ -233,3 +233,23 @@ def test_solve_passes_method_options_and_the_handheld_pose(sessions, fake_method
     assert len(msg) == 1 and "--handheld-pose 999" in msg[0]
     msg = [ln for ln in run("solve", both, "--option", "nokey").output.splitlines() if ln]
     assert len(msg) == 1 and "--option" in msg[0] and "KEY=VALUE" in msg[0]
+
+
+def test_placement_with_a_found_distortion_commands_the_true_flange_pose() -> None:
+    """Noise-free poses from a tracker that scales by 1.01: with the true rigid Y, Z and the
+    distortion D, the placement inputs give (Z C_cmd Y⁻¹) = the flange pose that really put the
+    probe at each measured C (to rounding); the measured C used as is would be ≈ 1 % × 1.5 m
+    off."""
+    from tmscal.calib import Calibration
+    from tmscal.report.compare import placement_inputs
+
+    truth, d = simulate(10, np.random.default_rng(5), plan="eq14",
+                        noise=Noise(0, 0, 0, tracker_scale=1.01))
+    D = np.eye(3) * 1.01
+    cal = Calibration("fake", 10, X=truth.X, Z=truth.Z, X_raw=truth.X, Z_raw=truth.Z,
+                      Y=truth.Y, Y_raw=truth.Y, distortion={"model": "scale", "matrix": D})
+    C_cmd, Y, Z = placement_inputs(cal, d["probe"])
+    A_cmd = Z @ C_cmd @ np.linalg.inv(Y)
+    np.testing.assert_allclose(A_cmd[:, :3, 3], d["A"][:, :3, 3], atol=1e-6)
+    naive = Z @ d["probe"] @ np.linalg.inv(Y)
+    assert np.linalg.norm(naive[:, :3, 3] - d["A"][:, :3, 3], axis=1).min() > 5.0
