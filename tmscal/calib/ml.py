@@ -448,8 +448,9 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
                       bodies[-1][:, :3, 3].mean(axis=0))
     from .bound import uncertainty_at
     u = uncertainty_at(fit.prob, P, N_ref, len(bodies) - 1)
-    key = "coil" if C is not None else "marker"
-    unc = {f"{key}_centre_mm": u["position_mm"], f"{key}_axis_deg": u["axis_deg"],
+    pos, ax = ("coil_centre_mm", "coil_axis_deg") if C is not None else \
+        ("marker_origin_mm", "marker_axis_deg")
+    unc = {pos: u["position_mm"], ax: u["axis_deg"],
            "target": u["target"], "target_note": f"the session's mean {names[-1]} pose"}
     dist = {"model": fit.prob.model, "matrix": D, "undistort": G,
             "scale_percent": float((np.cbrt(np.linalg.det(D)) - 1.0) * 100.0),
