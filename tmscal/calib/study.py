@@ -101,7 +101,7 @@ def threshold_n(values: Sequence[float], ns: Sequence[int], threshold: float) ->
 
 
 def cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: str = "qr36",
-                   k: int = 5, orthonormal: bool = False) -> dict[str, Any]:
+                   k: int = 5, orthonormal: bool = False, **options: Any) -> dict[str, Any]:
     """k-fold cross-validated hold-out errors (docs/methods.md). The poses, in their order,
     are cut into ``k`` contiguous folds of near-equal size (``numpy.array_split``: no seed, the
     same folds every run); each fold is held out in turn, the calibration solved on the other
@@ -131,7 +131,7 @@ def cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: s
         Ct = None if C is None else C[test]
         try:
             cal = solve(A[train], B[train], None if C is None else C[train], method=method,
-                        orthonormal=orthonormal)
+                        orthonormal=orthonormal, **options)
         except CalibrationError as e:
             raise CalibrationError(f"cross-validation fold {j + 1} of {k} (poses "
                                    f"{test[0]}–{test[-1]} held out): {e}; use --in-sample or "
