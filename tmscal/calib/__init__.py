@@ -210,8 +210,7 @@ def _solve_qr_impl(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: s
     return cal
 
 
-from . import ml  # noqa: E402,F401  (registers "ml")
-
 SOLVERS["qr24"] = _qr("qr24")
 SOLVERS["qr36"] = _qr("qr36")
-from . import classic, sgo  # noqa: E402,F401  (registers the methods)
+
+from . import classic, ml, sgo  # noqa: E402,F401,I001  (register their methods)
