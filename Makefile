@@ -29,6 +29,7 @@ test: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/speed.py
+	$(BIN)/python benchmarks/methods.py
 	$(BIN)/python benchmarks/tracker.py
 	$(BIN)/python benchmarks/acquisition.py --robot ur
 	$(BIN)/python benchmarks/acquisition.py --robot denso

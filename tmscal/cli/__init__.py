@@ -243,6 +243,7 @@ def main(verbose: int) -> None:
       tmscal simulate -o sim.jsonl         a simulated session (Wang et al. 2018)
       tmscal solve sim.jsonl --train 250   QR36 on 250 poses, errors on the rest
       tmscal study sim.jsonl --plot f.png  convergence: error against the pose count
+      tmscal compare sim.jsonl             every method side by side (error, time)
     \b
     At the rig (or against `tmscal mock CONFIG`):
       tmscal track CONFIG                  live tool poses: are the tools right?
