@@ -30,6 +30,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/speed.py
 	$(BIN)/python benchmarks/methods.py
+	$(BIN)/python benchmarks/ml_bound.py --n 20
+	$(BIN)/python benchmarks/ml_bound.py --n 250 --sessions 60
 	$(BIN)/python benchmarks/tracker.py
 	$(BIN)/python benchmarks/acquisition.py --robot ur
 	$(BIN)/python benchmarks/acquisition.py --robot denso
