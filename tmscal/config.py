@@ -48,7 +48,6 @@ import json
 import logging
 import math
 import os
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,6 +67,7 @@ from .config_checks import (
     show,
     with_line,
 )
+from .config_paths import log_wire_path, rom_path, tracker_port_problem
 from .errors import ConfigError
 
 __all__ = ["RigConfig", "RobotConfig", "TrackerConfig", "PlanConfig", "SamplingConfig",
@@ -216,27 +216,6 @@ _SECTIONS = {"robot", "tracker", "plan", "sampling", "safety", "run", "mock", "n
              "description"}
 
 
-def tracker_port_problem(port: str) -> str | None:
-    """Why ``port`` is not an acceptable tracker port, or None when it is: a device path
-    (``/dev/ttyUSB0``, ``/dev/pts/3``, ``COM3``; no URL scheme) or ``socket://host:port``.
-    Every other pyserial URL scheme (spy://, loop://, rfc2217://, hwgrep://, alt:// …) is
-    refused: some of them open or write files named in the URL."""
-    if not isinstance(port, str) or not port.strip():
-        return "expected a device path or socket://host:port"
-    if "\0" in port or any(c in port for c in "\r\n"):
-        return "contains a control character"
-    if "://" not in port:
-        return None
-    scheme, _, rest = port.partition("://")
-    if scheme.lower() != "socket":
-        return (f"URL scheme {scheme!r} is not allowed; use a device path (e.g. /dev/ttyUSB0) "
-                "or socket://host:port")
-    m = re.fullmatch(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):([0-9]{1,5})", rest)
-    if m is None or not 1 <= int(m.group(2)) <= 65535:
-        return "expected socket://host:port (port 1…65535, no path, query or options)"
-    return None
-
-
 def pose_from_config(value: Any, src: str, key: str) -> np.ndarray:
     """A pose from a config value: a 4×4 list (mm) or {xyz_mm: [..], rpy_deg: [..]} with
     R = Rz·Ry·Rx (DENSO-style fixed axes)."""
@@ -355,55 +334,14 @@ def _parse_tracker(data: Any, src: str, base_dir: Path | None,
             raise err(src, "tracker.port", f"{show(tracker.port)}: {problem}")
     if not tracker.tools:
         raise err(src, "tracker.tools", "name at least one tool, e.g. {marker: file.rom}")
-    tracker.tools = {name: _rom_path(rom, src, name, base_dir, check_files)
+    tracker.tools = {name: rom_path(rom, src, name, base_dir, check_files)
                      for name, rom in tracker.tools.items()}
     positive(src, "tracker.frame_rate_hz", tracker.frame_rate_hz, at_most=10_000)
     positive(src, "tracker.baud", tracker.baud)
     _check_options(tracker.options, TRACKER_RESERVED_OPTIONS, src, "tracker")
     if tracker.log_wire is not None:
-        tracker.log_wire = _log_wire_path(tracker, src, base_dir)
+        tracker.log_wire = log_wire_path(tracker, src, base_dir)
     return tracker
-
-
-def _log_wire_path(tracker: TrackerConfig, src: str, base_dir: Path | None) -> str:
-    """The absolute path of ``tracker.log_wire``: a new file in an existing directory, not an
-    input (the config, a ROM file), on a serial device port. Whether it exists is checked
-    again when the port opens (it must not: nothing is overwritten)."""
-    raw = tracker.log_wire
-    if not isinstance(raw, str) or not raw.strip() or any(c in raw for c in "\0\r\n"):
-        raise err(src, "tracker.log_wire", f"expected a file path, got {show(raw)}")
-    p = Path(raw).expanduser()
-    if not p.is_absolute() and base_dir is not None:
-        p = base_dir / p
-    p = p.absolute()
-    inputs = {Path(r).resolve() for r in tracker.tools.values() if r}
-    if Path(src).is_file():
-        inputs.add(Path(src).resolve())
-    if p.resolve() in inputs:
-        raise err(src, "tracker.log_wire", f"{p} is an input file; name a new file")
-    if p.is_dir():
-        raise err(src, "tracker.log_wire", f"{p} is a directory; name a new file")
-    if not p.parent.is_dir():
-        raise err(src, "tracker.log_wire", f"directory {p.parent} does not exist")
-    if tracker.port and "://" in tracker.port:
-        raise err(src, "tracker.log_wire", "the wire log records a serial device port "
-                  f"(pyserial's spy://); {tracker.port!r} is not one")
-    return str(p)
-
-
-def _rom_path(rom: Any, src: str, name: str, base_dir: Path | None,
-              must_exist: bool = True) -> str | None:
-    """The absolute path of tool ``name``'s ROM file (None: a tool already loaded)."""
-    if rom is None:
-        return None
-    if not isinstance(rom, str) or not rom or "\0" in rom:
-        raise err(src, f"tracker.tools.{name}", f"expected a ROM file path, got {show(rom)}")
-    p = Path(rom)
-    if not p.is_absolute() and base_dir is not None:
-        p = base_dir / p
-    if must_exist and not p.is_file():
-        raise err(src, f"tracker.tools.{name}", f"ROM file not found: {p}")
-    return str(p)
 
 
 def _parse_plan(data: Any, src: str) -> PlanConfig:

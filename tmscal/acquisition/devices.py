@@ -9,7 +9,6 @@ argument that has its own key or carries a limit.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,6 +20,7 @@ from ..config import (
     construct,
     tracker_port_problem,
 )
+from ..config_paths import check_rom_exists
 from ..drivers.base import ConfigError, Envelope, Robot, SafetyError, Tracker
 from ..drivers.registry import get_spec
 
@@ -112,9 +112,7 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
     if problem:
         raise ConfigError(f"{cfg.path}: key 'tracker.port': {p!r}: {problem}")
     for name, rom in t.tools.items():  # checked here too: a config may be loaded without it
-        if rom is not None and not Path(rom).is_file():
-            raise ConfigError(f"{cfg.path}: key 'tracker.tools.{name}': ROM file not found: "
-                              f"{rom}")
+        check_rom_exists(str(cfg.path), name, rom)
     for k in t.options:
         if k in TRACKER_RESERVED_OPTIONS:
             raise ConfigError(f"{cfg.path}: key 'tracker.options.{k}': '{k}' cannot be set "

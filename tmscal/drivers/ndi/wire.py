@@ -17,7 +17,7 @@ from typing import Any
 
 import serial
 
-from ...config import tracker_port_problem
+from ...config_paths import tracker_port_problem
 from ...errors import ConfigError, ConnectionLost
 
 __all__ = ["open_port", "wire_log_problem", "spy_url"]
