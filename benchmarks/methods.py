@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 
 from tmscal import calib
-from tmscal.calib import solve, truth_errors
+from tmscal.calib import coil_placement_errors, solve, truth_errors
+from tmscal.calib.ml import undistort
 from tmscal.errors import CalibrationError
-from tmscal.geometry import make_pose, orthonormalize
-from tmscal.report.compare import placement_inputs
+from tmscal.geometry import make_pose
 from tmscal.sim import TOOL_8700340_MM, Noise, simulate
 
 NS = (7, 14, 20, 50, 250)
@@ -78,13 +78,9 @@ def _figures(C: np.ndarray, Y: np.ndarray, Z: np.ndarray, truth: dict[str, np.nd
     (A = (Ẑ C_cmd Ŷ⁻¹)⊥, C_cmd = C undistorted by a solver that found a distortion); it
     lands at A Y, where the target really is at Z D⁻¹ C (D: the tracker distortion; without
     one this is ``calib.coil_placement_errors``)."""
-    G = np.linalg.inv(truth["D"])
-    C_true = C.copy()
-    C_true[:, :3, 3] = C[:, :3, 3] @ G.T
-    C_true[:, :3, :3] = orthonormalize(G @ C[:, :3, :3])
-    A_cmd = orthonormalize(Z @ (C if C_cmd is None else C_cmd) @ np.linalg.inv(Y))
-    coil = np.linalg.norm((A_cmd @ truth["Y"])[:, :3, 3] - (truth["Z"] @ C_true)[:, :3, 3],
-                          axis=1)
+    C_true = undistort(C, np.linalg.inv(truth["D"]), "affine")
+    coil = coil_placement_errors(C_true, Y, Z, truth["Y"], truth["Z"],
+                                 C_cmd=C if C_cmd is None else C_cmd)
     te = truth_errors({"Y": Y}, {"Y": truth["Y"]})
     return {"coil": float(coil.mean()), "Y": te["Y"]["trans_mm"], "e_t": e_t, "ms": 1e3 * dt}
 
@@ -98,7 +94,7 @@ def run_ours(m: str, d: dict[str, np.ndarray], n: int, truth: dict[str, np.ndarr
     dt = time.perf_counter() - t0
     sl = slice(N_TEST_FROM, None)
     e_t = cal.errors(A[sl], B[sl], C[sl])["e_t_mm"]
-    C_cmd, Y, Z = placement_inputs(cal, C[sl])  # QR24: the marker's Z, as tmscal solve does
+    C_cmd, Y, Z = cal.placement(C[sl])  # QR24: the marker's Z, as tmscal solve does
     return _figures(C[sl], Y, Z, truth, e_t, dt, C_cmd=C_cmd)
 
 

@@ -241,14 +241,13 @@ def test_placement_with_a_found_distortion_commands_the_true_flange_pose() -> No
     probe at each measured C (to rounding); the measured C used as is would be ≈ 1 % × 1.5 m
     off."""
     from tmscal.calib import Calibration
-    from tmscal.report.compare import placement_inputs
 
     truth, d = simulate(10, np.random.default_rng(5), plan="eq14",
                         noise=Noise(0, 0, 0, tracker_scale=1.01))
     D = np.eye(3) * 1.01
     cal = Calibration("fake", 10, X=truth.X, Z=truth.Z, X_raw=truth.X, Z_raw=truth.Z,
                       Y=truth.Y, Y_raw=truth.Y, distortion={"model": "scale", "matrix": D})
-    C_cmd, Y, Z = placement_inputs(cal, d["probe"])
+    C_cmd, Y, Z = cal.placement(d["probe"])
     A_cmd = Z @ C_cmd @ np.linalg.inv(Y)
     np.testing.assert_allclose(A_cmd[:, :3, 3], d["A"][:, :3, 3], atol=1e-6)
     naive = Z @ d["probe"] @ np.linalg.inv(Y)

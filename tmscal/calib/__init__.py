@@ -96,6 +96,19 @@ class Calibration:
                    for k, v in out.items()}
         return out
 
+    def placement(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(targets, Y, Z) with which a robot places the coil at measured probe poses C
+        (n, 4, 4) mm: the applied Y and Z; with a tracker ``distortion``, the targets
+        undistorted first (``ml.undistort``) and the rigid Y, Z, so that no scale of the
+        distortion leaks into the commanded flange pose Z C Y⁻¹."""
+        d = self.distortion
+        if d and d.get("matrix") is not None and d.get("model") != "none":
+            from .ml import undistort
+            G = np.linalg.inv(np.asarray(d["matrix"], dtype=float))
+            return undistort(C, G, "affine"), self.Y, self.Z
+        u = self.used()
+        return C, u["Y"], u["Z"]
+
     def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
                ) -> dict[str, Any]:
         """Hold-out errors of Wang et al. (2018) on the poses given (n, 4, 4), as defined in

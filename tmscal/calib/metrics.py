@@ -84,14 +84,17 @@ def truth_errors(estimates: Mapping[str, np.ndarray], truth: Mapping[str, np.nda
 
 
 def coil_placement_errors(C: np.ndarray, Y_hat: np.ndarray, Z_hat: np.ndarray,
-                          Y_true: np.ndarray, Z_true: np.ndarray) -> np.ndarray:
+                          Y_true: np.ndarray, Z_true: np.ndarray,
+                          C_cmd: np.ndarray | None = None) -> np.ndarray:
     """Coil placement error (mm) per target, the clinically meaningful number.
 
     The robot is told to put the coil (probe frame) at tracker pose C_i: it commands the
     flange to Â = (Ẑ C_i Ŷ⁻¹)⊥ (orthonormalised: a robot takes rigid poses). The coil then
     really sits at Â Y_true in the base frame, where Z_true C_i was wanted. Returns
-    ‖t(Â Y_true) − t(Z_true C_i)‖ for each C_i (n, 4, 4)."""
-    A_cmd = orthonormalize(Z_hat @ C @ np.linalg.inv(Y_hat))
+    ‖t(Â Y_true) − t(Z_true C_i)‖ for each C_i (n, 4, 4). ``C_cmd`` (default C): the targets
+    the robot is commanded with, when they differ from the true ones (e.g. undistorted by a
+    calibration that found a tracker distortion, ``Calibration.placement``)."""
+    A_cmd = orthonormalize(Z_hat @ (C if C_cmd is None else C_cmd) @ np.linalg.inv(Y_hat))
     actual = A_cmd @ Y_true
     desired = Z_true @ C
     return np.linalg.norm(actual[:, :3, 3] - desired[:, :3, 3], axis=1)

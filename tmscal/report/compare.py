@@ -26,7 +26,7 @@ from ..errors import CalibrationError
 from ..session import Session
 
 __all__ = ["compare_session", "compare_arrays", "format_compare", "default_ns", "find_bound",
-           "json_safe", "handheld_options", "session_noise", "placement_inputs"]
+           "json_safe", "handheld_options", "session_noise"]
 
 #: the error curves compared: key → (label, unit)
 METRICS = {"e_t_mm": ("position e_t", "mm"), "theta_t_deg": ("orientation θ_t", "deg")}
@@ -212,36 +212,11 @@ def _one_solve(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
             vals[f"truth:{k}_trans_mm"] = d["trans_mm"]
             vals[f"truth:{k}_rot_deg"] = d["rot_deg"]
         if C is not None and cal.Y is not None and truth.get("Y") is not None:
-            Cc, Yc, Zc = placement_inputs(cal, C[test])
-            coil = _placement(Cc, Yc, Zc, C[test], truth)
+            Cc, Yc, Zc = cal.placement(C[test])
+            coil = calib.coil_placement_errors(C[test], Yc, Zc, truth["Y"], truth["Z"],
+                                               C_cmd=Cc)
             vals["truth:coil_placement_mm"] = float(coil.mean())
     return vals
-
-
-def placement_inputs(cal: Any, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(targets, Y, Z) with which a robot places the coil at measured probe poses C: the
-    applied Y and Z; with a tracker distortion the calibration found (``cal.distortion``), the
-    targets undistorted first (positions by G = D⁻¹, orientations projected) and the rigid Y,
-    Z, so that no scale of the distortion leaks into the commanded flange pose."""
-    d = getattr(cal, "distortion", None)
-    if d and d.get("matrix") is not None and d.get("model") != "none":
-        from ..geometry import orthonormalize
-        G = np.linalg.inv(np.asarray(d["matrix"], dtype=float))
-        Cu = C.copy()
-        Cu[:, :3, 3] = C[:, :3, 3] @ G.T
-        Cu[:, :3, :3] = orthonormalize(G @ C[:, :3, :3])
-        return Cu, cal.Y, cal.Z
-    u = cal.used()
-    return C, u["Y"], u["Z"]
-
-
-def _placement(C_cmd: np.ndarray, Y: np.ndarray, Z: np.ndarray, C: np.ndarray,
-               truth: dict[str, Any]) -> np.ndarray:
-    """``calib.coil_placement_errors`` with the commanded side from ``placement_inputs``: the
-    robot commands (Ẑ C_cmd Ŷ⁻¹)⊥, the coil lands at that · Y_true, wanted at Z_true C."""
-    from ..geometry import orthonormalize
-    A_cmd = orthonormalize(Z @ C_cmd @ np.linalg.inv(Y))
-    return np.linalg.norm((A_cmd @ truth["Y"])[:, :3, 3] - (truth["Z"] @ C)[:, :3, 3], axis=1)
 
 
 def handheld_options(method: str, B_a: np.ndarray, C_a: np.ndarray | None) -> dict[str, Any]:
