@@ -140,7 +140,8 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
                 orthonormal=orthonormal, **options)
     sd = cv = None
     if train is None and not in_sample:
-        r = _cross_validate(A, B, C, method, folds, orthonormal, options)
+        r = cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal,
+                           **options)
         errors, sd = _nest(r["mean"]), _nest(r["sd"])
         cv = {"folds": r["folds"], "split": r["split"], "fold_sizes": r["fold_sizes"]}
         errors_on, n_test = f"cross-validated ({r['folds']} folds)", n
@@ -163,12 +164,6 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         uncertainty=cal.uncertainty, distortion=cal.distortion,
         options={k: _plain(v) for k, v in options.items()} or None)
     return cal, res
-
-
-def _cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: str,
-                    folds: int, orthonormal: bool, options: dict[str, Any]) -> dict[str, Any]:
-    """``calib.study.cross_validate`` with the method's options."""
-    return cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal, **options)
 
 
 def _truth_errors(session: Session, cal: Calibration,
