@@ -11,6 +11,7 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     safety:   {max_offset_mm, max_rotation_deg, workspace_min_mm, workspace_max_mm,
                max_speed_mm_s, max_accel_mm_s2}
     run:      {retries, reconnect_wait_s, warn_skip_share, stop_skip_share, skip_window}
+    adaptive: {target_mm, confidence, max_poses, bootstrap, pool, region}
     mock:     {clock: fast|real, seed, truth: tms|random|{X, Y, Z}, noise: {...},
                tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...}}
 
@@ -59,6 +60,7 @@ import yaml
 from .config_checks import (
     INT_BOUND,
     build,
+    check_adaptive,
     check_tree,
     construct,
     err,
@@ -71,9 +73,9 @@ from .config_paths import log_wire_path, rom_path, tracker_port_problem
 from .errors import ConfigError
 
 __all__ = ["RigConfig", "RobotConfig", "TrackerConfig", "PlanConfig", "SamplingConfig",
-           "SafetyConfig", "RunConfig", "MockConfig", "load_config", "parse_config",
-           "pose_from_config", "construct", "tracker_port_problem", "ROBOT_RESERVED_OPTIONS",
-           "TRACKER_RESERVED_OPTIONS", "SAFETY_KEYS"]
+           "SafetyConfig", "RunConfig", "MockConfig", "AdaptiveConfig", "load_config",
+           "parse_config", "pose_from_config", "construct", "tracker_port_problem",
+           "ROBOT_RESERVED_OPTIONS", "TRACKER_RESERVED_OPTIONS", "SAFETY_KEYS"]
 
 log = logging.getLogger(__name__)
 
@@ -193,6 +195,22 @@ class MockConfig:
 
 
 @dataclass
+class AdaptiveConfig:
+    """Adaptive acquisition (``tmscal acquire --adaptive``, docs/adaptive.md): stop when the
+    predicted coil-placement error (mm) at ``confidence`` is ≤ ``target_mm``, or after
+    ``max_poses``; ``bootstrap`` spread poses first (None: the fewest that make the problem
+    well posed, plus one); the candidates are the config's plan with ``pool`` poses, of which
+    the first ``region`` are where the rig will place the coil (the prediction's region)."""
+
+    target_mm: float = 0.05
+    confidence: float = 0.95
+    max_poses: int = 40
+    bootstrap: int | None = None
+    pool: int = 1000
+    region: int = 200
+
+
+@dataclass
 class RigConfig:
     """A whole rig config, as loaded from ``path``."""
 
@@ -205,6 +223,7 @@ class RigConfig:
     run: RunConfig
     mock: MockConfig | None
     raw: dict[str, Any]
+    adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
 
     @property
     def bodies(self) -> list[str]:
@@ -212,8 +231,8 @@ class RigConfig:
         return list(self.tracker.tools) if self.tracker else []
 
 
-_SECTIONS = {"robot", "tracker", "plan", "sampling", "safety", "run", "mock", "name",
-             "description"}
+_SECTIONS = {"robot", "tracker", "plan", "sampling", "safety", "run", "mock", "adaptive",
+             "name", "description"}
 
 
 def pose_from_config(value: Any, src: str, key: str) -> np.ndarray:
@@ -462,6 +481,7 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None,
     safety = _check_safety(data, src, robot is not None)
     run = _parse_run(data.get("run"), src)
     mock = _parse_mock(data.get("mock"), src)
+    adaptive = check_adaptive(build(AdaptiveConfig, data.get("adaptive"), src, "adaptive"), src)
     _check_robot_caps(robot, safety, src)
     try:  # the resolved config goes into the session header as JSON
         json.dumps(data, allow_nan=False)
@@ -472,7 +492,7 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None,
                     "robot FLANGE only, not the coil hanging below it. List points of the coil "
                     "(flange frame, mm) so the box bounds them too.", src)
     return RigConfig(path=None, robot=robot, tracker=tracker, plan=plan, sampling=sampling,
-                     safety=safety, run=run, mock=mock, raw=dict(data))
+                     safety=safety, run=run, mock=mock, raw=dict(data), adaptive=adaptive)
 
 
 def load_config(path: str | os.PathLike[str], *, check_files: bool = True) -> RigConfig:

@@ -23,7 +23,7 @@ from .errors import ConfigError
 
 __all__ = ["err", "show", "join", "check_tree", "build", "number", "coerce", "xyz", "positive",
            "in_range", "key_lines", "with_line", "construct", "MAX_DEPTH", "MAX_VALUES",
-           "INT_BOUND"]
+           "INT_BOUND", "check_adaptive"]
 
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
@@ -256,3 +256,22 @@ def construct(cls: Any, where: str, *args: Any, **options: Any) -> Any:
         return cls(*args, **options)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{where}: {e}") from None
+
+
+#: the most poses an adaptive run may take or choose among (as a plan's length)
+_MAX_POOL = 100_000
+
+
+def check_adaptive(a: Any, src: str) -> Any:
+    """The ``adaptive`` section (an ``AdaptiveConfig``): target_mm in (0, 100] mm, confidence
+    in (0, 1), 1 ≤ bootstrap ≤ max_poses ≤ pool, 1 ≤ region ≤ pool ≤ 100,000; else a
+    ConfigError naming the key. Returns ``a``."""
+    positive(src, "adaptive.target_mm", a.target_mm, at_most=100.0)
+    if not 0 < a.confidence < 1:
+        raise err(src, "adaptive.confidence", f"must be in (0, 1), got {a.confidence}")
+    in_range(src, "adaptive.pool", a.pool, 1, _MAX_POOL)
+    in_range(src, "adaptive.max_poses", a.max_poses, 1, a.pool)
+    in_range(src, "adaptive.region", a.region, 1, a.pool)
+    if a.bootstrap is not None:
+        in_range(src, "adaptive.bootstrap", a.bootstrap, 1, a.max_poses)
+    return a
