@@ -144,7 +144,7 @@ def _check_header(obj: Any) -> dict[str, Any]:
             or not all(isinstance(b, str) and b for b in bodies)
             or len(set(bodies)) != len(bodies)):
         raise _Bad("field 'bodies' must be a non-empty list of distinct names")
-    for k in ("config", "devices", "plan", "sampling", "units"):
+    for k in ("config", "devices", "plan", "sampling", "units", "adaptive"):
         if k in obj and not isinstance(obj[k], dict):
             raise _Bad(f"field '{k}' must be an object")
     if "created" in obj and not isinstance(obj["created"], str):
@@ -203,8 +203,15 @@ def _check_pose(obj: Any) -> PoseRecord:
             for v in spread.values()):
         raise _Bad("field 'spread' must be an object of {\"trans_mm\": mm, \"rot_deg\": deg} "
                    "objects (finite numbers)")
+    pool = obj.get("pool")
+    if pool is not None and not _count(pool):
+        raise _Bad(f"field 'pool' must be an integer from 0 to {_MAX_COUNT}")
+    robot_s = obj.get("robot_s")
+    if robot_s is not None and not (isinstance(robot_s, dict) and all(
+            _is_number(v) and 0 <= v < 1e9 for v in robot_s.values())):
+        raise _Bad("field 'robot_s' must be an object of seconds (finite numbers ≥ 0)")
     return PoseRecord(index=idx, time=t, samples=samples, spread=spread, skipped=skipped,
-                      **mats)
+                      pool=pool, robot_s=robot_s, **mats)
 
 
 @dataclass
@@ -212,7 +219,10 @@ class PoseRecord:
     """One pose of a session: A = base_from_flange, B = tracker_from_marker,
     C = tracker_from_probe (4×4 mm or None), the commanded base_from_flange (4×4 mm), the
     time (s since the session started), sample counts, spreads (mm, deg), and ``skipped``
-    (the reason) for a pose that is not usable."""
+    (the reason) for a pose that is not usable. Adaptive runs (docs/adaptive.md) also record
+    ``pool``, the index of the commanded pose in the run's candidate pool, and ``robot_s``,
+    the robot time the pose took by phase ({"moving", "settling", "sampling"}: s); both are
+    optional and absent from other sessions."""
 
     index: int
     A: np.ndarray | None
@@ -223,6 +233,8 @@ class PoseRecord:
     samples: dict[str, int] = field(default_factory=dict)
     spread: dict[str, Any] = field(default_factory=dict)
     skipped: str | None = None
+    pool: int | None = None
+    robot_s: dict[str, float] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The session line for this pose (matrices as nested lists, mm)."""
@@ -234,6 +246,10 @@ class PoseRecord:
         d["spread"] = self.spread
         if self.skipped:
             d["skipped"] = self.skipped
+        if self.pool is not None:
+            d["pool"] = int(self.pool)
+        if self.robot_s is not None:
+            d["robot_s"] = {str(k): float(v) for k, v in self.robot_s.items()}
         return d
 
 
