@@ -1,0 +1,274 @@
+"""The calibration file: read what ``tmscal solve -o`` (YAML) and ``tmscal export --format
+json`` write back into the :class:`tmscal.calib.Calibration` that ``solve`` returned.
+
+Frames and units (docs/conventions.md): X = flange_from_marker, Y = flange_from_probe,
+Z = base_from_tracker (Z_probe: QR24's separate Z of the probe), 4×4, mm; the orthonormal
+matrices at the top level, the solver's matrices under ``raw``.
+
+Every problem is one ``CalibrationError`` naming the file and the dotted key
+(``"c.yaml: key 'raw.Z': …"``): not a mapping, a missing or malformed matrix (shape, NaN, last
+row, a rotation that is not rigid), an unknown format or version, a YAML anchor/alias bomb or
+recursion (the document is bounded as the rig config is: 32 levels, 100,000 values with
+aliases expanded, 4 MB).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ..calib import Applied, Calibration
+from ..config_checks import check_tree
+from ..errors import CalibrationError, ConfigError
+from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
+
+__all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "read_calibration",
+           "parse_calibration", "load"]
+
+FORMAT = "tmscal-calibration"
+VERSION = 1
+MAX_BYTES = 4_000_000
+#: the solver's general (raw) matrices may be affine; this bounds them to something a
+#: calibration can be (|entries of the 3×3 block| ≤ 10, a non-singular block)
+_RAW_LIMIT = 10.0
+_MATRICES = ("X", "Y", "Z", "Z_probe")
+
+
+@dataclass
+class CalibrationFile:
+    """A calibration file read back: the ``calibration``, the ``path`` it came from and the
+    whole checked ``doc`` (errors, session provenance, cross-validation …, plain types)."""
+
+    calibration: Calibration
+    path: Path
+    doc: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def session(self) -> dict[str, Any]:
+        """{"path", "sha256"} of the session the calibration was solved on ({} if unknown)."""
+        s = self.doc.get("session")
+        return dict(s) if isinstance(s, dict) else {}
+
+    @property
+    def created(self) -> str | None:
+        """When the file was written (ISO 8601, UTC), if recorded."""
+        c = self.doc.get("created")
+        return str(c) if c is not None else None
+
+    @property
+    def tools(self) -> dict[str, str]:
+        """The tracker's tool definition (ROM) files {body: path} of the session's config,
+        when the file records them (sessions acquired at a rig); else {}."""
+        cfg = (self.doc.get("provenance") or {}).get("config") or {}
+        tools = (cfg.get("tracker") or {}).get("tools") if isinstance(cfg, dict) else None
+        if not isinstance(tools, dict):
+            return {}
+        return {str(k): str(v) for k, v in tools.items() if isinstance(v, str)}
+
+
+def _bad(src: str, key: str, msg: str) -> CalibrationError:
+    return CalibrationError(f"{src}: key '{key}': {msg}")
+
+
+def _matrix(v: Any, src: str, key: str, rigid: bool) -> np.ndarray:
+    """A 4×4 matrix (mm) from nested lists: finite numbers, last row 0 0 0 1; ``rigid``: an
+    orthonormal rotation (det +1); otherwise a non-singular, bounded 3×3 block."""
+    if not isinstance(v, list) or len(v) != 4 or not all(
+            isinstance(r, list) and len(r) == 4 for r in v):
+        raise _bad(src, key, "expected a 4×4 matrix (four rows of four numbers)")
+    for i, r in enumerate(v):
+        for j, x in enumerate(r):
+            if isinstance(x, bool) or not isinstance(x, int | float):
+                raise _bad(src, f"{key}[{i}][{j}]", f"{x!r:.40} is not a number")
+            if not math.isfinite(x):
+                raise _bad(src, f"{key}[{i}][{j}]", f"{x!r} is not a finite number")
+    M = np.array(v, dtype=float)
+    try:
+        check_pose(M, "matrix", rigid=rigid, tol=RIGID_TOL_DEFAULT)
+    except ValueError as e:
+        raise _bad(src, key, str(e).removeprefix("matrix: ").replace("pose 0 ", "")) from None
+    if not rigid:
+        R = M[:3, :3]
+        if np.abs(R).max() > _RAW_LIMIT or abs(np.linalg.det(R)) < 1e-6:
+            raise _bad(src, key, "the 3×3 block is singular or implausibly large for a "
+                       "calibration")
+    return M
+
+
+def _number_matrix(v: Any, src: str, key: str, shape: tuple[int, ...] | None) -> np.ndarray:
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError):
+        raise _bad(src, key, "expected a matrix of numbers") from None
+    if (shape is not None and a.shape != shape) or (shape is None and (
+            a.ndim != 2 or a.shape[0] != a.shape[1])):
+        want = "×".join(map(str, shape)) if shape else "square"
+        raise _bad(src, key, f"expected a {want} matrix, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise _bad(src, key, "contains NaN or infinity")
+    return a
+
+
+def _mapping(v: Any, src: str, key: str) -> dict[str, Any] | None:
+    if v is None:
+        return None
+    if not isinstance(v, dict):
+        raise _bad(src, key, f"expected a mapping, got {type(v).__name__}")
+    return v
+
+
+def _distortion(d: Any, src: str) -> dict[str, Any] | None:
+    d = _mapping(d, src, "distortion")
+    if d is None:
+        return None
+    out = dict(d)
+    for k in ("matrix", "undistort"):
+        if out.get(k) is not None:
+            out[k] = _number_matrix(out[k], src, f"distortion.{k}", (3, 3))
+            if abs(np.linalg.det(out[k])) < 1e-6:
+                raise _bad(src, f"distortion.{k}", "the matrix is singular")
+    if out.get("axis_scale_percent") is not None:
+        out["axis_scale_percent"] = _number_matrix(out["axis_scale_percent"], src,
+                                                   "distortion.axis_scale_percent", (3,))
+    moments = _mapping(out.get("tool_moments"), src, "distortion.tool_moments")
+    if moments is not None:
+        out["tool_moments"] = {k: None if m is None else _number_matrix(
+            m, src, f"distortion.tool_moments.{k}", None) for k, m in moments.items()}
+    return out
+
+
+def _uncertainty(u: Any, src: str) -> dict[str, Any] | None:
+    u = _mapping(u, src, "uncertainty")
+    if u is None:
+        return None
+    out = dict(u)
+    if out.get("target") is not None:
+        out["target"] = _matrix(out["target"], src, "uncertainty.target", rigid=True)
+    for k, v in u.items():
+        if isinstance(v, dict) and v.get("covariance") is not None:
+            out[k] = dict(v, covariance=_number_matrix(v["covariance"], src,
+                                                       f"uncertainty.{k}.covariance", (3, 3)))
+    return out
+
+
+def _header(doc: Any, src: str) -> tuple[str, Applied, int]:
+    if not isinstance(doc, dict):
+        raise CalibrationError(f"{src}: not a tmscal calibration file (expected a mapping at "
+                               f"the top level, got {type(doc).__name__})")
+    if doc.get("format") != FORMAT:
+        raise _bad(src, "format", f"expected {FORMAT!r}, got {doc.get('format')!r:.60} (a "
+                   "file written by tmscal solve -o or tmscal export --format json)")
+    if doc.get("version") != VERSION:
+        raise _bad(src, "version", f"this tmscal reads version {VERSION}, got "
+                   f"{doc.get('version')!r:.30}")
+    method = doc.get("method")
+    if not isinstance(method, str) or not method:
+        raise _bad(src, "method", "expected the method's name")
+    try:
+        applied = Applied(doc.get("applied", "raw"))
+    except ValueError:
+        raise _bad(src, "applied", "expected 'raw' or 'orthonormal'") from None
+    poses = _mapping(doc.get("poses"), src, "poses") or {}
+    n = poses.get("solve", 0)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise _bad(src, "poses.solve", "expected the number of poses solved on (≥ 0)")
+    return method, applied, n
+
+
+def parse_calibration(doc: Any, src: str = "<calibration>") -> Calibration:
+    """A :class:`Calibration` from a parsed calibration document (a dict as the file holds
+    it). Raises CalibrationError naming ``src`` and the key."""
+    check = ConfigError  # check_tree raises ConfigError; re-raised as CalibrationError
+    try:
+        check_tree(doc, src)
+    except check as e:
+        raise CalibrationError(str(e)) from None
+    method, applied, n = _header(doc, src)
+    mats: dict[str, np.ndarray | None] = {}
+    for k in _MATRICES:
+        v = doc.get(k)
+        if v is None and k in ("X", "Z"):
+            raise _bad(src, k, f"missing: the {k} matrix is required")
+        mats[k] = None if v is None else _matrix(v, src, k, rigid=True)
+    raw_doc = _mapping(doc.get("raw"), src, "raw") or {}
+    raw: dict[str, np.ndarray | None] = {}
+    for k in _MATRICES:
+        v = raw_doc.get(k)
+        raw[k] = mats[k] if v is None else _matrix(v, src, f"raw.{k}", rigid=False)
+        if v is not None and mats[k] is None:
+            if k == "Z_probe":  # files from before Z_probe was written: project it
+                mats[k] = orthonormalize(raw[k])
+            else:
+                raise _bad(src, k, f"missing, but raw.{k} is given")
+    cov = doc.get("covariance")
+    cal = Calibration(method, n, X=mats["X"], Z=mats["Z"], X_raw=raw["X"], Z_raw=raw["Z"],
+                      Y=mats["Y"], Y_raw=raw["Y"], Z_probe=mats["Z_probe"],
+                      Z_probe_raw=raw["Z_probe"], applied=applied,
+                      covariance=None if cov is None else _number_matrix(cov, src,
+                                                                         "covariance", None),
+                      uncertainty=_uncertainty(doc.get("uncertainty"), src),
+                      distortion=_distortion(doc.get("distortion"), src))
+    params = doc.get("parameters")
+    if params is not None:
+        if not isinstance(params, list) or not all(isinstance(p, str) for p in params):
+            raise _bad(src, "parameters", "expected a list of parameter names")
+        if cal.covariance is not None and len(params) != len(cal.covariance):
+            raise _bad(src, "parameters", f"{len(params)} names for a "
+                       f"{len(cal.covariance)}×{len(cal.covariance)} covariance")
+        cal.extra["parameters"] = list(params)
+    return cal
+
+
+def _load_text(text: str, src: str) -> Any:
+    """The document of a YAML or JSON file (JSON when it starts with '{')."""
+    if text.lstrip().startswith("{"):
+        def no_constant(c: str) -> None:
+            raise ValueError(f"{c} is not a finite number")
+        try:
+            return json.loads(text, parse_constant=no_constant)
+        except (ValueError, RecursionError) as e:
+            raise CalibrationError(f"{src}: invalid JSON ({str(e)[:120]})") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f", line {mark.line + 1}" if mark is not None else ""
+        raise CalibrationError(f"{src}{where}: invalid YAML "
+                               f"({getattr(e, 'problem', None) or e})") from None
+    except RecursionError:
+        raise CalibrationError(f"{src}: invalid YAML (nested too deeply)") from None
+    except (ValueError, OverflowError, TypeError) as e:
+        raise CalibrationError(f"{src}: invalid YAML ({str(e)[:120]})") from None
+
+
+def read_calibration(path: str | Path) -> CalibrationFile:
+    """Read a calibration file (YAML of ``tmscal solve -o`` or JSON of ``tmscal export
+    --format json``). Raises CalibrationError naming the file (and the key)."""
+    p = Path(path)
+    src = str(p)
+    try:
+        if not p.is_file():
+            raise CalibrationError(f"{src}: not a regular file")
+        if p.stat().st_size > MAX_BYTES:
+            raise CalibrationError(f"{src}: larger than {MAX_BYTES:,} bytes; not a "
+                                   "calibration file")
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise CalibrationError(f"{src}: cannot read ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise CalibrationError(f"{src}: not a UTF-8 text file") from None
+    doc = _load_text(text, src)
+    cal = parse_calibration(doc, src)
+    cal.extra.setdefault("source", src)
+    return CalibrationFile(calibration=cal, path=p, doc=doc)
+
+
+def load(path: str | Path) -> Calibration:
+    """The :class:`Calibration` stored in a calibration file (see :func:`read_calibration`)."""
+    return read_calibration(path).calibration
