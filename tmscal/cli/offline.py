@@ -200,18 +200,31 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
               help="Write the calibration YAML here.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write a PNG of the per-pose errors (spot outlier poses).")
+@click.option("--calib", "calib_file", type=INPUT_FILE, default=None, metavar="CALIB",
+              help="Check a stored calibration (a file of tmscal solve -o, or a json export) "
+                   "on this session instead of solving: every pose held out, the errors beside "
+                   "the stored ones, coil placement against the truth when the session has "
+                   "one, the calibration's provenance. No fitting; the daily check before a "
+                   "TMS session.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_pose: int | None,
           train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
-          output: Path | None, plot: Path | None, force: bool, strict: bool) -> None:
+          output: Path | None, plot: Path | None, calib_file: Path | None, force: bool,
+          strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
-    docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses."""
+    docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses.
+    With --calib, check a stored calibration on the session instead (no fitting)."""
     from ..report.evaluate import pose_residuals, solve_session
     from ..report.text import calibration_yaml, format_result, plot_residuals
     from ..session import sha256_of
 
+    if calib_file is not None:
+        _check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
+                      fitting=bool(options or handheld_pose is not None or train is not None
+                                   or in_sample or orthonormal))
+        return
     opts = _parse_options(options)
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)
     session = _read_session(session_file, strict)
@@ -221,7 +234,10 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
                              orthonormal=orthonormal, folds=folds, in_sample=in_sample,
                              options=opts)
     if output is not None:
-        _write_atomic(output, calibration_yaml(res, str(session_file), sha256_of(session_file)))
+        from ..exports.calibfile import provenance
+        _write_atomic(output, calibration_yaml(
+            res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
+            parameters=cal.extra.get("parameters"), provenance=provenance(session.header)))
     if plot is not None:
         _plot(plot_residuals, pose_residuals(session, cal), res.n_solve, str(plot),
               f"{session_file.name}: {res.method.upper()} per-pose errors",
@@ -233,6 +249,28 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
         for f in (output, plot):
             if f is not None:
                 click.echo(f"\nwrote {f}")
+
+
+def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bool,
+                  output: Path | None, plot: Path | None, fitting: bool) -> None:
+    """``solve SESSION --calib CALIB``: the stored calibration on the session, no fitting."""
+    from ..exports.calibfile import read_calibration
+    from ..exports.check import check_calibration, format_check
+    from ..session import sha256_of
+
+    for opt, given in (("--output", output is not None), ("--plot", plot is not None),
+                       ("--method/--option/--train/--in-sample/--orthonormal/--handheld-pose",
+                        fitting)):
+        if given:
+            raise click.BadParameter(f"{opt} solves or writes a calibration; --calib only "
+                                     "checks a stored one (leave it out)", param_hint="--calib")
+    cf = read_calibration(calib_file)
+    session = _read_session(session_file, strict)
+    res = check_calibration(session, cf, sha256_of(session_file))
+    if as_json:
+        _print_json(res)
+    else:
+        click.echo(format_check(res))
 
 
 # --- study ----------------------------------------------------------------------------------

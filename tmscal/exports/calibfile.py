@@ -29,7 +29,7 @@ from ..errors import CalibrationError, ConfigError
 from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
 
 __all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "read_calibration",
-           "parse_calibration", "load"]
+           "parse_calibration", "load", "provenance"]
 
 FORMAT = "tmscal-calibration"
 VERSION = 1
@@ -272,3 +272,20 @@ def read_calibration(path: str | Path) -> CalibrationFile:
 def load(path: str | Path) -> Calibration:
     """The :class:`Calibration` stored in a calibration file (see :func:`read_calibration`)."""
     return read_calibration(path).calibration
+
+
+def provenance(header: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What a calibration file records of where it came from: the tmscal, Python and NumPy
+    versions and, from a session ``header``, when the session was recorded, its config (the
+    rig config it was acquired with, or the simulation's settings) and devices."""
+    import platform
+
+    from .. import __version__
+    out: dict[str, Any] = {"versions": {"tmscal": __version__,
+                                        "python": platform.python_version(),
+                                        "numpy": np.__version__}}
+    if header:
+        out["session_created"] = header.get("created")
+        out["config"] = header.get("config") or {}
+        out["devices"] = header.get("devices") or {}
+    return out

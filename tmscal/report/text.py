@@ -252,10 +252,15 @@ def format_study(study: dict[str, Any], paper: dict[str, Any] | None = None) -> 
     return "\n".join(out)
 
 
-def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -> str:
-    """The calibration YAML (docs/conventions.md): X, Y, Z orthonormal, raw matrices, method, poses
-    used, the errors (cross-validated by default, with their SD over folds), the outlier poses,
-    and the session's SHA-256. Units mm."""
+def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
+                     covariance: Any = None, parameters: list[str] | None = None,
+                     provenance: dict[str, Any] | None = None) -> str:
+    """The calibration YAML (docs/conventions.md, docs/exports.md): X, Y, Z orthonormal (and
+    QR24's Z_probe), raw matrices, method, poses used, the errors (cross-validated by default,
+    with their SD over folds), the outlier poses, the session's SHA-256; a statistical
+    solver's parameter ``covariance`` with the ``parameters`` it is ordered by; the
+    ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices). Units mm.
+    ``tmscal.calib.load`` reads it back."""
     j = res.to_json()
     doc = {
         "format": "tmscal-calibration",
@@ -273,6 +278,7 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -
         "errors_sd": j["errors_sd"],
         "outlier_poses": [o["index"] for o in j["outliers"]],
         "X": j["X"], "Y": j["Y"], "Z": j["Z"],
+        **({"Z_probe": j["Z_probe"]} if "Z_probe" in j else {}),
         "raw": j["raw"],
         "errors": j["errors"],
     }
@@ -281,4 +287,10 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str) -
     for k in ("uncertainty", "distortion", "options"):
         if k in j:
             doc[k] = j[k]
+    if covariance is not None:
+        doc["covariance"] = np.asarray(covariance, dtype=float).tolist()
+        if parameters is not None:
+            doc["parameters"] = [str(p) for p in parameters]
+    if provenance is not None:
+        doc["provenance"] = provenance
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
