@@ -1,0 +1,454 @@
+"""Adaptive acquisition's mathematics: predict the coil-placement error of the calibration so
+far, choose the next pose, decide when to stop (docs/methods.md, "Adaptive acquisition").
+Pure numerics, no I/O: the acquisition loop (tmscal.acquisition.adaptive) moves the robot.
+
+Frames and units as everywhere (docs/conventions.md): A = base_from_flange, B =
+tracker_from_marker, C = tracker_from_probe, X = flange_from_marker, Y = flange_from_probe,
+Z = base_from_tracker; 4×4, mm. Robot time in s.
+
+The pieces:
+
+* the candidate pool is the config's plan with ``settings.pool`` poses (so it is regenerated
+  from a session header and checked against the safety envelope before anything moves); the
+  region where the rig will place coils is its first ``settings.region`` poses;
+* :func:`bootstrap_indices`: well-spread start poses (greedy farthest point);
+* :func:`predict`: QR36 then ``ml`` (its covariance), and the predicted coil-placement error
+  over the region at a confidence (:class:`Prediction`);
+* :func:`choose_next`: the candidate with the largest expected reduction of the mean-square
+  coil-placement error over the region per second of robot time (an L-optimal design);
+* :func:`stop_reason`: "target" or "max_poses";
+* :func:`next_step`: the whole decision for one step, a function of the poses measured so far
+  (so a resumed run re-derives it from the session);
+* :func:`true_coil_error`: the error against a known truth (simulation, benchmarks).
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..geometry import angle_between, invert
+from ..motion import move_duration
+from . import Calibration, solve
+from .metrics import coil_placement_errors
+from .ml import (
+    Problem,
+    _g_of,
+    _tracker_covs,
+    _whitener,
+    ml_solve,
+    noise_covariance,
+    undistortion,
+)
+
+__all__ = ["AdaptiveSettings", "Prediction", "Step", "minimum_poses", "bootstrap_indices",
+           "predict", "choose_next", "stop_reason", "next_step", "candidate_cost_s",
+           "true_coil_error", "MC_DRAWS"]
+
+#: Monte Carlo draws of the parameter error behind the predicted quantile (fixed seed 0)
+MC_DRAWS = 4000
+
+
+def minimum_poses(bodies: int) -> int:
+    """The fewest poses that make the calibration well posed: 3, for one body (marker) or two
+    (marker and probe). Eliminating Z from A_i X = Z B_i leaves (A_j⁻¹ A_i) X = X (B_j⁻¹ B_i),
+    the hand–eye equation AX = XB; one relative motion leaves X free to turn about and slide
+    along its screw axis, two motions with non-parallel rotation axes fix it (Tsai and Lenz
+    1989), i.e. three poses. Z then follows from any pose, and Y (the probe) from Z and the
+    probe poses, so the second body needs no further pose."""
+    if isinstance(bodies, bool) or bodies not in (1, 2):
+        raise ValueError(f"bodies must be 1 (marker) or 2 (marker and probe), got {bodies!r}")
+    return 3
+
+
+def _positive_int(name: str, v: Any, low: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+        raise ValueError(f"AdaptiveSettings.{name} must be an integer ≥ {low}, got {v!r}")
+    return int(v)
+
+
+@dataclass(frozen=True)
+class AdaptiveSettings:
+    """Settings of an adaptive run (the config's ``adaptive:`` section).
+
+    ``target_mm``: stop when the predicted coil-placement error (mean over the region, at
+    ``confidence``) is at or below this (mm). ``confidence``: 0 < c < 1. ``max_poses``: stop
+    there in any case. ``bootstrap``: number of well-spread start poses (None: the minimum
+    that makes the problem well posed plus one, :meth:`bootstrap_poses`). ``pool``: candidate
+    poses (the plan with this many poses). ``region``: the first ``region`` pool poses, where
+    the rig will place coils (the prediction's average). ValueError naming the field."""
+
+    target_mm: float = 0.05
+    confidence: float = 0.95
+    max_poses: int = 40
+    bootstrap: int | None = None
+    pool: int = 1000
+    region: int = 200
+
+    def __post_init__(self) -> None:
+        t = self.target_mm
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not (
+                math.isfinite(t) and t > 0):
+            raise ValueError(f"AdaptiveSettings.target_mm must be a finite number > 0 (mm), "
+                             f"got {t!r}")
+        c = self.confidence
+        if isinstance(c, bool) or not isinstance(c, (int, float)) or not 0 < c < 1:
+            raise ValueError(f"AdaptiveSettings.confidence must be a number in (0, 1), got {c!r}")
+        low = minimum_poses(2)
+        mx = _positive_int("max_poses", self.max_poses, low)
+        if self.bootstrap is not None:
+            b = _positive_int("bootstrap", self.bootstrap, low)
+            if b > mx:
+                raise ValueError(f"AdaptiveSettings.bootstrap ({b}) must not exceed max_poses "
+                                 f"({mx})")
+        pool = _positive_int("pool", self.pool, max(mx, low))
+        reg = _positive_int("region", self.region, 1)
+        if reg > pool:
+            raise ValueError(f"AdaptiveSettings.region ({reg}) must not exceed pool ({pool})")
+
+    def bootstrap_poses(self, bodies: int = 2) -> int:
+        """The number of bootstrap poses: ``bootstrap``, or minimum_poses(bodies) + 1 (one
+        more than the minimum, so that the first fit has residual degrees of freedom to
+        estimate the noise level from), at most ``max_poses``."""
+        b = minimum_poses(bodies) + 1 if self.bootstrap is None else self.bootstrap
+        return min(b, self.max_poses)
+
+
+@dataclass
+class Prediction:
+    """The predicted coil-placement error of a calibration over the region.
+
+    ``coil_mm``: the ``confidence`` quantile of the mean over the region of the coil-centre
+    placement error (mm); ``sigma_mm``: its RMS over the region and the parameter error (mm);
+    ``n_poses``; ``calibration``: the ``ml`` Calibration. For :func:`choose_next`:
+    ``problem`` (ml's Problem at the estimate), ``covariance`` (unscaled, the inverse of the
+    whitened information), ``variance_factor`` and ``dof`` (its scale and degrees of
+    freedom), ``region_q`` (Q = mean_r J_rᵀ J_r, the region's placement Jacobians J_r (3×k)),
+    ``noise`` (robot σ mm, robot σ rad, mean tracker covariance per body (m, 6, 6))."""
+
+    coil_mm: float
+    sigma_mm: float
+    confidence: float
+    n_poses: int
+    calibration: Calibration
+    problem: Problem
+    covariance: np.ndarray
+    variance_factor: float
+    dof: int
+    region_q: np.ndarray
+    noise: tuple[float, float, np.ndarray]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def criterion_mm2(self) -> float:
+        """Expected mean-square coil-placement error over the region (mm²):
+        mean_r tr(J_r Σ J_rᵀ), Σ the scaled covariance."""
+        return float(self.variance_factor * np.sum(self.covariance * self.region_q))
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready summary: predicted_coil_mm, sigma_mm, confidence, n_poses, the fit's
+        variance factor and residual degrees of freedom, the distortion model."""
+        return {"predicted_coil_mm": self.coil_mm, "sigma_mm": self.sigma_mm,
+                "confidence": self.confidence, "n_poses": self.n_poses,
+                "variance_factor": self.variance_factor, "dof": self.dof,
+                "distortion": self.problem.model}
+
+
+def bootstrap_indices(pool: np.ndarray, k: int, p0: np.ndarray) -> list[int]:
+    """k well-spread pool indices (pool: (n, 4, 4) base_from_flange mm; p0 4×4 mm).
+
+    Rule (deterministic): greedy farthest point in a combined distance d² = (Δt / s_t)² +
+    (Δθ / s_θ)², Δt the distance between flange origins (mm), Δθ the rotation angle between
+    them (rad), s_t and s_θ the RMS offset and RMS rotation of the pool from P0 (so a pool's
+    translations and rotations weigh alike). The first pose is the one farthest from P0, each
+    next one maximises its distance to the nearest pose already chosen; ties go to the lower
+    index."""
+    pool = np.asarray(pool, dtype=float)
+    p0 = np.asarray(p0, dtype=float)
+    n = len(pool)
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n:
+        raise ValueError(f"bootstrap_indices: k must be an integer in 1..{n}, got {k!r}")
+    t = pool[:, :3, 3]
+    s_t = float(np.sqrt(np.mean(np.sum((t - p0[:3, 3]) ** 2, axis=1)))) or 1.0
+    s_r = float(np.sqrt(np.mean(angle_between(p0, pool) ** 2))) or 1.0
+
+    def dist(ref: np.ndarray) -> np.ndarray:
+        dt = np.linalg.norm(t - ref[:3, 3], axis=1) / s_t
+        return np.sqrt(dt ** 2 + (angle_between(ref, pool) / s_r) ** 2)
+
+    nearest = dist(p0)
+    chosen: list[int] = []
+    for _ in range(k):
+        i = int(np.argmax(np.where(np.isin(np.arange(n), chosen), -np.inf, nearest)))
+        chosen.append(i)
+        nearest = dist(pool[i]) if len(chosen) == 1 else np.minimum(nearest, dist(pool[i]))
+    return chosen
+
+
+def _ml_defaults() -> dict[str, Any]:
+    """ml's own defaults of its noise options (one place: ml_solve's signature)."""
+    sig = inspect.signature(ml_solve).parameters
+    keys = ("robot_sigma_mm", "robot_sigma_deg", "tracker_sigma_mm", "tracker_sigma_deg",
+            "tracker_cov", "spreads")
+    return {k: sig[k].default for k in keys}
+
+
+def _problem_of(cal: Calibration, A: np.ndarray, bodies: list[np.ndarray]) -> Problem:
+    """ml's Problem re-centred at the calibration's estimate (θ = 0 is the estimate)."""
+    d = cal.distortion or {}
+    model = d.get("model", "none")
+    G = np.asarray(d.get("undistort", np.eye(3)), dtype=float)
+    Ws = [cal.X] if len(bodies) == 1 else [cal.X, cal.Y]
+    tm = d.get("tool_moments") or {}
+    moments = [tm.get(nm) for nm in ("marker", "probe")[:len(bodies)]]
+    return Problem(A, bodies, Ws, cal.Z, model, _g_of(model, G), moments)
+
+
+def placement_jacobians(prob: Problem, region: np.ndarray) -> np.ndarray:
+    """Jacobians (R, 3, k) of the coil-centre placement error (mm, base frame) with respect to
+    ml's parameters, at the estimate, for the flange poses ``region`` (R, 4, 4) mm.
+
+    The robot is told to put the coil at the tracker pose N_r that the estimate gives for
+    P_r (Ñ_r = Ẑ⁻¹ P_r Ŷ undistorted, N_r as measured), commands Z Ñ_r Y⁻¹ and the coil
+    lands at t(Z Ñ_r Y⁻¹ Ŷ) if (Y, Z, G) are the truth; to first order (the error model of
+    ``calib.bound``, analytically): ∂/∂ω_Z = −R̂_Z [t(Ñ_r)]×, ∂/∂t_Z = I, ∂/∂t_Y = −R(P_r),
+    ∂/∂g_i = R̂_Z (∂G/∂g_i) t(N_r); X and Y's rotation do not move the coil centre."""
+    k, m = prob.n_params, len(prob.Ws)
+    Ws, Z, G = prob.unpack(np.zeros(k))
+    Nt = invert(Z)[None] @ region @ Ws[-1][None]  # undistorted targets Ñ_r
+    tn = Nt[:, :3, 3]
+    J = np.zeros((len(region), 3, k))
+    RZ = Z[:3, :3]
+    skew = np.zeros((len(region), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -tn[:, 2], tn[:, 1], -tn[:, 0]
+    skew -= np.swapaxes(skew, 1, 2)
+    jz = 6 * m
+    J[:, :, jz:jz + 3] = -RZ[None] @ skew
+    J[:, :, jz + 3:jz + 6] = np.eye(3)
+    jy = 6 * (m - 1)
+    J[:, :, jy + 3:jy + 6] = -region[:, :3, :3]
+    ng = k - 6 * (m + 1)
+    if ng:
+        t_meas = tn @ np.linalg.inv(G).T
+        for i in range(ng):
+            e = np.zeros(ng)
+            e[i] = 1.0
+            dG = undistortion(prob.model, e) - np.eye(3)
+            J[:, :, jz + 6 + i] = t_meas @ (RZ @ dG).T
+    return J
+
+
+def _scale_draws(vf: float, dof: int, scaled: bool, n: int, rng: np.random.Generator
+                 ) -> np.ndarray:
+    """Draws of the noise scale s (the factor on the unscaled standard deviations): with the
+    covariance scaled by the variance factor (ml's default), s² = vf · ν / χ²_ν, the
+    uncertainty of a variance estimated from ν residual degrees of freedom (this makes the
+    prediction a Student-t-like one and keeps it honest at the bootstrap's few poses);
+    otherwise s = 1 (the noise as given)."""
+    if not scaled:
+        return np.ones(n)
+    return np.sqrt(max(vf, 0.0) * dof / rng.chisquare(max(dof, 1), n))
+
+
+def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarray,
+            settings: AdaptiveSettings, **ml_options: Any) -> Prediction:
+    """Solve QR36 then ``ml`` on the poses so far (A, B, C: (n, 4, 4) mm; C None for a
+    marker-only rig, then the marker is the body placed) and predict the coil-placement error
+    over ``region`` (flange poses (R, 4, 4) mm where the rig will place coils).
+
+    ``ml_options`` go to ``ml`` (e.g. ``spreads`` from the session, robot sigmas);
+    ``distortion`` defaults to "none" here (a dozen poses inside the plan's envelope do not
+    separate a tracker distortion from Z and the noise, and a model switching between steps
+    would make the predictions jump; pass ``distortion`` to override). The parameter error
+    δθ ~ N(0, s² P) (P ml's unscaled covariance, s² its variance factor drawn as in
+    :func:`_scale_draws`), e_r = J_r δθ (:func:`placement_jacobians`); ``coil_mm`` is the
+    ``settings.confidence`` quantile of mean_r ‖e_r‖ over :data:`MC_DRAWS` draws with a fixed
+    seed, ``sigma_mm`` = √(vf · mean_r tr(J_r P J_rᵀ)). CalibrationError when the poses do not
+    determine the calibration."""
+    opts = {"distortion": "none", **ml_options}
+    cal = solve(A, B, C, method="ml", **opts)
+    bodies = [np.asarray(B, dtype=float)] + ([] if C is None else [np.asarray(C, dtype=float)])
+    A = np.asarray(A, dtype=float)
+    prob = _problem_of(cal, A, bodies)
+    k = prob.n_params
+    vf = float(cal.extra["variance_factor"])
+    scaled = bool(cal.extra["noise"]["scale_covariance"])
+    P = np.asarray(cal.covariance, dtype=float) / (vf if scaled and vf > 0 else 1.0)
+    if scaled and vf <= 0:
+        P = np.zeros_like(P)
+    dof = int(cal.extra["residuals"]) - k
+    region = np.asarray(region, dtype=float).reshape(-1, 4, 4)
+    J = placement_jacobians(prob, region)
+    Q = np.einsum("rik,ril->kl", J, J) / len(region)
+    w, V = np.linalg.eigh((P + P.T) / 2)
+    root = V * np.sqrt(np.clip(w, 0.0, None))
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((MC_DRAWS, k)) @ root.T
+    e = np.linalg.norm(np.einsum("rik,mk->mri", J, d), axis=2).mean(axis=1)
+    s = _scale_draws(vf, dof, scaled, MC_DRAWS, rng)
+    coil = float(np.quantile(e * s, settings.confidence))
+    v = vf if scaled else 1.0
+    names = ["marker", "probe"][:len(bodies)]
+    o = {**_ml_defaults(), **opts}
+    tracker = _tracker_covs(len(A), names, o).mean(axis=0)
+    noise = (float(o["robot_sigma_mm"]), float(np.radians(o["robot_sigma_deg"])), tracker)
+    return Prediction(coil_mm=coil, sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q))),
+                      confidence=settings.confidence, n_poses=len(A), calibration=cal,
+                      problem=prob, covariance=P, variance_factor=v, dof=dof, region_q=Q,
+                      noise=noise)
+
+
+def candidate_information(pred: Prediction, poses: np.ndarray) -> np.ndarray:
+    """Fisher information (n, k, k) one more pose at each of ``poses`` (n, 4, 4
+    base_from_flange mm) would add, in the units of ``pred.covariance`` (unscaled): J_cᵀ J_c,
+    J_c the whitened Jacobian of ml's residuals at the estimate for the tracker poses the
+    estimate predicts there (Ẑ⁻¹ P_c X̂ and Ẑ⁻¹ P_c Ŷ, distorted to first order by Ĝ⁻¹ on
+    their positions), with ml's noise model (robot σ, the session's mean tracker covariance)."""
+    prob = pred.problem
+    k = prob.n_params
+    Ws, Z, G = prob.unpack(np.zeros(k))
+    Zi = invert(Z)
+    Gi = np.linalg.inv(G)
+    bodies = []
+    for W in Ws:
+        N = Zi[None] @ poses @ W[None]
+        N[:, :3, 3] = N[:, :3, 3] @ Gi.T
+        bodies.append(N)
+    cand = Problem(poses, bodies, prob.Ws, prob.Z0, prob.model, prob.g0, prob.moments)
+    rs_mm, rs_rad, tracker = pred.noise
+    whiten = _whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker[None]))
+    Jc = cand.jacobian(np.zeros(k), whiten).reshape(len(poses), -1, k)
+    return np.einsum("nqk,nql->nkl", Jc, Jc)
+
+
+def _criteria(pred: Prediction, info: np.ndarray) -> np.ndarray:
+    """mean_r tr(J_r Σ' J_rᵀ) (mm²) for Σ' = vf (P⁻¹ + I_c)⁻¹, per candidate information
+    I_c (n, k, k); in the correlation scaling of P, by batched solves."""
+    P = pred.covariance
+    dsc = np.sqrt(np.clip(np.diag(P), 1e-300, None))
+    Pn = P / np.outer(dsc, dsc)
+    Fn = np.linalg.pinv((Pn + Pn.T) / 2, hermitian=True)
+    M = Fn[None] + info * np.outer(dsc, dsc)[None]
+    Qn = pred.region_q * np.outer(dsc, dsc)
+    X = np.linalg.solve(M, np.broadcast_to(Qn, M.shape))
+    return pred.variance_factor * np.trace(X, axis1=1, axis2=2)
+
+
+def choose_next(pred: Prediction, pool: np.ndarray, available: np.ndarray,
+                cost_s: np.ndarray) -> tuple[int, dict[str, float]]:
+    """The pool index (pool: (n, 4, 4) base_from_flange mm) with the largest expected
+    reduction of the mean-square coil-placement error over the region per second of robot
+    time ``cost_s`` (n,) s (travel from where the arm is + settle + sampling), among the
+    ``available`` (n,) bool candidates. The criterion is L-optimal (c-optimal on the coil
+    centre, averaged over the region): φ(Σ) = mean_r tr(J_r Σ J_rᵀ), Σ' = (Σ⁻¹ + I_c)⁻¹ after
+    one more pose at the candidate (:func:`candidate_information`), gain = φ(Σ) − φ(Σ').
+
+    Returns (index, {"gain_mm2", "cost_s", "gain_per_s", "criterion_mm2" (φ after),
+    "rms_after_mm" (√φ after), "rms_now_mm"}). ValueError for mismatched shapes, no available
+    candidate, or a cost that is not finite and > 0."""
+    pool = np.asarray(pool, dtype=float)
+    avail = np.asarray(available, dtype=bool)
+    cost = np.asarray(cost_s, dtype=float)
+    if avail.shape != (len(pool),) or cost.shape != (len(pool),):
+        raise ValueError(f"choose_next: available {avail.shape} and cost_s {cost.shape} must "
+                         f"be ({len(pool)},) like the pool")
+    idx = np.flatnonzero(avail)
+    if not len(idx):
+        raise ValueError("choose_next: no candidate pose is available")
+    if not np.all(np.isfinite(cost[idx]) & (cost[idx] > 0)):
+        raise ValueError("choose_next: cost_s must be finite and > 0 s for every available "
+                         "candidate")
+    now = pred.criterion_mm2
+    after = _criteria(pred, candidate_information(pred, pool[idx]))
+    gain = now - after
+    rate = gain / cost[idx]
+    j = int(np.argmax(rate))
+    i = int(idx[j])
+    return i, {"gain_mm2": float(gain[j]), "cost_s": float(cost[i]),
+               "gain_per_s": float(rate[j]), "criterion_mm2": float(after[j]),
+               "rms_after_mm": float(np.sqrt(max(after[j], 0.0))),
+               "rms_now_mm": float(np.sqrt(max(now, 0.0)))}
+
+
+def stop_reason(pred: Prediction | None, n_poses: int, settings: AdaptiveSettings
+                ) -> str | None:
+    """"target" when the predicted error ``pred.coil_mm`` is at or below
+    ``settings.target_mm``, else "max_poses" when ``n_poses`` ≥ ``settings.max_poses``, else
+    None (go on). ``pred`` None (no prediction yet) stops only at max_poses."""
+    if pred is not None and pred.coil_mm <= settings.target_mm:
+        return "target"
+    if n_poses >= settings.max_poses:
+        return "max_poses"
+    return None
+
+
+def candidate_cost_s(current: np.ndarray, pool: np.ndarray, speed_mm_s: float,
+                     accel_mm_s2: float, per_pose_s: float | np.ndarray = 0.0,
+                     rot_speed_deg_s: float | None = None,
+                     rot_accel_deg_s2: float | None = None) -> np.ndarray:
+    """Robot time (s) per pool pose (n,): the straight move from ``current`` (base_from_flange
+    4×4 mm) under the speed and acceleration caps (:func:`tmscal.motion.move_duration`, the
+    one motion model) + ``per_pose_s`` (settle + sampling, s; a number or (n,))."""
+    mv = np.array([move_duration(current, P, speed_mm_s, accel_mm_s2, rot_speed_deg_s,
+                                 rot_accel_deg_s2) for P in np.asarray(pool, dtype=float)])
+    return mv + np.asarray(per_pose_s, dtype=float)
+
+
+@dataclass
+class Step:
+    """One decision of an adaptive run: ``index`` (the pool pose to measure next, or None),
+    ``phase`` ("bootstrap", "adaptive" or "stop"), ``stop`` (None, "target" or
+    "max_poses"), ``prediction`` (None during the bootstrap) and ``info`` (choose_next's)."""
+
+    index: int | None
+    phase: str
+    stop: str | None = None
+    prediction: Prediction | None = None
+    info: dict[str, float] = field(default_factory=dict)
+
+
+def next_step(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, used: list[int],
+              pool: np.ndarray, p0: np.ndarray, settings: AdaptiveSettings,
+              cost_s: np.ndarray | None = None, **ml_options: Any) -> Step:
+    """What to do after the poses measured so far: ``used`` pool indices in the order
+    measured, with their A, B, C ((n, 4, 4) mm, n = len(used)). The first
+    ``settings.bootstrap_poses`` are :func:`bootstrap_indices` of the pool around ``p0``;
+    after them every step predicts (:func:`predict`, region = the first ``settings.region``
+    pool poses), stops (:func:`stop_reason`) or picks an unused candidate
+    (:func:`choose_next` with ``cost_s``, (n_pool,) s; None: every pose costs 1 s).
+    A pure function of its inputs, so a resumed run re-derives its state from the session."""
+    n = len(used)
+    bodies = 1 if C is None else 2
+    nb = settings.bootstrap_poses(bodies)
+    if n < nb:
+        boot = bootstrap_indices(pool, nb, p0)
+        if list(used) != boot[:n]:
+            raise ValueError(f"next_step: the poses measured {list(used)} are not the "
+                             f"bootstrap's first {n} {boot[:n]}")
+        return Step(boot[n], "bootstrap")
+    pred = predict(A, B, C, pool[:settings.region], settings, **ml_options)
+    why = stop_reason(pred, n, settings)
+    if why is not None:
+        return Step(None, "stop", why, pred)
+    avail = np.ones(len(pool), dtype=bool)
+    avail[list(used)] = False
+    cost = np.ones(len(pool)) if cost_s is None else cost_s
+    i, info = choose_next(pred, pool, avail, cost)
+    return Step(i, "adaptive", None, pred, info)
+
+
+def true_coil_error(cal: Calibration, truth_Y: np.ndarray, truth_Z: np.ndarray,
+                    region_flange_poses: np.ndarray) -> float:
+    """Mean coil-placement error (mm) of ``cal`` over the region against a known truth: the
+    targets are where the coil is when the flange is at each region pose, C_i = Z⁻¹ P_i Y
+    (true Y, Z; tracker_from_probe, no tracker distortion), placed with
+    ``Calibration.placement`` and measured by ``calib.metrics.coil_placement_errors``."""
+    P = np.asarray(region_flange_poses, dtype=float).reshape(-1, 4, 4)
+    Yt, Zt = np.asarray(truth_Y, dtype=float), np.asarray(truth_Z, dtype=float)
+    C = invert(Zt)[None] @ P @ Yt[None]
+    cmd, Y, Z = cal.placement(C)
+    return float(coil_placement_errors(C, Y, Z, Yt, Zt, C_cmd=cmd).mean())
