@@ -13,6 +13,7 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     run:      {retries, reconnect_wait_s, warn_skip_share, stop_skip_share, skip_window}
     adaptive: {target_mm, confidence, max_poses, bootstrap, pool, region}
     mock:     {clock: fast|real, seed, truth: tms|random|{X, Y, Z}, noise: {...},
+               settle: {amplitude_mm, tau_s, freq_hz, rotation_deg},
                tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...}}
 
 Lengths are mm, angles degrees (``_deg``), speeds mm/s, times seconds. Relative file paths
@@ -184,12 +185,14 @@ class RunConfig:
 class MockConfig:
     """The mock rig: clock ("fast" or "real"), RNG seed, truth ("tms" built-in rig,
     "random" truth as in Wang et al. 2018, or explicit {X, Y, Z} 4×4 mm), noise
-    (``sim.Noise`` fields), per-device options and faults."""
+    (``sim.Noise`` fields), settle (``sim.Settle`` fields: the coil's damped oscillation
+    after each move; None: no oscillation), per-device options and faults."""
 
     clock: str = "fast"
     seed: int = 0
     truth: Any = "tms"
     noise: dict[str, float] = field(default_factory=dict)
+    settle: dict[str, float] | None = None
     tracker: dict[str, Any] = field(default_factory=dict)
     robot: dict[str, Any] = field(default_factory=dict)
 
@@ -413,8 +416,8 @@ def _parse_run(data: Any, src: str) -> RunConfig:
 
 
 def _parse_mock(data: Any, src: str) -> MockConfig | None:
-    """The mock section (None when absent): clock, seed, truth, per-device faults and the
-    tracker's measurement volume."""
+    """The mock section (None when absent): clock, seed, truth, settle (checked by building
+    ``sim.Settle``), per-device faults and the tracker's measurement volume."""
     if data is None:
         return None
     mock = build(MockConfig, data, src, "mock")
@@ -432,6 +435,9 @@ def _parse_mock(data: Any, src: str) -> MockConfig | None:
     elif mock.truth not in ("tms", "random"):
         raise err(src, "mock.truth", f"expected 'tms', 'random' or {{X, Y, Z}}, "
                   f"got {show(mock.truth)}")
+    if mock.settle is not None:
+        from .sim.rig import Settle
+        construct(Settle, f"{src}: key 'mock.settle'", **mock.settle)
     for dev in ("tracker", "robot"):
         faults = getattr(mock, dev).get("faults")
         if faults is not None and not isinstance(faults, Mapping):

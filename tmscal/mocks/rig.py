@@ -22,7 +22,7 @@ import numpy as np
 from ..config import RigConfig, construct
 from ..drivers.registry import DriverSpec, get_spec
 from ..errors import ConfigError
-from ..sim import TMS_RIG_P0, Noise, SimRig, Truth, facing_start, tms_rig_truth
+from ..sim import TMS_RIG_P0, Noise, Settle, SimRig, Truth, facing_start, tms_rig_truth
 from .clock import FAST, REAL_TIME, Clock
 from .net import loopback_family
 
@@ -33,7 +33,8 @@ __all__ = ["MockRig", "MockProcess", "build_sim_rig", "start_mock_rig", "spawn_m
 
 def build_sim_rig(cfg: RigConfig) -> SimRig:
     """The sim rig of a config's ``mock`` section: truth ("tms" built-in rig, "random", or
-    explicit X/Y/Z), noise (``sim.Noise`` fields), seed; the flange starts at P0."""
+    explicit X/Y/Z), noise (``sim.Noise`` fields), settling (``sim.Settle`` fields; absent:
+    none), seed; the flange starts at P0."""
     m = cfg.mock
     if m is None:
         raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig")
@@ -50,7 +51,9 @@ def build_sim_rig(cfg: RigConfig) -> SimRig:
         start = np.asarray(cfg.plan.start, dtype=float)
     noise = construct(Noise, f"{cfg.path}: key 'mock.noise'", **m.noise)
     bodies = list(cfg.tracker.tools) if cfg.tracker else None
-    rig = SimRig(truth, noise=noise, rng=rng, start=start)
+    settle = (None if m.settle is None
+              else construct(Settle, f"{cfg.path}: key 'mock.settle'", **m.settle))
+    rig = SimRig(truth, noise=noise, rng=rng, start=start, settle=settle)
     if bodies is not None:
         unknown = [b for b in bodies if b not in rig.bodies]
         if unknown:
@@ -129,6 +132,10 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
         if cfg.tracker is not None:
             tm = _tracker_mock(cfg, mr.rig, clock)
             mr.devices.append(tm)
+            if clock.fast and hasattr(tm, "tracker_time_s"):
+                # fast clock: the rig's time (the settling oscillation) is the tracker's
+                # virtual time, which advances as frames are requested
+                mr.rig.time_s = tm.tracker_time_s
             if tracker_transport == "pty" or (tracker_transport == "config"
                                               and tracker_url is None):
                 mr.endpoints["tracker"] = tm.start_pty()

@@ -7,6 +7,7 @@ from .rig import (
     TMS_RIG_P0,
     TOOL_8700340_MM,
     Noise,
+    Settle,
     SimRig,
     Truth,
     facing_start,
@@ -14,5 +15,5 @@ from .rig import (
     tms_rig_truth,
 )
 
-__all__ = ["Noise", "SimRig", "Truth", "simulate", "facing_start", "tms_rig_truth", "TMS_RIG_P0",
-           "TOOL_8700340_MM"]
+__all__ = ["Noise", "Settle", "SimRig", "Truth", "simulate", "facing_start", "tms_rig_truth",
+           "TMS_RIG_P0", "TOOL_8700340_MM"]

@@ -19,13 +19,30 @@ The rig knows the truth and the current flange pose, and returns noisy observati
 The mocks (Polaris, UR, DENSO) all serve one ``SimRig``: the robot mock calls
 ``move_flange`` and reads ``reported_flange``; the tracker mock calls ``observe``.
 The rig is thread-safe (one lock) because mock servers run in threads.
+
+Two time-dependent effects make what the tracker sees move (the controller's reported pose
+never does):
+
+* motion: while a robot mock runs a move it hands the rig the move's path
+  (``follow(path)``: a function giving the commanded base_from_flange now); the true flange
+  follows that path, with the previous move's positioning error, until ``move_flange`` ends
+  the move;
+* settling (``settle``: a :class:`Settle`, off when None): after every ``move_flange`` the
+  true flange oscillates, a damped oscillation along a direction drawn per move.
+
+Both read the rig's time base ``time_s`` (seconds; None: ``time.monotonic``). On the mocks'
+fast clock the mock rig sets it to the tracker's virtual time (frames served / frame rate),
+so the oscillation decays as frames are read, not as wall time passes: a client that only
+sleeps does not advance fast time (see docs/devices.md).
 """
 
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -164,6 +181,67 @@ class Noise:
         return cls(0.0, 0.0, 0.0, 0.0, 0.0)
 
 
+#: below this share of its initial amplitude the oscillation is exactly zero (the flange is
+#: then exactly still, as a real one is once its motion is far below the tracker's noise)
+_QUIET = 1e-12
+
+
+@dataclass(frozen=True)
+class Settle:
+    """The coil's settling after a move: a damped oscillation of the true flange that the
+    tracker sees and the robot controller does not report.
+
+    ``t`` seconds after a move ends the flange is offset by
+    ``amplitude_mm · exp(−t/tau_s) · cos(2π · freq_hz · t)`` along a unit direction u (base
+    frame, mm) and, when ``rotation_deg`` > 0, rotated about its own origin by
+    ``rotation_deg · exp(−t/tau_s) · cos(2π · freq_hz · t)`` about a unit axis w (flange
+    frame); u and w are drawn per move from the rig's RNG. ``freq_hz`` 0: a pure exponential
+    decay. Once the envelope exp(−t/τ) is below 1e-12 the offset is exactly zero."""
+
+    amplitude_mm: float = 0.3
+    tau_s: float = 0.25
+    freq_hz: float = 4.0
+    rotation_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, lo, hi, open_lo in (("amplitude_mm", 0.0, 50.0, False),
+                                      ("tau_s", 0.0, 60.0, True),
+                                      ("freq_hz", 0.0, 1000.0, False),
+                                      ("rotation_deg", 0.0, 5.0, False)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ValueError(f"{name}: expected a number, got {v!r}")
+            v = float(v)
+            if not (math.isfinite(v) and (v > lo if open_lo else v >= lo) and v <= hi):
+                rng = f"{'(' if open_lo else '['}{lo:g}, {hi:g}]"
+                raise ValueError(f"{name} must be in {rng}, got {v!r}")
+            object.__setattr__(self, name, v)
+
+    @property
+    def quiet_after_s(self) -> float:
+        """Seconds after a move from which the offset is exactly zero."""
+        return self.tau_s * math.log(1.0 / _QUIET)
+
+    def factor(self, t: float) -> float:
+        """exp(−t/τ)·cos(2πft) at ``t`` s after the move (0 before the move ends, i.e. t < 0,
+        and from ``quiet_after_s`` on)."""
+        if t < 0 or t >= self.quiet_after_s:
+            return 0.0
+        return math.exp(-t / self.tau_s) * math.cos(2.0 * math.pi * self.freq_hz * t)
+
+    def offset(self, t: float, direction: np.ndarray, axis: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(translation in the base frame (3,) mm, rotation in the flange frame 3×3) at
+        ``t`` s after the move, for the move's unit ``direction`` and ``axis``; None when the
+        offset is zero."""
+        f = self.factor(t)
+        if f == 0.0:
+            return None
+        R = (matrix_from_rotvec(axis * math.radians(self.rotation_deg * f))
+             if self.rotation_deg > 0 else np.eye(3))
+        return direction * (self.amplitude_mm * f), R
+
+
 def _three(value: object, name: str, broadcast: bool) -> tuple[float, float, float]:
     """A finite float triple from a number (if ``broadcast``) or a sequence of three."""
     if isinstance(value, bool):
@@ -200,7 +278,10 @@ class SimRig:
 
     ``tools`` maps body names to sphere centres (k, 3) in the body frame, mm (default: the
     8700340-like tool for every body of the truth). ``flange`` is the true base_from_flange
-    and ``commanded`` the last commanded one (what the robot reports).
+    where the flange comes to rest (with the robot's positioning error; ``true_flange()``
+    adds the motion under way and the settling oscillation) and ``commanded`` the last
+    commanded one (what the robot reports). ``settle``: the settling model (None: none);
+    ``time_s``: the time base in seconds (None: ``time.monotonic``).
     """
 
     truth: Truth
@@ -208,6 +289,8 @@ class SimRig:
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     tools: Mapping[str, np.ndarray] | None = None
     start: np.ndarray | None = None
+    settle: Settle | None = None
+    time_s: Callable[[], float] | None = None
 
     def __post_init__(self) -> None:
         self._lock = threading.RLock()
@@ -221,6 +304,13 @@ class SimRig:
         #: every commanded base_from_flange (4×4 mm) passed to move_flange, oldest first
         #: (bounded: the last 100,000), so tests can see what a robot mock was told
         self.moves: deque[np.ndarray] = deque(maxlen=100_000)
+        self._path: Callable[[], np.ndarray] | None = None
+        #: the current oscillation: (time the move ended (s), direction u, axis w) or None
+        self._swing: tuple[float, np.ndarray, np.ndarray] | None = None
+
+    def now(self) -> float:
+        """The rig's time base, seconds (``time_s``, else ``time.monotonic``)."""
+        return float(self.time_s()) if self.time_s is not None else time.monotonic()
 
     @property
     def bodies(self) -> list[str]:
@@ -238,6 +328,40 @@ class SimRig:
             self.commanded = cmd.copy()
             self.flange = cmd @ d
             self.moves.append(cmd.copy())
+            self._path = None
+            if self.settle is not None:
+                u = self.rng.standard_normal(3)
+                w = self.rng.standard_normal(3)
+                self._swing = (self.now(), u / np.linalg.norm(u), w / np.linalg.norm(w))
+
+    def follow(self, path: Callable[[], np.ndarray]) -> None:
+        """A move is under way: until the next ``move_flange`` the true flange is ``path()``
+        (the commanded base_from_flange now, 4×4 mm, as the robot mock's motion model gives
+        it) with the positioning error of the pose the move started from. The controller's
+        reported pose is the robot mock's business (``reported_flange`` is unchanged)."""
+        with self._lock:
+            self._path = path
+            self._swing = None
+
+    def true_flange(self) -> np.ndarray:
+        """The true base_from_flange now (4×4 mm): on the move's path while a move runs, else
+        where the flange came to rest plus the settling oscillation."""
+        with self._lock:
+            if self._path is not None:
+                return self._path() @ invert(self.commanded) @ self.flange
+            if self._swing is None or self.settle is None:
+                return self.flange.copy()
+            t0, u, w = self._swing
+            t = self.now() - t0
+            if t >= self.settle.quiet_after_s:
+                self._swing = None  # at rest for good
+            off = self.settle.offset(t, u, w)
+            if off is None:
+                return self.flange.copy()
+            out = self.flange.copy()
+            out[:3, :3] = out[:3, :3] @ off[1]
+            out[:3, 3] += off[0]
+            return out
 
     def reported_flange(self) -> np.ndarray:
         """What the controller reports: base_from_flange 4×4 mm (commanded pose, plus read
@@ -251,9 +375,10 @@ class SimRig:
 
     # --- tracker side ---
     def true_body(self, body: str) -> np.ndarray:
-        """Noise-free tracker_from_<body> = Z⁻¹ · A_true · (X or Y), 4×4 mm."""
+        """Noise-free tracker_from_<body> = Z⁻¹ · A_true · (X or Y), 4×4 mm, A_true the true
+        flange now (``true_flange``: moving or settling included)."""
         with self._lock:
-            return self._tracker_from_base @ self.flange @ self.truth.flange_from(body)
+            return self._tracker_from_base @ self.true_flange() @ self.truth.flange_from(body)
 
     def observe(self, body: str, n: int | None = None) -> np.ndarray:
         """Noisy tracker_from_<body> (4×4 mm), or n independent observations (n, 4, 4):

@@ -163,6 +163,12 @@ class PolarisFirmware:
         self.commands: list[str] = []
         self._power_up()
 
+    def tracker_time_s(self) -> float:
+        """The tracker's time in seconds: on the fast clock frames served / frame rate (it
+        advances only as TX/BX requests are answered), else the clock's monotonic time. The
+        mock rig makes it the sim rig's time base on the fast clock."""
+        return self._frames.time_s()
+
     # --- state -------------------------------------------------------------------------------
     def _power_up(self) -> None:
         with self._lock:

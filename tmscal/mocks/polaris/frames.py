@@ -2,8 +2,10 @@
 handle reports (a noisy observation of its rig body, or MISSING, with its port status).
 
 On the real-time clock the frame counter advances at the model's rate; on the fast clock
-once per TX/BX request. A new noisy observation (``rig.observe``) is taken only when the
-frame number changes, so the same frame always reports the same pose.
+once per TX/BX request, and ``time_s()`` (frames served / rate) is the tracker's virtual
+time, the time base of the sim rig's settling oscillation on that clock. A new noisy
+observation (``rig.observe``) is taken only when the frame number changes, so the same frame
+always reports the same pose.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ class FrameSource:
         self.error_mm = error_mm
         self._rng = rng
         self._obs_cache: dict[str, tuple[np.ndarray, list[np.ndarray]]] = {}
+        self._served = 0   # fast-clock frames served since power-up (TSTART does not reset it)
         self.restart()
 
     def restart(self, *, observations: bool = True) -> None:
@@ -75,9 +78,16 @@ class FrameSource:
                 for number, (kind, _, status) in state.items()]
         return recs, sys_status
 
+    def time_s(self) -> float:
+        """The tracker's time in seconds: on the fast clock the frames served since power-up
+        divided by the frame rate (so it advances only as frames are requested, and never
+        goes back); on the real-time clock the clock's monotonic time."""
+        return self._served / self.rate_hz if self.clock.fast else self.clock.now()
+
     def _current_frame(self) -> int:
         if self.clock.fast:
             self._fast_frame += 1
+            self._served += 1
             return self._fast_frame
         return int((self.clock.now() - self._t0) * self.rate_hz) & 0xFFFFFFFF
 
