@@ -1,0 +1,158 @@
+"""``tmscal stream``: live OpenIGTLink TRANSFORM messages of the tracked coil through a stored
+calibration, for 3D Slicer's OpenIGTLinkIF (the server loop is :mod:`tmscal.stream`;
+docs/streaming.md)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+import click
+
+from . import INPUT_FILE, _Finite, handle_errors, main
+
+#: seconds between two status lines when stderr is not a terminal
+PLAIN_STATUS_S = 5.0
+
+
+class _Status:
+    """The status line on ``stream`` (stderr): redrawn in place on a terminal (4 times a
+    second), one plain line every ``PLAIN_STATUS_S`` seconds elsewhere."""
+
+    def __init__(self, stream: TextIO, tools: list[str]) -> None:
+        from .live import _isatty, _width
+
+        self.stream, self.tools = stream, tools
+        self.tty = _isatty(stream)
+        self.width = _width(stream)
+        self._last = -1e9
+
+    def text(self, st: Any) -> str:
+        from .live import fit
+
+        rate = f"{st.rate_hz:.1f} Hz" if st.rate_hz else "… Hz"
+        client = f"client {st.peer}" if st.peer else "no client"
+        unseen = [f"{t} unseen {st.unseen[t] / st.frames:.0%}" for t in self.tools
+                  if st.frames and st.unseen[t]]
+        return fit([f"frames {st.frames}", rate, client, f"sent {st.sent}", *unseen],
+                   self.width - 1)
+
+    def __call__(self, st: Any) -> None:
+        now = time.monotonic()
+        if now - self._last < (0.25 if self.tty else PLAIN_STATUS_S):
+            return
+        self._last = now
+        line = self.text(st)
+        if self.tty:
+            self.stream.write(f"\r{line}\x1b[K")
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def finish(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _check_host(host: str, allow_remote: bool) -> None:
+    from ..stream import is_loopback
+
+    if is_loopback(host):
+        return
+    if not allow_remote:
+        raise click.BadParameter(
+            f"{host!r} is not a loopback address: the stream would be open to the network "
+            "(OpenIGTLink has no authentication). Add --allow-remote to serve it anyway.",
+            param_hint="--host")
+    click.echo(f"warning: serving OpenIGTLink on {host}, reachable from the network without "
+               "authentication; anyone who connects sees the live coil pose", err=True)
+
+
+@main.command()
+@click.argument("config", type=INPUT_FILE)
+@click.option("--calib", "calib_file", type=INPUT_FILE, required=True,
+              help="The calibration to apply: a file written by `tmscal solve -o` (YAML) or "
+                   "`tmscal export --format json`. Its Z (robot base ← tracker) maps the "
+                   "tracked coil into the robot base.")
+@click.option("--port", type=click.IntRange(0, 65535), default=18944, show_default=True,
+              help="TCP port of the OpenIGTLink server (18944 is OpenIGTLink's and Slicer's "
+                   "default; 0 picks a free port, printed at start).")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to listen on. Loopback (this computer only) unless --allow-remote.")
+@click.option("--allow-remote", is_flag=True,
+              help="Allow a --host that is not a loopback address (e.g. 0.0.0.0 or the "
+                   "navigation computer's network address); prints a warning.")
+@click.option("--rate", "rate_hz", type=_Finite(0, 1000, lo_open=True), default=None,
+              metavar="HZ",
+              help="Send at most HZ frames a second (default: every tracker frame).")
+@click.option("--frames", type=click.IntRange(1), default=None,
+              help="Stop after this many tracker frames (default: until Ctrl-C).")
+@click.option("--tracker-port", default=None,
+              help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
+@handle_errors
+def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: bool,
+           rate_hz: float | None, frames: int | None, tracker_port: str | None) -> None:
+    """Stream the tracked coil to 3D Slicer (or any OpenIGTLink client) as live TRANSFORM
+    messages, through a stored calibration; the robot is not needed.
+
+    \b
+    Device names (Slicer's "FromToTo": the transform maps From into To; 4×4, mm):
+      CoilToRobotBase     robot base ← coil centre (probe): Z · C
+      CoilToTracker       tracker ← coil centre (probe): C as measured
+      MarkerToTracker     tracker ← coil marker: B as measured
+      TrackerToRobotBase  robot base ← tracker: Z of the calibration
+    A tool that is missing or out of the tracker's volume is not sent for that frame (the
+    client keeps its last pose); the status line on stderr counts those frames.
+
+    In Slicer: OpenIGTLinkIF, add a connector, type Client, this host and port, Active.
+    Ctrl-C stops (docs/streaming.md)."""
+    from ..acquisition.devices import make_tracker
+    from ..calib import load
+    from ..config import load_config
+    from ..stream import TRANSFORMS, StreamServer, stream_frames
+    from .rig import _close_quietly, _StopFlag
+
+    _check_host(host, allow_remote)
+    cfg = load_config(config)
+    cal = load(calib_file)
+    tracker = make_tracker(cfg, tracker_port)
+    tools = list(tracker.tools)
+    if "marker" not in tools and "probe" not in tools:
+        raise click.UsageError(f"{config}: tracker.tools has neither 'marker' nor 'probe'; "
+                               "nothing to stream")
+    if "probe" not in tools:
+        click.echo("warning: no 'probe' tool in tracker.tools: CoilToRobotBase and "
+                   "CoilToTracker are not sent", err=True)
+    stop = _StopFlag(quiet=True)
+    stop.install()
+    status = _Status(sys.stderr, tools)
+    try:
+        server = StreamServer(host, port)
+    except OSError as e:
+        raise click.BadParameter(f"cannot listen on {host}:{port}: {e.strerror or e}",
+                                 param_hint="--port/--host") from None
+    interrupted = False
+    try:
+        tracker.open()
+        server.start()
+        click.echo(f"OpenIGTLink server on {server.host}:{server.port}, TRANSFORM "
+                   f"{', '.join(TRANSFORMS)} (mm); serving until Ctrl-C")
+        sys.stdout.flush()
+        st = stream_frames(tracker, cal, server, rate_hz=rate_hz, frames=frames, stop=stop,
+                           on_frame=status)
+        status.finish()
+        click.echo(f"stopped: {st.frames} tracker frames read, {st.sent} sent "
+                   f"({st.messages} TRANSFORM messages)")
+    except KeyboardInterrupt:  # a second Ctrl-C, during a read
+        interrupted = True
+        status.finish()
+        click.echo("stopped", err=True)
+    finally:
+        server.stop()
+        if interrupted:
+            _close_quietly(tracker)
+        else:
+            tracker.close()
