@@ -294,3 +294,19 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
     if provenance is not None:
         doc["provenance"] = provenance
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
+
+
+def format_robot_time(rt: dict[str, float]) -> str:
+    """Robot time by phase (s) on one line: moving, settling, sampling and the total."""
+    return (f"robot time {rt['total']:.1f} s: moving {rt['moving']:.1f} s, settling "
+            f"{rt['settling']:.1f} s, sampling {rt['sampling']:.1f} s")
+
+
+def format_prediction(pred: Any, region: str) -> str:
+    """The adaptive prediction (``calib.adaptive.Prediction``) in two lines: the predicted
+    coil-placement error (mm) at its confidence and its RMS, the poses and method it rests
+    on, and the region it is averaged over (``region``, a description)."""
+    return (f"predicted coil-placement error {pred.coil_mm:.3g} mm at "
+            f"{pred.confidence * 100:g} % (RMS {pred.sigma_mm:.3g} mm), from {pred.n_poses} "
+            f"poses ({pred.calibration.method}, distortion {pred.problem.model})\n"
+            f"  mean over {region}")
