@@ -123,6 +123,10 @@ BUILTIN: tuple[DriverSpec, ...] = (
                mock="tmscal.mocks.polaris:PolarisMock",
                mock_faults="tmscal.mocks.polaris:PolarisFaults",
                mock_volume="tmscal.mocks.polaris:MeasurementVolume"),
+    DriverSpec("franka", "robot", "tmscal.drivers.franka.robot:FrankaRobot",
+               mock="tmscal.mocks.franka:FrankaMock",
+               mock_faults="tmscal.mocks.franka:FrankaFaults", extra="franka",
+               requires=("franky",)),
 )
 
 #: name → spec, in registration order (built-ins first, then entry points)

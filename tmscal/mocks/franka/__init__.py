@@ -1,0 +1,241 @@
+"""A Franka FR3 for the mock rig: franky-sim's embedded ``SimulationServer`` (MuJoCo physics,
+libfranka's network protocol, 1 kHz in real time) serving ONE ``tmscal.sim.SimRig``.
+
+Nobody on this project wrote the simulator: the driver (``tmscal.drivers.franka``, on the
+unmodified ``franky`` client) is tested against an independent implementation of the FCI
+protocol. The mock adds three things around it:
+
+* **The rig follows the arm.** After every ``update_every`` simulation steps (5 ms by default)
+  the flange pose is computed from the simulated joint angles with the FR3's own kinematic
+  model (pinocchio, the URDF franky-sim ships, frame ``link8`` = the flange), independently of
+  the ``O_T_EE`` / ``F_T_EE`` the controller reports, and put into the sim rig
+  (``SimRig.move_flange``) when it moved by more than 1 µm or 1 µrad. The mock Polaris then
+  observes marker and probe there with the rig's truth X, Y, Z. ``mock.noise``'s robot
+  positioning error would be drawn anew at every update: keep ``robot_*_sigma`` at 0 (the
+  simulator's own tracking error is the robot error).
+* **The arm starts at the rig's start pose** (``plan.start`` or the built-in P0): the initial
+  joint angles come from a damped least-squares inverse kinematics on the same model (or
+  ``initial_q``, rad, from ``mock.robot``).
+* **Loopback only.** franky-sim 1.0.4 binds its TCP command port to the given host but its UDP
+  state socket to 0.0.0.0; the servers here bind the UDP socket to the same loopback host.
+
+The end effector is franky-sim's default, the Franka Hand (``F_T_NE`` = 103.4 mm along z,
+−45° about z), so flange and end effector differ as on most real arms. franky-sim simulates an
+FR3 and produces no controller errors (no reflexes, no joint-limit or
+communication-constraint checks): ``FrankaFaults`` has no faults to inject.
+
+``mock.clock`` must be ``real``: libfranka's control loop runs at 1 kHz of wall-clock time.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...errors import ConfigError, MissingExtraError
+from ...geometry import angle_between
+from ...sim import SimRig
+from ..clock import REAL_TIME, Clock
+from ..net import loopback_family
+from ..server import MockDevice
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FrankaMock", "FrankaFaults", "flange_ik"]
+
+_MOVED_MM = 1e-3   # the rig is updated when the flange moved more than this (mm) …
+_MOVED_RAD = 1e-6  # … or turned more than this (rad)
+
+
+@dataclass(frozen=True)
+class FrankaFaults:
+    """No faults: franky-sim produces no controller errors to inject (module docstring)."""
+
+
+def _sim_modules() -> tuple[Any, Any, Any, Any]:
+    """(franky_sim, its MuJoCo simulator module, its server module, pinocchio)."""
+    try:
+        import franky_sim
+        import franky_sim.franka_gripper_server as gripper
+        import franky_sim.mujoco_simulator as mj
+        import pinocchio
+    except ImportError as e:
+        raise MissingExtraError("the 'franka' mock (franky-sim)", "test", str(e)) from e
+    return franky_sim, mj, gripper, pinocchio
+
+
+def _flange_model(pin: Any, urdf: str) -> tuple[Any, Any, int]:
+    model = pin.buildModelFromXML(urdf)
+    return model, model.createData(), model.getFrameId("link8")
+
+
+def flange_ik(target_mm: np.ndarray, q0: Sequence[float], iterations: int = 200
+              ) -> np.ndarray:
+    """Joint angles (7, rad) that put the simulated FR3's flange (``link8``) at ``target_mm``
+    (base_from_flange, 4×4 mm), from ``q0`` by damped least squares. ``ValueError`` when it
+    does not converge to 1 µm / 1 µrad within the joint limits."""
+    franky_sim, _, _, pin = _sim_modules()
+    model, data, fid = _flange_model(pin, franky_sim.FR3_URDF)
+    T = np.array(target_mm, dtype=np.float64)
+    T[:3, 3] /= 1000.0
+    target = pin.SE3(T[:3, :3], T[:3, 3])
+    q = np.array(q0, dtype=np.float64)
+    for _ in range(iterations):
+        pin.forwardKinematics(model, data, q)
+        pin.updateFramePlacement(model, data, fid)
+        err = pin.log6(data.oMf[fid].inverse() * target).vector
+        if np.linalg.norm(err[:3]) < 1e-6 and np.linalg.norm(err[3:]) < 1e-6:
+            break
+        J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)
+        q = pin.integrate(model, q, J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), err))
+    else:
+        raise ValueError(f"the simulated FR3 cannot reach the start pose "
+                         f"{np.round(target_mm[:3, 3], 1).tolist()} mm (no IK solution)")
+    if np.any(q < model.lowerPositionLimit) or np.any(q > model.upperPositionLimit):
+        raise ValueError(f"the start pose {np.round(target_mm[:3, 3], 1).tolist()} mm needs "
+                         f"joint angles outside the FR3's limits: {np.round(q, 3).tolist()}")
+    return q
+
+
+def _loopback_servers(franky_sim: Any, gripper_mod: Any) -> tuple[type, type]:
+    """franky-sim's robot and gripper servers with the UDP socket bound to the command host
+    (franky-sim 1.0.4 binds it to 0.0.0.0). The override writes the same attributes as the
+    library's ``FrankaServer._setup_udp_connection``."""
+    from franky_sim.franka_server import FrankaServer, NonBlockingReceiver
+
+    def setup_udp(self: Any, network_udp_port: int) -> None:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind((self.hostname, 0))
+        s.setblocking(False)
+        self._FrankaServer__client_udp_port = network_udp_port
+        self._FrankaServer__udp_socket = s
+        self._FrankaServer__udp_receiver = NonBlockingReceiver(s)
+        self._FrankaServer__message_id = 0
+
+    if not hasattr(FrankaServer, "_setup_udp_connection"):  # pragma: no cover - other version
+        raise ConfigError("the 'franka' mock needs franky-sim 1.0.x (its UDP socket setup "
+                          "changed): pip install 'franky-sim>=1.0.4,<1.1'")
+    gripper = type("LoopbackGripperServer", (gripper_mod.FrankaGripperServer,),
+                   {"_setup_udp_connection": setup_udp})
+
+    def bind_children(self: Any, hostname: str) -> None:
+        if self._FrankaRobotServer__robot.has_gripper:
+            g = gripper(self._FrankaRobotServer__robot, hostname)
+            g.init()
+            self._FrankaRobotServer__gripper_server = g
+
+    robot = type("LoopbackRobotServer", (franky_sim.FrankaRobotServer,),
+                 {"_setup_udp_connection": setup_udp, "_bind_children": bind_children})
+    return robot, gripper
+
+
+class FrankaMock(MockDevice):
+    """franky-sim serving ``rig`` on ``host`` (loopback; libfranka's fixed ports, TCP 1337).
+
+    ``start()`` returns the host. ``initial_q`` (7 rad) overrides the joint angles computed
+    from the rig's start pose; ``update_every`` is how many 1 ms simulation steps pass between
+    two updates of the rig's flange. ``clock`` must be the real-time clock."""
+
+    def __init__(self, rig: SimRig, host: str = "127.0.0.2", clock: Clock = REAL_TIME,
+                 faults: FrankaFaults | None = None, initial_q: Sequence[float] | None = None,
+                 update_every: int = 5) -> None:
+        loopback_family(host, "franka mock host")
+        if clock.fast:
+            raise ValueError("the franka mock runs franky-sim, whose 1 kHz control loop needs "
+                             "wall-clock time: set mock.clock: real")
+        if isinstance(update_every, bool) or not isinstance(update_every, int) \
+                or not 1 <= update_every <= 1000:
+            raise ValueError(f"update_every must be an integer in 1..1000, got {update_every!r}")
+        if initial_q is not None:
+            q = np.array(initial_q, dtype=np.float64)
+            if q.shape != (7,) or not np.isfinite(q).all():
+                raise ValueError(f"initial_q must be 7 finite joint angles (rad), got "
+                                 f"{initial_q!r}")
+        self.rig = rig
+        self.host = host
+        self.faults = faults or FrankaFaults()
+        self.initial_q = None if initial_q is None else [float(v) for v in initial_q]
+        self.update_every = update_every
+        self._sim: Any = None
+        self._server: Any = None
+        self._steps = 0
+        self._last: np.ndarray | None = None
+
+    def _start(self) -> str:
+        franky_sim, mj, gripper_mod, pin = _sim_modules()
+        from franky_sim import DEFAULT_INITIAL_JOINT_POS
+        q0 = self.initial_q
+        if q0 is None:
+            q0 = flange_ik(self.rig.reported_flange(), DEFAULT_INITIAL_JOINT_POS).tolist()
+        robot_server, _ = _loopback_servers(franky_sim, gripper_mod)
+
+        class Server(franky_sim.SimulationServer):
+            def init(self) -> None:  # as SimulationServer.init, with the loopback servers
+                for robot in self.sim.robots:
+                    rs = robot_server(robot, self._remaining_hostname_candidates)
+                    rs.init()
+                    self.robot_servers.append(rs)
+                self.sim.start()
+
+        self._model, self._data, self._fid = _flange_model(pin, franky_sim.FR3_URDF)
+        self._pin = pin
+        self._sim = mj.MujocoSimulator()
+        self._sim.init()
+        self._robot = self._sim.add_robot(initial_q=tuple(q0))
+        self._server = Server(self._sim, hostname_candidates=[self.host])
+        try:
+            self._server.init()
+        except OSError as e:
+            raise OSError(f"franka mock: cannot bind {self.host}:1337 ({e})") from e
+        self._sim.register_post_step_callback(self._after_step)
+        self._update_rig(force=True)
+        self._server.run_async()
+        log.info("franka mock (franky-sim FR3) on %s", self.host)
+        return self.host
+
+    def _flange_mm(self) -> np.ndarray:
+        """base_from_flange (4×4 mm) from the simulated joint angles (the model's link8)."""
+        q = np.asarray(self._robot.inner_state.q, dtype=np.float64)
+        self._pin.forwardKinematics(self._model, self._data, q)
+        self._pin.updateFramePlacement(self._model, self._data, self._fid)
+        T = np.array(self._data.oMf[self._fid].homogeneous)
+        T[:3, 3] *= 1000.0
+        return T
+
+    def _after_step(self, sim: Any) -> None:
+        self._steps += 1
+        if self._steps % self.update_every == 0:
+            self._update_rig()
+
+    def _update_rig(self, force: bool = False) -> None:
+        T = self._flange_mm()
+        last = self._last
+        if not force and last is not None \
+                and np.linalg.norm(T[:3, 3] - last[:3, 3]) <= _MOVED_MM \
+                and float(angle_between(last, T)) <= _MOVED_RAD:
+            return
+        self._last = T
+        self.rig.move_flange(T)
+
+    def flange(self) -> np.ndarray:
+        """The flange pose (base_from_flange, 4×4 mm) last put into the rig."""
+        assert self._last is not None, "franka mock not started"
+        return self._last.copy()
+
+    def _close(self) -> None:
+        server, sim, self._server, self._sim = self._server, self._sim, None, None
+        if server is not None:
+            try:
+                server.cleanup()
+            except Exception:  # franky-sim's own errors at shutdown: best effort
+                log.warning("franka mock: server cleanup failed", exc_info=True)
+        if sim is not None and sim.is_initialized and not sim.is_cleaned_up:
+            try:
+                sim.cleanup()
+            except Exception:
+                log.warning("franka mock: simulator cleanup failed", exc_info=True)
