@@ -8,3 +8,27 @@ robot co-registration) and :mod:`.jsonfmt` (everything, for scripts).
 
 Frames: X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
 """
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["FORMATS", "render"]
+
+#: export format → (module, one line for the help text)
+FORMATS = {
+    "itk": ("itk", "ITK .tfm of Z for 3D Slicer (LPS, resampling direction; affine kept)"),
+    "plus": ("plus", "PLUS device set: NDITracker block + CoordinateDefinitions (mm)"),
+    "easy-handeye": ("easy_handeye", "ROS easy_handeye YAML, eye-on-base (m, quaternion)"),
+    "invesalius": ("invesalius", "InVesalius robot co-registration .rbtf (X, Z; mm)"),
+    "json": ("jsonfmt", "everything, for scripts; tmscal.calib.load reads it back"),
+}
+
+
+def render(fmt: str, cf: Any, **options: Any) -> str:
+    """The text of export ``fmt`` (a key of :data:`FORMATS`) for a calibration file read by
+    :func:`tmscal.exports.calibfile.read_calibration`."""
+    import importlib
+
+    module = importlib.import_module(f".{FORMATS[fmt][0]}", __name__)
+    return module.render(cf, **options)

@@ -1,0 +1,82 @@
+"""``tmscal export``: a stored calibration in the formats the lab's other software reads (3D
+Slicer, PLUS, ROS easy_handeye, InVesalius, JSON; docs/exports.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from . import FORCE_HELP, INPUT_FILE, _write_atomic, check_outputs, handle_errors, main
+
+_FORMAT_HELP = "; ".join(f"{k}: {v[1]}" for k, v in
+                         __import__("tmscal.exports", fromlist=["FORMATS"]).FORMATS.items())
+
+
+@main.command()
+@click.argument("calib_file", type=INPUT_FILE, metavar="CALIB")
+@click.option("--format", "fmt", required=True,
+              type=click.Choice(["itk", "plus", "easy-handeye", "invesalius", "json"]),
+              help=_FORMAT_HELP + ".")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="File to write (e.g. Z.tfm, plus.xml, handeye.yaml, robot.rbtf, calib.json).")
+@click.option("--easy-handeye2", "handeye2", is_flag=True,
+              help="easy-handeye: write easy_handeye2's (ROS 2) layout: transform.translation /"
+                   " transform.rotation, calibration_type eye_on_base.")
+@click.option("--frame", "frames", multiple=True, metavar="KEY=NAME",
+              help="easy-handeye: a tf frame name (repeatable): robot_base_frame, "
+                   "robot_effector_frame, tracking_base_frame or tracking_marker_frame "
+                   "(defaults base_link, tool0, tracker, coil_marker).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@handle_errors
+def export(calib_file: Path, fmt: str, output: Path, handeye2: bool, frames: tuple[str, ...],
+           force: bool) -> None:
+    """Write the calibration CALIB (a file of tmscal solve -o, or a json export) as FORMAT.
+    Each format's frames, units and conventions, and how to load it in its consumer, are in
+    docs/exports.md; every format that allows comments names them in the file."""
+    from ..exports import render
+    from ..exports.calibfile import read_calibration
+    from ..exports.easy_handeye import FRAMES
+
+    if fmt != "easy-handeye" and (handeye2 or frames):
+        raise click.BadParameter("only for --format easy-handeye",
+                                 param_hint="--easy-handeye2/--frame")
+    names: dict[str, str] = {}
+    for f in frames:
+        key, sep, val = f.partition("=")
+        if not sep or key not in FRAMES or not val.strip() or " " in val.strip():
+            raise click.BadParameter(f"{f!r}: expected KEY=NAME with KEY one of "
+                                     f"{', '.join(FRAMES)}", param_hint="--frame")
+        names[key] = val.strip()
+    check_outputs({"--output": output}, [calib_file], force)
+    cf = read_calibration(calib_file)
+    opts = {"version": 2 if handeye2 else 1, "frames": names} if fmt == "easy-handeye" else {}
+    _write_atomic(output, render(fmt, cf, **opts))
+    click.echo(f"wrote {output} ({fmt}{' 2' if handeye2 else ''}) from {calib_file}")
+    for note in _notes(fmt, cf, output.suffix.lower()):
+        click.echo(f"note: {note}")
+
+
+def _notes(fmt: str, cf: object, out_suffix: str) -> list[str]:
+    """What the user must know about what the format leaves out."""
+    from ..exports.calibfile import CalibrationFile
+
+    assert isinstance(cf, CalibrationFile)
+    cal = cf.calibration
+    out = []
+    if cal.distortion and fmt in ("plus", "easy-handeye", "invesalius"):
+        out.append("the calibration found a tracker distortion; this format holds rigid "
+                   "matrices only and does not correct it (the itk and json exports do)")
+    if fmt == "invesalius":
+        from ..exports.invesalius import tcp_offset_mm
+        x, y, z = tcp_offset_mm(cf)
+        out.append(f"set the robot TCP offset to ({x:.3f}, {y:.3f}, {z:.3f}) mm, no rotation "
+                   "(the marker's origin in the flange frame); the file has no slot for Y, "
+                   "the coil centre: register the coil in InVesalius as usual")
+    if fmt == "itk" and out_suffix not in (".tfm", ".txt"):
+        out.append("ITK readers (3D Slicer, SimpleITK) pick the file type by its suffix: name "
+                   "the file *.tfm")
+    if fmt == "plus" and not cf.tools:
+        out.append("the calibration file does not record the tracker's tools (a simulated "
+                   "session?): fill in the CHECK placeholders")
+    return out

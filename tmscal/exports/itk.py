@@ -1,0 +1,66 @@
+"""ITK transform file (``.tfm``) of Z for 3D Slicer (``tmscal export --format itk``).
+
+Conventions (docs/exports.md works them out): the tracker and robot-base frames are taken as
+RAS, i.e. Slicer shows tmscal's numbers unchanged. ITK files are in LPS and hold the
+resampling direction (from parent to child); Slicer converts LPS ↔ RAS with C = diag(−1, −1, 1)
+and inverts, so that a node loaded from this file has the to-parent transform Z = base ←
+tracker (tracker points into the robot base, mm). The file therefore holds
+
+    T = C · Z⁻¹ · C      (LPS, base → tracker: the resampling direction)
+
+as ``AffineTransform_double_3_3``: the 3×3 block row by row, then the translation (mm),
+FixedParameters 0 0 0 (centre of rotation at the origin). Z is the applied one
+(``Calibration.used()``): a raw or distortion-correcting (affine) Z stays affine.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..calib import Calibration
+from .calibfile import CalibrationFile
+
+__all__ = ["LPS", "itk_matrix", "render"]
+
+#: RAS ↔ LPS: x and y change sign
+LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def itk_matrix(Z: np.ndarray) -> np.ndarray:
+    """The 4×4 the ITK file stores for Z (base ← tracker, RAS, mm): C Z⁻¹ C (LPS, base →
+    tracker)."""
+    return LPS @ np.linalg.inv(np.asarray(Z, dtype=float)) @ LPS
+
+
+def _num(v: float) -> str:
+    return repr(float(v))
+
+
+def _kind(Z: np.ndarray, cal: Calibration) -> str:
+    if np.allclose(Z[:3, :3] @ Z[:3, :3].T, np.eye(3), atol=1e-9):
+        return "rigid (orthonormal rotation)"
+    why = ("it undoes the tracker distortion the solver found" if cal.distortion
+           else f"the solver's {cal.applied} matrix")
+    return f"affine, not rigid: {why}"
+
+
+def render(cf: CalibrationFile) -> str:
+    """The ``.tfm`` text for the applied Z of ``cf`` (comment lines name frames and units)."""
+    cal = cf.calibration
+    Z = cal.used()["Z"]
+    T = itk_matrix(Z)
+    params = [*T[:3, :3].ravel(), *T[:3, 3]]
+    src = cf.session.get("path", "?")
+    return "\n".join([
+        "#Insight Transform File V1.0",
+        f"# tmscal {cal.method} calibration {cf.path.name} (session {src}), units mm",
+        "# Z = base_from_tracker (robot base <- NDI tracker), frames taken as RAS; stored as ITK",
+        "# does: LPS, resampling direction = C Z^-1 C, C = diag(-1,-1,1). Load in 3D Slicer: the",
+        "# transform node's to-parent maps tracker points into the robot base (docs/exports.md).",
+        f"# {_kind(Z, cal)}",
+        "#Transform 0",
+        "Transform: AffineTransform_double_3_3",
+        "Parameters: " + " ".join(_num(v) for v in params),
+        "FixedParameters: 0 0 0",
+        "",
+    ])

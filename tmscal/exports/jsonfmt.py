@@ -1,0 +1,46 @@
+"""The ``json`` export: the whole calibration for scripts (``tmscal export --format json``).
+
+The calibration document of ``tmscal solve -o`` (format "tmscal-calibration", version 1: X, Y,
+Z and Z_probe orthonormal, ``raw`` matrices, method, applied, poses, errors with their SD
+over folds, outlier poses, uncertainty, distortion, covariance with its parameter names,
+session path and SHA-256, provenance: versions, the session's config and devices) as JSON,
+plus ``used`` (the matrices ``Calibration.errors`` applies, distortion included) and
+``exported`` (tmscal version, the source file and its SHA-256). 4×4 in mm.
+``tmscal.calib.load`` reads it back.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from .calibfile import CalibrationFile
+
+__all__ = ["render"]
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def render(cf: CalibrationFile) -> str:
+    """The JSON text (one object, indented)."""
+    doc = dict(cf.doc)
+    used = cf.calibration.used()
+    doc["used"] = {k: None if v is None else np.asarray(v, dtype=float).tolist()
+                   for k, v in used.items()}
+    doc["exported"] = {"tmscal": __version__, "from": str(cf.path),
+                       "sha256": hashlib.sha256(cf.path.read_bytes()).hexdigest()}
+    return json.dumps(_plain(doc), indent=1, allow_nan=False) + "\n"
