@@ -24,6 +24,7 @@ from . import (
     handle_errors,
     main,
 )
+from .adaptive import adaptive_options, check_adaptive_flags
 
 # --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
 
@@ -287,15 +288,22 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
               help="Print the plan's extent and estimated duration; move nothing.")
 @click.option("--tracker-port", default=None, help="Tracker port (overrides the config).")
 @click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             samples: int | None, dry_run: bool, tracker_port: str | None,
-            robot_host: str | None) -> None:
+            robot_host: str | None, adaptive: bool, **overrides: Any) -> None:
     """Move the robot through the plan and record a session (A, B, C at every pose).
 
     Each pose: move, settle, average N distinct tracker frames (and the robot pose read
     alongside), append one fsynced line. Ctrl-C finishes the pose in flight and leaves a
     resumable session; device faults are retried with a reconnect.
+
+    With --adaptive (the recommended way; docs/adaptive.md) the run measures a few
+    well-spread poses, then after each pose predicts the coil-placement error and moves to
+    the pose of the plan that reduces it most per second of robot time, until the prediction
+    reaches --target-mm or --max-poses; it ends with the robot time by phase. --resume
+    continues an adaptive session adaptively.
     """
     from ..acquisition.run import AcquisitionStopped
     from ..acquisition.run import acquire as run_acquire
@@ -305,12 +313,20 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     if _same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
+    adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     cfg = load_config(config)
     if dry_run:
+        if adaptive:  # the candidates: the plan with adaptive.pool poses
+            from ..acquisition.adaptive import settings_for
+            poses = settings_for(cfg, **overrides).pool
         _dry_run(cfg, poses, samples, robot_host)
         return
     stop = _StopFlag()
     stop.install()
+    if adaptive:
+        _acquire_adaptive(cfg, config, output, resume, overrides, samples, tracker_port,
+                          robot_host, stop)
+        return
     try:
         with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
             res = run_acquire(cfg, output, resume=resume, poses=poses, samples=samples,
@@ -321,6 +337,24 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         _fail(f"acquisition stopped: {e}")
         return
     _acquire_summary(res, config, output, tracker_port, robot_host)
+    if res.stopped:
+        sys.exit(EXIT_INTERRUPTED)
+
+
+def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
+                      overrides: dict[str, Any], samples: int | None,
+                      tracker_port: str | None, robot_host: str | None, stop: Any) -> None:
+    from ..acquisition.run import AcquisitionStopped
+    from . import adaptive as cli_adaptive
+
+    try:
+        res = cli_adaptive.run(cfg, output, resume=resume, overrides=overrides,
+                               samples=samples, tracker_port=tracker_port,
+                               robot_host=robot_host, should_stop=stop)
+    except AcquisitionStopped as e:
+        _fail(f"acquisition stopped: {e}")
+        return
+    cli_adaptive.summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
 
@@ -387,13 +421,20 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
               help="How the Polaris mock is reached: loopback TCP (socket://, as NDI's network "
                    "trackers) or a pty (as a serial port).")
 @click.option("--json", "as_json", is_flag=True,
-              help="Print the solve result (with the mock rig's truth) as one JSON object.")
+              help="Print the solve result (with the mock rig's truth) as one JSON object; "
+                   "with --adaptive it adds robot_time_s (moving, settling, sampling, "
+                   "total), poses_used, predicted_coil_mm, true_coil_mm and stop_reason.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
+@adaptive_options
 @handle_errors
 def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
-         transport: str, as_json: bool, force: bool) -> None:
+         transport: str, as_json: bool, force: bool, adaptive: bool,
+         **overrides: Any) -> None:
     """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
-    through the real drivers and wire protocols, solve with QR36, compare with the truth."""
+    through the real drivers and wire protocols, solve with QR36, compare with the truth.
+
+    With --adaptive: the adaptive run (docs/adaptive.md), its robot time, the predicted
+    coil-placement error and the true one against the mock rig's truth over the same region."""
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
     from ..mocks.rig import build_sim_rig, spawn_mock_rig
@@ -403,6 +444,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
     from .live import AcquireProgress, stderr_to_log
 
     cfg_path = config or _default_demo_config()
+    check_adaptive_flags(adaptive, False, Path(), poses, overrides)
     check_outputs({"--output": output}, [cfg_path], force)
     if output is not None and force and output.exists():
         output.unlink()
@@ -413,6 +455,10 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
         tmp = tempfile.TemporaryDirectory(prefix="tmscal-demo-")
         output = Path(tmp.name) / "demo-session.jsonl"
     try:
+        if adaptive:
+            from . import adaptive as cli_adaptive
+            cli_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
+            return
         # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
         with spawn_mock_rig(cfg_path, transport=transport) as mp:
             ep = mp.endpoints

@@ -1,0 +1,190 @@
+"""The adaptive parts of ``tmscal acquire --adaptive`` and ``tmscal demo --adaptive``
+(docs/adaptive.md): running the loop with a progress display, the end-of-run report, and the
+demo's comparison with the mock rig's truth. The commands' options live in
+:mod:`tmscal.cli.rig`; the loop in :mod:`tmscal.acquisition.adaptive`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+
+from . import _Finite
+
+#: the command-line overrides of the ``adaptive:`` section (option → AdaptiveSettings field)
+OVERRIDES = ("target_mm", "confidence", "max_poses", "bootstrap")
+
+
+def adaptive_options(fn: Any) -> Any:
+    """--adaptive and its overrides of the config's adaptive: section."""
+    opts = [
+        click.option("--adaptive", is_flag=True,
+                     help="Adaptive acquisition (docs/adaptive.md): choose each next pose of "
+                          "the plan by the expected reduction of the predicted coil-placement "
+                          "error per second of robot time; stop at --target-mm or "
+                          "--max-poses. The candidates are the config's plan with "
+                          "adaptive.pool poses, all checked against the safety envelope "
+                          "before anything moves."),
+        click.option("--target-mm", type=_Finite(0, 100, lo_open=True), default=None,
+                     help="With --adaptive: stop when the predicted coil-placement error (mean "
+                          "over the region, at --confidence) is at or below this, mm "
+                          "(overrides adaptive.target_mm; default 0.05)."),
+        click.option("--confidence", type=_Finite(0.5, 0.9999), default=None,
+                     help="With --adaptive: the confidence of the prediction, e.g. 0.95 "
+                          "(overrides adaptive.confidence)."),
+        click.option("--max-poses", type=click.IntRange(3, 100000), default=None,
+                     help="With --adaptive: stop after this many poses whatever the "
+                          "prediction; skipped poses count (overrides adaptive.max_poses; "
+                          "default 40)."),
+        click.option("--bootstrap", type=click.IntRange(3, 100000), default=None,
+                     help="With --adaptive: well-spread poses measured before the first "
+                          "prediction (overrides adaptive.bootstrap; default 4: the 3 poses "
+                          "that make the problem well posed, plus one)."),
+    ]
+    for o in reversed(opts):
+        fn = o(fn)
+    return fn
+
+
+def check_adaptive_flags(adaptive: bool, resume: bool, output: Path, poses: int | None,
+                          overrides: dict[str, Any]) -> bool:
+    """Whether the run is adaptive: --adaptive, or --resume of an adaptive session. The
+    adaptive overrides need it; --poses does not go with it (the run chooses its poses)."""
+    if resume and not adaptive and is_adaptive_session(output):
+        adaptive = True
+    given = [k for k, v in overrides.items() if v is not None]
+    if given and not adaptive:
+        raise click.BadParameter("only with --adaptive (or --resume of an adaptive session)",
+                                 param_hint="--" + given[0].replace("_", "-"))
+    if adaptive and poses is not None:
+        raise click.BadParameter("an adaptive run chooses its poses: use --max-poses to bound "
+                                 "them (adaptive.pool sets the candidates)",
+                                 param_hint="--poses")
+    return adaptive
+
+
+def is_adaptive_session(path: Path) -> bool:
+    """True when ``path`` is a session recorded by ``acquire --adaptive`` (its header has
+    an ``adaptive`` entry); False for other sessions and for a missing file."""
+    from ..session import read_session
+
+    if not path.exists():
+        return False
+    return isinstance(read_session(path).header.get("adaptive"), dict)
+
+
+def _note(msg: str) -> None:
+    """One line on stderr that does not tear a progress bar."""
+    from tqdm import tqdm
+    tqdm.write(msg, file=sys.stderr)
+
+
+def _on_predict(pred: Any, info: dict[str, Any]) -> None:
+    line = (f"{pred.n_poses} poses: predicted coil-placement error {pred.coil_mm:.3g} mm at "
+            f"{pred.confidence * 100:g} %")
+    if info.get("next") is not None and "gain_per_s" in info:
+        line += (f"; next: pool pose {info['next']} (RMS {info['rms_now_mm']:.3g} → "
+                 f"{info['rms_after_mm']:.3g} mm for {info['cost_s']:.1f} s of robot time)")
+    _note(line)
+
+
+def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
+        samples: int | None, tracker_port: str | None, robot_host: str | None,
+        robot_port: int | None = None, should_stop: Any = lambda: False,
+        quiet: bool = False) -> Any:
+    """``acquire_adaptive`` with the progress display (the bars and a line per prediction on
+    stderr unless ``quiet``); returns its AdaptiveResult."""
+    from ..acquisition.adaptive import acquire_adaptive, settings_for
+    from .live import AcquireProgress, stderr_to_log
+
+    settings = None if resume else settings_for(cfg, **overrides)
+    with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
+        return acquire_adaptive(
+            cfg, output, settings=settings, resume=resume, overrides=overrides,
+            samples=samples, tracker_port=tracker_port, robot_host=robot_host,
+            robot_port=robot_port, on_pose=bar.pose, on_start=bar.start, on_phase=bar.phase,
+            on_predict=None if quiet else _on_predict, should_stop=should_stop)
+
+
+def summary(res: Any, config: Path | None, output: Path, tracker_port: str | None = None,
+            robot_host: str | None = None) -> None:
+    """The end-of-run report: why it stopped, the poses used, the prediction with its
+    confidence and region, the robot time by phase, and what to run next."""
+    from ..acquisition.run import resume_command
+    from ..report.text import format_prediction, format_robot_time
+
+    for note in res.notes:
+        click.echo(f"note: {note}")
+    state = "stopped early (resumable)" if res.stopped else f"done: {res.message}"
+    click.echo(f"session {output}: {state}")
+    click.echo(f"  poses used {res.recorded} ({res.skipped} skipped; {res.new_poses} new in "
+               f"{res.elapsed_s:.1f} s); device faults recovered: {res.faults}")
+    if res.prediction is not None:
+        click.echo("  " + format_prediction(res.prediction, _region(res.settings)))
+    click.echo("  " + format_robot_time(res.robot_time_s))
+    if res.stopped:
+        click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
+    click.echo(f"next: tmscal solve {output} --method ml --option distortion=none -o "
+               f"{output.with_suffix('.yaml')}   (the calibration the prediction is about)")
+
+
+def _region(settings: Any) -> str:
+    return f"the first {settings.region} poses of the plan (the coil-placement region)"
+
+
+def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | None,
+         overrides: dict[str, Any], as_json: bool) -> None:
+    """``tmscal demo --adaptive``: the adaptive run on the mock rig (mocks in a child), then
+    the prediction beside the true coil-placement error against the rig's truth (over the
+    same region), and QR36 on the session as ``demo`` prints it."""
+    import numpy as np
+
+    from ..acquisition.plan import PlanSpec
+    from ..calib.adaptive import true_coil_error
+    from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..report.evaluate import solve_session
+    from ..report.text import format_prediction, format_result, format_robot_time
+    from ..session import read_session
+    from . import _print_json
+    from .rig import _split_endpoint
+
+    truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
+    with spawn_mock_rig(cfg_path, transport=transport) as mp:
+        ep = mp.endpoints
+        if not as_json:
+            click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
+        host, port = _split_endpoint(ep["robot"])
+        res = run(cfg, output, resume=False, overrides=overrides, samples=samples,
+                  tracker_port=ep["tracker"], robot_host=host, robot_port=port,
+                  quiet=as_json)
+    session = read_session(output)
+    session.header["truth"] = truth.as_dict()
+    region = PlanSpec.from_header(session.header).with_n(res.settings.region).poses()
+    true_mm = None
+    if res.prediction is not None and truth.Y is not None:
+        true_mm = true_coil_error(res.prediction.calibration, truth.Y, truth.Z, region)
+    _, result = solve_session(session, "qr36")
+    if as_json:
+        out = result.to_json()
+        out.update(robot_time_s=res.robot_time_s, poses_used=res.recorded,
+                   predicted_coil_mm=None if res.prediction is None else res.prediction.coil_mm,
+                   confidence=res.settings.confidence, true_coil_mm=true_mm,
+                   stop_reason=res.stop, adaptive_method="ml")
+        _print_json(out)
+        return
+    click.echo(f"{res.message}; poses used {res.recorded} ({res.skipped} skipped)")
+    click.echo(format_robot_time(res.robot_time_s))
+    if res.prediction is not None:
+        click.echo(format_prediction(res.prediction, _region(res.settings)))
+    if true_mm is not None:
+        click.echo(f"true coil-placement error {true_mm:.3g} mm (the ml calibration against the "
+                   "mock rig's truth, mean over the same region)\n")
+    click.echo(format_result(result))
+    click.echo("\n  truth (the mock rig's):")
+    from ..report.text import format_matrix
+    for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
+                    ("Z", "base_from_tracker")):
+        click.echo(f"  {k} = {name}")
+        click.echo(format_matrix(np.asarray(getattr(truth, k))))
