@@ -242,13 +242,34 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
         _plot(plot_residuals, pose_residuals(session, cal), res.n_solve, str(plot),
               f"{session_file.name}: {res.method.upper()} per-pose errors",
               outliers=res.outliers)
+    pred = _adaptive_prediction(session)
     if as_json:
-        _print_json(res.to_json())
+        _print_json(res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]})
     else:
         click.echo(format_result(res))
+        if pred is not None:
+            click.echo("\n" + pred[1])
         for f in (output, plot):
             if f is not None:
                 click.echo(f"\nwrote {f}")
+
+
+def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
+    """For a session recorded by ``acquire --adaptive``: the prediction that run stopped on,
+    recomputed from the session (``report.evaluate.predict_session``; docs/adaptive.md), as
+    ({predicted_coil_mm, confidence, sigma_mm, n_poses, …, region, robot_time_s}, its text);
+    None for other sessions."""
+    if not isinstance(session.header.get("adaptive"), dict):
+        return None
+    from ..report.evaluate import predict_session
+    from ..report.text import format_prediction, format_robot_time
+
+    pred, info = predict_session(session)
+    text = ("adaptive acquisition (docs/adaptive.md), recomputed from the session:\n  "
+            + format_prediction(pred, info["region"]) + "\n  "
+            + format_robot_time(info["robot_time_s"]))
+    return ({**pred.as_dict(), "region": info["region"],
+             "robot_time_s": info["robot_time_s"]}, text)
 
 
 def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bool,
