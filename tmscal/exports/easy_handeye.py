@@ -8,7 +8,8 @@ w ≥ 0.
 
 * easy_handeye (ROS 1): ``parameters`` {eye_on_hand: false, namespace, move_group_namespace,
   move_group, robot_base_frame, robot_effector_frame, tracking_base_frame,
-  tracking_marker_frame, freehand_robot_movement} and ``transformation`` {x, y, z, qx, qy, qz,
+  tracking_marker_frame} (exactly the arguments of its HandeyeCalibrationParameters, which
+  ``from_dict`` passes them to) and ``transformation`` {x, y, z, qx, qy, qz,
   qw}.
 * easy_handeye2 (ROS 2; ``--easy-handeye2``): the easy_handeye2_msgs/HandeyeCalibration
   message as YAML: ``parameters`` {name, calibration_type: eye_on_base, robot_base_frame,
@@ -49,8 +50,7 @@ def render(cf: CalibrationFile, version: int = 1, name: str = "tmscal_eye_on_bas
     doc: dict[str, Any]
     if version == 1:
         doc = {"parameters": {"eye_on_hand": False, "namespace": f"/{name}/",
-                              "move_group_namespace": "/", "move_group": "manipulator", **f,
-                              "freehand_robot_movement": True},
+                              "move_group_namespace": "/", "move_group": "manipulator", **f},
                "transformation": dict(zip(("x", "y", "z"), t, strict=True))
                | dict(zip(("qx", "qy", "qz", "qw"), q, strict=True))}
     else:

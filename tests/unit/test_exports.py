@@ -1,0 +1,215 @@
+"""Each export read back the way its consumer reads it (SimpleITK for the ITK file, an XML
+parser against PLUS' element and attribute names, YAML as easy_handeye loads it, InVesalius'
+CSV reader and tms-robot-control's split) and checked numerically against the calibration."""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from tmscal.calib import load
+from tmscal.cli import main
+from tmscal.session import read_session
+
+sitk = pytest.importorskip("SimpleITK", reason="SimpleITK (the test extra) reads the .tfm")
+
+C_LPS = np.diag([-1.0, -1.0, 1.0])
+
+
+def run(*args):
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    assert r.exit_code == 0, r.output
+    return r
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("exports")
+    run("simulate", "-o", d / "s.jsonl", "--poses", 60, "--seed", 7)
+    run("simulate", "-o", d / "d.jsonl", "--poses", 60, "--seed", 8, "--tracker-scale",
+        "1.002,0.999,1")
+    run("solve", d / "s.jsonl", "-o", d / "qr36.yaml", "--folds", 2)
+    run("solve", d / "d.jsonl", "-o", d / "ml.yaml", "--method", "ml", "--option",
+        "distortion=axis", "--folds", 2)
+    return d
+
+
+def export(files, calib, fmt, out, *extra):
+    run("export", files / calib, "--format", fmt, "-o", files / out, "--force", *extra)
+    return files / out
+
+
+def _tracker_points(n=20, seed=0):
+    rng = np.random.default_rng(seed)  # points in the tracker's working volume, mm
+    return rng.uniform([-300, -300, -2400], [300, 300, -900], size=(n, 3))
+
+
+@pytest.mark.parametrize("calib", ["qr36.yaml", "ml.yaml"])
+def test_itk_file_read_by_simpleitk_maps_as_documented(files, calib):
+    cal = load(files / calib)
+    Z = cal.used()["Z"]  # base ← tracker, the applied (raw / distortion-correcting) one
+    T = sitk.ReadTransform(str(export(files, calib, "itk", "Z.tfm")))
+    assert T.GetName() == "AffineTransform"
+    # ITK applies the resampling direction in LPS: a base point (RAS numbers b, LPS C b)
+    # goes to the LPS coordinates of the tracker point it came from
+    for q in _tracker_points():
+        b = Z[:3, :3] @ q + Z[:3, 3]
+        np.testing.assert_allclose(T.TransformPoint((C_LPS @ b).tolist()), C_LPS @ q,
+                                   atol=1e-7)
+    # what Slicer makes of it: RAS (conjugate by C), then from-parent → to-parent (invert)
+    A = sitk.AffineTransform(T)
+    M = np.eye(4)
+    M[:3, :3] = np.array(A.GetMatrix()).reshape(3, 3)
+    M[:3, 3] = A.GetTranslation()
+    assert np.allclose(A.GetCenter(), 0)
+    C4 = np.diag([-1.0, -1.0, 1.0, 1.0])
+    np.testing.assert_allclose(np.linalg.inv(C4 @ M @ C4), Z, atol=1e-9)
+    if calib == "ml.yaml":  # a distortion-correcting Z stays affine in the file
+        assert not np.allclose(M[:3, :3] @ M[:3, :3].T, np.eye(3), atol=1e-6)
+    text = (files / "Z.tfm").read_text()
+    assert text.startswith("#Insight Transform File V1.0\n")
+    assert "base_from_tracker" in text and "mm" in text
+
+
+def test_plus_device_set_parses_against_plus_names(files, tmp_path):
+    cal = load(files / "qr36.yaml")
+    doc = yaml.safe_load((files / "qr36.yaml").read_text())
+    root = ET.parse(export(files, "qr36.yaml", "plus", "plus.xml")).getroot()
+    assert root.tag == "PlusConfiguration"
+    tr = {(t.get("From"), t.get("To")): t for t in root.iter("Transform")}
+    assert set(tr) == {("CoilMarker", "Flange"), ("CoilCentre", "Flange"),
+                       ("Tracker", "RobotBase")}
+    for (a, b), M, err in (
+            (("CoilMarker", "Flange"), cal.X, doc["errors"]["marker"]["trans_mm"]),
+            (("CoilCentre", "Flange"), cal.Y, doc["errors"]["probe"]["trans_mm"]),
+            (("Tracker", "RobotBase"), cal.Z, doc["errors"]["e_t_mm"])):
+        vals = [float(v) for v in tr[a, b].get("Matrix").split()]
+        assert len(vals) == 16
+        np.testing.assert_allclose(np.reshape(vals, (4, 4)), M, rtol=0, atol=1e-12)
+        assert float(tr[a, b].get("Error")) == pytest.approx(err, abs=5e-5)
+        dt.datetime.strptime(tr[a, b].get("Date"), "%Y.%m.%d %H:%M:%S")
+    dev = root.find("./DataCollection/Device")
+    assert dev.get("Type") == "NDITracker" and dev.get("ToolReferenceFrame") == "Tracker"
+    ids = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")
+           if s.get("Type") == "Tool"}
+    assert set(ids) == {"CoilMarker", "CoilCentre"}
+    # with the rig config recorded (a session acquired at a rig), the ROM files and port
+    doc["provenance"]["config"] = {"tracker": {
+        "driver": "ndi", "port": "/dev/ttyUSB0", "baud": 115200, "frame_rate_hz": 60,
+        "tools": {"marker": "/lab/roms/marker.rom", "probe": "/lab/roms/probe.rom"}}}
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(doc))
+    run("export", tmp_path / "rig.yaml", "--format", "plus", "-o", tmp_path / "p.xml")
+    dev = ET.parse(tmp_path / "p.xml").getroot().find("./DataCollection/Device")
+    roms = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")}
+    assert roms == {"CoilMarker": "/lab/roms/marker.rom", "CoilCentre": "/lab/roms/probe.rom"}
+    assert (dev.get("SerialPort"), dev.get("BaudRate")) == ("/dev/ttyUSB0", "115200")
+    assert [s.get("Id") for s in dev.findall("./OutputChannels/OutputChannel/DataSource")] \
+        == ["CoilMarker", "CoilCentre"]
+
+
+def _R_from_xyzw(x, y, z, w):
+    """Rotation matrix of a unit quaternion (Hamilton, scalar w), written out."""
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+#: the arguments of easy_handeye's HandeyeCalibrationParameters (ROS 1) and the fields of
+#: easy_handeye2_msgs/HandeyeCalibrationParameters (ROS 2)
+EH1_PARAMS = {"namespace", "move_group_namespace", "move_group", "eye_on_hand",
+              "robot_base_frame", "robot_effector_frame", "tracking_base_frame",
+              "tracking_marker_frame"}
+EH2_PARAMS = {"name", "calibration_type", "robot_base_frame", "robot_effector_frame",
+              "tracking_base_frame", "tracking_marker_frame", "freehand_robot_movement",
+              "move_group_namespace", "move_group"}
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_easy_handeye_yaml_is_z_in_metres_xyzw(files, version):
+    cal = load(files / "qr36.yaml")
+    extra = ["--easy-handeye2"] if version == 2 else []
+    d = yaml.safe_load(export(files, "qr36.yaml", "easy-handeye", f"eh{version}.yaml",
+                              "--frame", "robot_base_frame=denso_base", *extra).read_text())
+    if version == 1:
+        assert set(d) == {"parameters", "transformation"}
+        assert set(d["parameters"]) == EH1_PARAMS and d["parameters"]["eye_on_hand"] is False
+        t = d["transformation"]
+        xyz, q = [t["x"], t["y"], t["z"]], [t["qx"], t["qy"], t["qz"], t["qw"]]
+    else:
+        assert set(d) == {"parameters", "transform"}
+        assert set(d["parameters"]) == EH2_PARAMS
+        assert d["parameters"]["calibration_type"] == "eye_on_base"
+        t = d["transform"]
+        xyz = [t["translation"][k] for k in "xyz"]
+        q = [t["rotation"][k] for k in "xyzw"]
+    assert d["parameters"]["robot_base_frame"] == "denso_base"
+    np.testing.assert_allclose(np.array(xyz) * 1000.0, cal.Z[:3, 3], atol=1e-9)
+    assert np.linalg.norm(q) == pytest.approx(1.0) and q[3] >= 0
+    np.testing.assert_allclose(_R_from_xyzw(*q), cal.Z[:3, :3], atol=1e-12)
+
+
+def test_invesalius_rbtf_read_as_invesalius_and_tms_robot_control_do(files):
+    cal = load(files / "qr36.yaml")
+    path = export(files, "qr36.yaml", "invesalius", "robot.rbtf")
+    # InVesalius' RobotCoregistrationDialog.LoadRegistration
+    with open(path) as f:
+        content = list(csv.reader(f, delimiter="\t"))
+    data = np.vstack(list(np.float64(content))).tolist()
+    # tms-robot-control's OnSetRobotTransformationMatrix
+    X, Y, affine = np.split(np.array(data).reshape(12, 4), 3, axis=0)
+    np.testing.assert_allclose(X, cal.X, atol=0)
+    np.testing.assert_allclose(Y, cal.Z, atol=0)
+    np.testing.assert_allclose(affine, cal.Z, atol=0)
+    # its transformation_tracker_to_robot on the session's marker poses: rotation of
+    # Y N X⁻¹ and position of affine · N are the flange's rotation and the point t(X) of
+    # the flange (the TCP offset it needs), within the simulated noise
+    A, B, _, _ = read_session(files / "s.jsonl").arrays()
+    for Ai, N in zip(A, B, strict=True):
+        M = Y @ N @ np.linalg.inv(X)
+        cosang = (np.trace(M[:3, :3].T @ Ai[:3, :3]) - 1) / 2
+        assert np.degrees(np.arccos(min(1.0, cosang))) < 0.5
+        tcp = Ai[:3, :3] @ cal.X[:3, 3] + Ai[:3, 3]
+        assert np.linalg.norm((affine @ N)[:3, 3] - tcp) < 1.0
+
+
+def test_json_export_has_everything_and_loads_back(files):
+    path = export(files, "ml.yaml", "json", "c.json")
+    d = json.loads(path.read_text())
+    for k in ("X", "Y", "Z", "raw", "method", "uncertainty", "distortion", "covariance",
+              "parameters", "errors", "session", "provenance", "used", "exported"):
+        assert k in d, k
+    assert d["provenance"]["versions"]["tmscal"] and len(d["session"]["sha256"]) == 64
+    a, b = load(files / "ml.yaml"), load(path)
+    for k in ("X", "Y", "Z", "X_raw", "Z_raw"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
+    np.testing.assert_allclose(d["used"]["Z"], a.used()["Z"], atol=0)
+
+
+def test_export_refuses_bad_use(files):
+    def fails(*args):
+        r = CliRunner().invoke(main, [str(a) for a in args])
+        assert r.exit_code != 0
+        lines = [ln for ln in r.output.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("error:"), r.output
+        return lines[0]
+
+    (files / "exists.json").write_text("{}")
+    assert "already exists" in fails("export", files / "qr36.yaml", "--format", "json", "-o",
+                                     files / "exists.json")
+    assert "input" in fails("export", files / "qr36.yaml", "--format", "json", "-o",
+                            files / "qr36.yaml", "--force")
+    assert "directory" in fails("export", files, "--format", "json", "-o", files / "x.json")
+    assert "easy-handeye" in fails("export", files / "qr36.yaml", "--format", "itk", "-o",
+                                   files / "x.tfm", "--easy-handeye2")
+    assert "--frame" in fails("export", files / "qr36.yaml", "--format", "easy-handeye", "-o",
+                              files / "x.yaml", "--frame", "robot=base")
+    assert "s.jsonl" in fails("export", files / "s.jsonl", "--format", "json", "-o",
+                              files / "y.json")
