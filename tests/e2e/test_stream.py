@@ -1,0 +1,232 @@
+"""``tmscal stream`` end to end: a mock Polaris (in this process, over loopback TCP) serving the
+simulated TMS rig, ``tmscal stream`` in a child process, and OpenIGTLink clients receiving its
+TRANSFORM messages: ``pyigtl.OpenIGTLinkClient`` (as 3D Slicer connects) and a lossless reader
+built on pyigtl's message parser. The messages are checked against the stored calibration (read
+here with PyYAML) and against the sim rig's truth.
+
+Tolerances: the mock's fiducial noise is σ = 0.05 mm per coordinate (its config), so a tool's
+pose is within 0.5 mm / 0.5° of the truth; the calibration is QR36 on 200 simulated poses of
+the same rig (seed 3), whose coil placement error is a few tenths of a mm: 2 mm bounds the coil
+centre in the robot base. OpenIGTLink carries float32 (2e-3 mm at 2,000 mm).
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from tests.rigs import write_config
+from tmscal.config import load_config
+from tmscal.mocks.rig import start_mock_rig
+from tmscal.sim import tms_rig_truth
+from tmscal.timing import Deadline
+
+pyigtl = pytest.importorskip("pyigtl")
+
+pytestmark = pytest.mark.e2e
+
+#: the device names docs/streaming.md promises (Slicer's "FromToTo" convention)
+NAMES = {"CoilToRobotBase", "CoilToTracker", "MarkerToTracker", "TrackerToRobotBase"}
+
+F32_MM = 5e-3  # float32 on the wire, translations up to ~2,000 mm
+F32_ROT = 1e-4  # degrees (float32 rotation entries, ~1e-7 rad)
+
+
+@pytest.fixture(scope="module")
+def calib_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``tmscal solve -o`` of 200 simulated poses (Eq. 14 plan, the paper's noise, seed 3) of
+    the mock's rig (the built-in TMS rig truth)."""
+    from tmscal.session import make_header, records_from_arrays, write_session
+    from tmscal.sim import Noise, simulate
+
+    d = tmp_path_factory.mktemp("stream-calib")
+    truth, sim = simulate(200, np.random.default_rng(3), noise=Noise(), truth=tms_rig_truth())
+    header = make_header(["marker", "probe"], truth=truth.as_dict())
+    write_session(d / "s.jsonl", header,
+                  records_from_arrays(sim["A"], sim["marker"], sim["probe"], sim["commanded"]))
+    out = d / "calib.yaml"
+    r = subprocess.run([sys.executable, "-m", "tmscal.cli", "solve", str(d / "s.jsonl"), "-o",
+                        str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.fixture
+def polaris(tmp_path: Path):
+    """(config path, running mock rig) of configs/mock-polaris.yaml on an ephemeral port."""
+    def start(**faults: float):
+        cfg = write_config(tmp_path, "mock-polaris.yaml",
+                           mock={"clock": "real", "seed": 1,
+                                 "noise": {"fiducial_sigma_mm": 0.05},
+                                 "tracker": {"model": "spectra", "faults": dict(faults)}})
+        mr = start_mock_rig(load_config(cfg), tracker_transport="tcp")
+        started.append(mr)
+        return cfg, mr
+    started: list = []
+    yield start
+    for mr in started:
+        mr.close()
+
+
+def _start_stream(cfg: Path, calib: Path, tracker: str, *extra: str) -> tuple[subprocess.Popen,
+                                                                              int]:
+    """``tmscal stream`` in a child process on a free port; returns (process, port) once it
+    has said where it listens."""
+    proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "stream", str(cfg), "--calib",
+                             str(calib), "--tracker-port", tracker, "--port", "0", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = proc.stdout.readline()  # type: ignore[union-attr]
+    m = re.search(r"OpenIGTLink server on 127\.0\.0\.1:(\d+)", line)
+    if m is None:
+        proc.kill()
+        raise AssertionError(f"stream did not start: {line!r} {proc.communicate()[1]!r}")
+    return proc, int(m.group(1))
+
+
+def _stop(proc: subprocess.Popen) -> tuple[int, str, str]:
+    """Ctrl-C (SIGINT) the stream; its exit code and output."""
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    return proc.returncode, out, err
+
+
+def _stored_Z(calib: Path) -> np.ndarray:
+    return np.asarray(yaml.safe_load(calib.read_text())["Z"], dtype=float)
+
+
+def _angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    """The angle between two rotations, from ‖Ra − Rb‖_F = 2√2 · sin(θ/2) (well conditioned at
+    small angles, unlike arccos of the trace)."""
+    d = np.linalg.norm(Ra - Rb) / (2 * np.sqrt(2))
+    return float(np.degrees(2 * np.arcsin(min(1.0, d))))
+
+
+def _close(a: np.ndarray, b: np.ndarray, mm: float, deg: float) -> bool:
+    return (np.linalg.norm(a[:3, 3] - b[:3, 3]) <= mm
+            and _angle_deg(a[:3, :3], b[:3, :3]) <= deg)
+
+
+def _by_time(msgs: list) -> dict[float, dict[str, np.ndarray]]:
+    out: dict[float, dict[str, np.ndarray]] = {}
+    for m in msgs:
+        out.setdefault(m.timestamp, {})[m.device_name] = np.asarray(m.matrix, dtype=float)
+    return out
+
+
+def test_slicer_client_receives_the_coil_through_the_calibration(polaris, calib_file):
+    cfg, mr = polaris()
+    proc, port = _start_stream(cfg, calib_file, mr.endpoints["tracker"])
+    msgs: list = []
+    client = pyigtl.OpenIGTLinkClient(host="127.0.0.1", port=port)
+    try:
+        deadline = Deadline(60.0)
+        while len({m.timestamp for m in msgs if m.device_name == "CoilToTracker"}) < 40:
+            assert not deadline.expired(), f"few messages after 60 s: {len(msgs)}"
+            msgs += client.get_latest_messages()
+            time.sleep(0.002)
+    finally:
+        client.stop()
+        code, out, err = _stop(proc)
+    assert code == 0, err
+    assert re.search(r"stopped: \d+ tracker frames read, [1-9]\d* sent", out), out
+
+    names = {m.device_name for m in msgs}
+    assert names == NAMES
+    assert all(len(n.encode()) <= 20 for n in names)
+    assert {m.message_type for m in msgs} == {"TRANSFORM"}
+
+    Z = _stored_Z(calib_file)
+    coil_in_base = mr.rig.true_flange() @ mr.rig.truth.Y  # the flange rests at P0
+    pairs = 0
+    for frame in _by_time(msgs).values():
+        if "TrackerToRobotBase" in frame:
+            assert _close(frame["TrackerToRobotBase"], Z, F32_MM, F32_ROT)
+        if "CoilToTracker" in frame:
+            assert _close(frame["CoilToTracker"], mr.rig.true_body("probe"), 0.5, 0.5)
+        if "MarkerToTracker" in frame:
+            assert _close(frame["MarkerToTracker"], mr.rig.true_body("marker"), 0.5, 0.5)
+        if "CoilToRobotBase" in frame:
+            assert _close(frame["CoilToRobotBase"], coil_in_base, 2.0, 0.5)
+            if "CoilToTracker" in frame:
+                pairs += 1
+                assert _close(frame["CoilToRobotBase"], Z @ frame["CoilToTracker"], F32_MM,
+                              F32_ROT)
+    assert pairs >= 10
+
+
+def _read_all(port: int, n_messages: int, timeout_s: float = 60.0) -> list:
+    """Every message, in order, from a plain socket, parsed by pyigtl's message classes; the
+    CRC-64 of every body checked."""
+    from pyigtl.messages import CRC64, MessageBase
+
+    sock = socket.create_connection(("127.0.0.1", port), timeout=timeout_s)
+    buf = b""
+    deadline = Deadline(timeout_s)
+
+    def take(n: int) -> bytes:
+        nonlocal buf
+        while len(buf) < n:
+            assert not deadline.expired(), "stream stalled"
+            chunk = sock.recv(65536)
+            assert chunk, "stream closed the connection"
+            buf += chunk
+        out, buf = buf[:n], buf[n:]
+        return out
+
+    out = []
+    try:
+        while len(out) < n_messages:
+            head = take(MessageBase.IGTL_HEADER_SIZE)
+            fields = MessageBase.parse_header(head)
+            body = take(fields["body_size"])
+            assert struct.unpack(">Q", head[-8:])[0] == CRC64(body)
+            msg = MessageBase.create_message(fields["message_type"])
+            msg.unpack(fields, body)
+            out.append(msg)
+    finally:
+        sock.close()
+    return out
+
+
+def test_a_tool_out_of_sight_is_not_sent_for_that_frame(polaris, calib_file):
+    cfg, mr = polaris(missing_fraction=0.5)  # each tool missing in half of the frames
+    proc, port = _start_stream(cfg, calib_file, mr.endpoints["tracker"], "--rate", "1000")
+    try:
+        msgs = _read_all(port, 400)
+    finally:
+        code, _, err = _stop(proc)
+    assert code == 0, err
+    frames = _by_time(msgs)
+    del frames[msgs[-1].timestamp]  # the last frame may be cut short
+    assert len(frames) >= 60
+    with_coil = [f for f in frames.values() if "CoilToTracker" in f]
+    with_marker = [f for f in frames.values() if "MarkerToTracker" in f]
+    # Z in every frame; the probe's two transforms together or not at all
+    assert all("TrackerToRobotBase" in f for f in frames.values())
+    assert all(("CoilToRobotBase" in f) == ("CoilToTracker" in f) for f in frames.values())
+    # P(a tool seen in all of 60 frames, or in none) = 2 · 0.5⁶⁰: both cases happen
+    assert 0 < len(with_coil) < len(frames)
+    assert 0 < len(with_marker) < len(frames)
+    for f in with_coil:  # never a placeholder pose for a missing tool
+        assert _close(f["CoilToTracker"], mr.rig.true_body("probe"), 0.5, 0.5)
+
+
+def test_a_host_off_loopback_is_refused_without_allow_remote(polaris, calib_file):
+    cfg, mr = polaris()
+    r = subprocess.run([sys.executable, "-m", "tmscal.cli", "stream", str(cfg), "--calib",
+                        str(calib_file), "--tracker-port", mr.endpoints["tracker"], "--host",
+                        "0.0.0.0", "--frames", "1"], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2
+    assert "--host" in r.stderr and "--allow-remote" in r.stderr
+    assert "OpenIGTLink server" not in r.stdout
