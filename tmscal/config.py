@@ -7,7 +7,8 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     tracker:  {driver: ndi, port, baud, frame_rate_hz, reply: bx|tx,
                tools: {marker: file.rom, probe: file.rom}}
     plan:     {kind: eq14|sphere, poses, radius_mm, rotation_deg, seed, start}
-    sampling: {samples, settle_s, min_share, max_frames_factor, robot_reads}
+    sampling: {samples, settle_s, min_share, max_frames_factor, robot_reads, settle,
+               still_window_s, still_tol_mm, min_samples, sem_mm}
     safety:   {max_offset_mm, max_rotation_deg, workspace_min_mm, workspace_max_mm,
                max_speed_mm_s, max_accel_mm_s2}
     run:      {retries, reconnect_wait_s, warn_skip_share, stop_skip_share, skip_window}
@@ -62,6 +63,7 @@ from .config_checks import (
     INT_BOUND,
     build,
     check_adaptive,
+    check_sampling,
     check_tree,
     construct,
     err,
@@ -140,15 +142,25 @@ class PlanConfig:
 
 @dataclass
 class SamplingConfig:
-    """Samples per pose (distinct tracker frames), settle time after each move (s), the
-    share of frames with every body usable below which a pose is retried then skipped, and
-    how many of those frames also read the robot's flange pose (spread evenly)."""
+    """Samples per pose (distinct tracker frames; the cap when ``sem_mm`` is set), settling
+    after each move (``settle`` "still": until every body is still over ``still_window_s``
+    within ``still_tol_mm`` (None: from the tracker's noise), at most ``settle_s`` s;
+    "fixed": ``settle_s`` s), the share of frames with every body usable below which a pose
+    is retried then skipped, how many of those frames also read the robot's flange pose
+    (spread evenly), and samples by need: stop when every body's standard error of the mean
+    position is ≤ ``sem_mm`` (mm; None: always ``samples``), after at least ``min_samples``.
+    ``tmscal.acquisition.sample`` documents the rules."""
 
     samples: int = 100
     settle_s: float = 1.0
     min_share: float = 0.8
     max_frames_factor: float = 3.0
     robot_reads: int = 10
+    settle: str = "still"
+    still_window_s: float = 0.2
+    still_tol_mm: float | None = None
+    min_samples: int = 10
+    sem_mm: float | None = None
 
 
 @dataclass
@@ -386,14 +398,9 @@ def _parse_plan(data: Any, src: str) -> PlanConfig:
 
 
 def _parse_sampling(data: Any, src: str) -> SamplingConfig:
-    """The sampling section: counts, settle time, usable share, frame budget."""
+    """The sampling section: counts, settling, usable share, frame budget, samples by need."""
     sampling = build(SamplingConfig, data, src, "sampling")
-    in_range(src, "sampling.samples", sampling.samples, 1, 1_000_000)
-    positive(src, "sampling.settle_s", sampling.settle_s, allow_zero=True, at_most=3600.0)
-    in_range(src, "sampling.robot_reads", sampling.robot_reads, 1, 1_000_000)
-    if not 0 < sampling.min_share <= 1:
-        raise err(src, "sampling.min_share", f"must be in (0, 1], got {sampling.min_share}")
-    positive(src, "sampling.max_frames_factor", sampling.max_frames_factor, at_most=1000.0)
+    check_sampling(sampling, src)
     return sampling
 
 

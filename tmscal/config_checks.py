@@ -23,7 +23,7 @@ from .errors import ConfigError
 
 __all__ = ["err", "show", "join", "check_tree", "build", "number", "coerce", "xyz", "positive",
            "in_range", "key_lines", "with_line", "construct", "MAX_DEPTH", "MAX_VALUES",
-           "INT_BOUND", "check_adaptive"]
+           "INT_BOUND", "check_adaptive", "check_sampling", "SETTLE_MODES"]
 
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
@@ -275,3 +275,31 @@ def check_adaptive(a: Any, src: str) -> Any:
     if a.bootstrap is not None:
         in_range(src, "adaptive.bootstrap", a.bootstrap, 1, a.max_poses)
     return a
+
+
+#: sampling.settle: wait for stillness (bounded by settle_s) or a fixed settle_s
+SETTLE_MODES = ("still", "fixed")
+
+
+def check_sampling(s: Any, src: str) -> None:
+    """The ``sampling`` section's ranges (a ``SamplingConfig``), each violation a ConfigError
+    naming the key: counts, times and tolerances finite and in a sensible range; with
+    ``sem_mm``, the floor ``min_samples`` is not above the cap ``samples``."""
+    in_range(src, "sampling.samples", s.samples, 1, 1_000_000)
+    positive(src, "sampling.settle_s", s.settle_s, allow_zero=True, at_most=3600.0)
+    in_range(src, "sampling.robot_reads", s.robot_reads, 1, 1_000_000)
+    if not 0 < s.min_share <= 1:
+        raise err(src, "sampling.min_share", f"must be in (0, 1], got {s.min_share}")
+    positive(src, "sampling.max_frames_factor", s.max_frames_factor, at_most=1000.0)
+    if s.settle not in SETTLE_MODES:
+        raise err(src, "sampling.settle", f"expected 'still' (wait until the tools are "
+                  f"still, at most settle_s) or 'fixed' (wait settle_s), got {show(s.settle)}")
+    positive(src, "sampling.still_window_s", s.still_window_s, at_most=60.0)
+    if s.still_tol_mm is not None:
+        positive(src, "sampling.still_tol_mm", s.still_tol_mm, at_most=10.0)
+    in_range(src, "sampling.min_samples", s.min_samples, 1, 1_000_000)
+    if s.sem_mm is not None:
+        positive(src, "sampling.sem_mm", s.sem_mm, at_most=10.0)
+        if s.min_samples > s.samples:
+            raise err(src, "sampling.min_samples", f"{s.min_samples} is above samples "
+                      f"{s.samples} (the floor of samples by need is above their cap)")

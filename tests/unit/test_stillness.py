@@ -28,7 +28,9 @@ from tmscal.acquisition.sample import (
     stillness,
     window_frames,
 )
+from tmscal.config import parse_config
 from tmscal.drivers.base import Robot, ToolState, Tracker, TrackerFrame
+from tmscal.errors import ConfigError
 from tmscal.geometry import make_pose
 
 RATE_HZ = 60.0
@@ -221,6 +223,17 @@ def test_a_tracker_that_never_settles_is_reported_after_settle_s(settle_s):
     assert s.samples == {"A": 1, "marker": 0, "probe": 0} and s.frames == 0
 
 
+@pytest.mark.parametrize("amp, still", [(0.0, True), (0.4, False)])
+def test_a_settle_time_shorter_than_the_window_judges_one_shorter_window(amp, still):
+    # settle_s 0.05 s is 3 frames at 60 Hz: the window shrinks to settle_s, i.e. to its
+    # floor of 6 frames, and that one window is judged
+    tr = SwingTracker(9, amp, None, 4.0, sigma_mm=0.01)
+    s, _ = _run(tr, n=5, settle_s=0.05)
+    assert s.still is still
+    assert (s.problem is None) is still
+    assert tr.frame == 6 + (5 if still else 0)
+
+
 def test_settling_frames_are_never_averaged_in_even_when_a_frame_repeats():
     tr = SwingTracker(2, A0, TAU, FREQ, sigma_mm=0.005, repeat=True)
     s, last_settle = _run(tr, still_tol_mm=0.05)
@@ -375,3 +388,62 @@ def test_sem_with_settling_records_counts_and_spread_as_a_fixed_count_does():
     assert s.still and s.first_frame > last_settle
     assert s.samples["marker"] == s.frames and s.share["marker"] == 1.0
     assert set(s.spread) == {"A", "marker", "probe"}
+
+
+# --- the config keys --------------------------------------------------------------------------
+
+def _sampling(**kw):
+    return parse_config({"sampling": kw}, "rig.yaml").sampling
+
+
+def test_config_defaults_settle_by_stillness_with_a_fixed_count():
+    s = _sampling()
+    assert (s.settle, s.still_window_s, s.still_tol_mm, s.min_samples, s.sem_mm) == \
+        ("still", 0.2, None, 10, None)
+    s = _sampling(settle="fixed", still_window_s=0.5, still_tol_mm=0.04, min_samples=20,
+                  sem_mm=0.01, settle_s=0.1)
+    assert (s.settle, s.still_window_s, s.still_tol_mm, s.min_samples, s.sem_mm) == \
+        ("fixed", 0.5, 0.04, 20, 0.01)
+
+
+@pytest.mark.parametrize("kw, key", [
+    ({"settle": "wait"}, "sampling.settle"),
+    ({"settle": 1}, "sampling.settle"),
+    ({"still_window_s": 0}, "sampling.still_window_s"),
+    ({"still_window_s": 600}, "sampling.still_window_s"),
+    ({"still_window_s": float("nan")}, "sampling.still_window_s"),
+    ({"still_tol_mm": -0.1}, "sampling.still_tol_mm"),
+    ({"still_tol_mm": 50}, "sampling.still_tol_mm"),
+    ({"still_tol_mm": "0.1"}, "sampling.still_tol_mm"),
+    ({"min_samples": 0}, "sampling.min_samples"),
+    ({"min_samples": 2.5}, "sampling.min_samples"),
+    ({"sem_mm": 0}, "sampling.sem_mm"),
+    ({"sem_mm": float("inf")}, "sampling.sem_mm"),
+    ({"sem_mm": True}, "sampling.sem_mm"),
+    ({"sem_mm": 0.01, "samples": 5}, "sampling.min_samples"),
+])
+def test_config_refuses_bad_sampling_keys_naming_them(kw, key):
+    with pytest.raises(ConfigError, match=re.escape(f"rig.yaml: key '{key}'")):
+        _sampling(**kw)
+
+
+_KEYS = ["settle", "still_window_s", "still_tol_mm", "min_samples", "sem_mm"]
+
+
+@given(st.dictionaries(st.sampled_from(_KEYS),
+                       st.one_of(st.none(), st.booleans(), st.integers(-10, 10 ** 7),
+                                 st.floats(allow_nan=True, allow_infinity=True),
+                                 st.sampled_from(["still", "fixed", "Still", ""])),
+                       max_size=5))
+@fuzz_settings(200)
+def test_config_sampling_keys_are_accepted_in_range_or_refused_by_name(kw):
+    try:
+        s = _sampling(**kw)
+    except ConfigError as e:
+        assert re.match(r"rig\.yaml: key 'sampling\.(\w+)'", str(e))
+        assert re.match(r"rig\.yaml: key 'sampling\.(\w+)'", str(e)).group(1) in _KEYS
+        return
+    assert s.settle in ("still", "fixed")
+    assert 0 < s.still_window_s <= 60 and 1 <= s.min_samples
+    assert s.still_tol_mm is None or 0 < s.still_tol_mm <= 10
+    assert s.sem_mm is None or (0 < s.sem_mm <= 10 and s.min_samples <= s.samples)

@@ -5,7 +5,8 @@ Settling (``settle``):
 
 * ``"still"`` (default): read tracker frames until every tracked body has been still over the
   last ``still_window_s`` of frames (the window, counted in distinct frames at the tracker's
-  nominal rate, at least ``MIN_WINDOW_FRAMES``), with ``settle_s`` seconds as the upper bound.
+  nominal rate, at least ``MIN_WINDOW_FRAMES``; no longer than ``settle_s``), with ``settle_s``
+  seconds as the upper bound (one full window is always judged, even if that takes longer).
   Still means: the RMS distance of the body's positions from their mean over the window (its
   spread, mm) is at most the tolerance, ``still_tol_mm`` when given, else
   ``STILL_NOISE_MULTIPLE`` · √3 · σ̂ with a floor of ``STILL_FLOOR_MM``. σ̂ is the tracker's
@@ -46,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config_checks import SETTLE_MODES
 from ..drivers.base import Robot, Tracker
 from ..geometry import angle_between, pose_mean
 from ..timing import Deadline
@@ -56,8 +58,6 @@ __all__ = ["PoseSample", "sample_pose", "spread_of", "noise_sigma_mm", "stillnes
            "window_frames", "SETTLE_MODES", "STILL_NOISE_MULTIPLE", "STILL_FLOOR_MM",
            "MIN_WINDOW_FRAMES"]
 
-#: how a pose settles: wait for stillness (bounded by settle_s) or a fixed settle_s
-SETTLE_MODES = ("still", "fixed")
 #: the stillness tolerance, when not given, is this multiple of white noise's spread √3·σ̂
 STILL_NOISE_MULTIPLE = 2.0
 #: the tolerance from the noise is never below this (mm): a quantised or noise-free tracker
@@ -163,29 +163,27 @@ def _wait_until_still(tracker: Tracker, settle_s: float, still_window_s: float,
     """Read frames until every body is still over the window, or ``settle_s`` s pass."""
     names = list(tracker.tools)
     rate = max(tracker.frame_rate_hz, 1.0)
-    w = window_frames(still_window_s, tracker.frame_rate_hz)
+    w = window_frames(min(still_window_s, settle_s), tracker.frame_rate_hz)
     window: deque[dict[str, np.ndarray | None]] = deque(maxlen=w)
     deadline = Deadline(settle_s, clock)
     budget = settle_s * rate + w
     moving: list[tuple[str, float, float]] = []
-    last = None
+    last = None  # the loop ends by a return, a break, or DeviceTimeout from the tracker
     for fr in tracker.distinct_frames(
             None, timeout_s=settle_s + max_frames_factor * w / rate + 5.0,
             max_reads=int(budget * max_frames_factor + 10) * 50):
         last = fr.frame
         window.append({b: (fr.tools[b].pose[:3, 3].copy() if fr.tools[b].usable
                            and fr.tools[b].pose is not None else None) for b in names})
-        if len(window) == w:
-            moving = _window_verdict(window, names, tol_mm)
-            if not moving:
-                return _Settled(True, None, last)
+        if len(window) < w:
+            continue
+        moving = _window_verdict(window, names, tol_mm)
+        if not moving:
+            return _Settled(True, None, last)
         if deadline.expired():
             break
-    if len(window) < w:
-        why = f"{len(window)} of the {w} frames of the stillness window arrived"
-    else:
-        why = "; ".join(f"{b} {s:.3f} mm RMS over the last window of {w} frames, tolerance "
-                        f"{t:.3f} mm" for b, s, t in moving)
+    why = "; ".join(f"{b} {s:.3f} mm RMS over the last window of {w} frames, tolerance "
+                    f"{t:.3f} mm" for b, s, t in moving)
     return _Settled(False, f"not still after {settle_s:g} s ({why})", last)
 
 
