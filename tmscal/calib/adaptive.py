@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import angle_between, invert
-from ..motion import move_duration
+from ..motion import trapezoid_duration
 from . import Calibration, solve
 from .metrics import coil_placement_errors
 from .ml import (
@@ -128,7 +128,8 @@ class Prediction:
     ``problem`` (ml's Problem at the estimate), ``covariance`` (unscaled, the inverse of the
     whitened information), ``variance_factor`` and ``dof`` (its scale and degrees of
     freedom), ``region_q`` (Q = mean_r J_rᵀ J_r, the region's placement Jacobians J_r (3×k)),
-    ``noise`` (robot σ mm, robot σ rad, mean tracker covariance per body (m, 6, 6))."""
+    ``noise`` (robot σ mm, robot σ rad, mean tracker covariance per body (m, 6, 6));
+    ``draws_mm``: the Monte Carlo draws of the mean placement error behind ``coil_mm``."""
 
     coil_mm: float
     sigma_mm: float
@@ -141,7 +142,12 @@ class Prediction:
     dof: int
     region_q: np.ndarray
     noise: tuple[float, float, np.ndarray]
+    draws_mm: np.ndarray
     extra: dict[str, Any] = field(default_factory=dict)
+
+    def quantile(self, q: float) -> float:
+        """The predicted mean coil-placement error over the region (mm) at confidence q."""
+        return float(np.quantile(self.draws_mm, q))
 
     @property
     def criterion_mm2(self) -> float:
@@ -288,9 +294,10 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     root = V * np.sqrt(np.clip(w, 0.0, None))
     rng = np.random.default_rng(0)
     d = rng.standard_normal((MC_DRAWS, k)) @ root.T
-    e = np.linalg.norm(np.einsum("rik,mk->mri", J, d), axis=2).mean(axis=1)
+    e = np.linalg.norm((J.reshape(-1, k) @ d.T).reshape(len(region), 3, -1), axis=1).mean(0)
     s = _scale_draws(vf, dof, scaled, MC_DRAWS, rng)
-    coil = float(np.quantile(e * s, settings.confidence))
+    draws = e * s
+    coil = float(np.quantile(draws, settings.confidence))
     v = vf if scaled else 1.0
     names = ["marker", "probe"][:len(bodies)]
     o = {**_ml_defaults(), **opts}
@@ -299,7 +306,7 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     return Prediction(coil_mm=coil, sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q))),
                       confidence=settings.confidence, n_poses=len(A), calibration=cal,
                       problem=prob, covariance=P, variance_factor=v, dof=dof, region_q=Q,
-                      noise=noise)
+                      noise=noise, draws_mm=draws)
 
 
 def candidate_information(pred: Prediction, poses: np.ndarray) -> np.ndarray:
@@ -391,11 +398,19 @@ def candidate_cost_s(current: np.ndarray, pool: np.ndarray, speed_mm_s: float,
                      rot_speed_deg_s: float | None = None,
                      rot_accel_deg_s2: float | None = None) -> np.ndarray:
     """Robot time (s) per pool pose (n,): the straight move from ``current`` (base_from_flange
-    4×4 mm) under the speed and acceleration caps (:func:`tmscal.motion.move_duration`, the
-    one motion model) + ``per_pose_s`` (settle + sampling, s; a number or (n,))."""
-    mv = np.array([move_duration(current, P, speed_mm_s, accel_mm_s2, rot_speed_deg_s,
-                                 rot_accel_deg_s2) for P in np.asarray(pool, dtype=float)])
-    return mv + np.asarray(per_pose_s, dtype=float)
+    4×4 mm) under the speed and acceleration caps, as :func:`tmscal.motion.move_duration`
+    times it (the longer of the translation and, with rotation caps, the rotation profile;
+    the one motion model, through ``trapezoid_duration``), + ``per_pose_s`` (settle +
+    sampling, s; a number or (n,))."""
+    pool = np.asarray(pool, dtype=float)
+    cur = np.asarray(current, dtype=float)
+    d = np.linalg.norm(pool[:, :3, 3] - cur[:3, 3], axis=1)
+    t = np.array([trapezoid_duration(x, speed_mm_s, accel_mm_s2) for x in d])
+    if rot_speed_deg_s is not None and rot_accel_deg_s2 is not None:
+        ang = np.degrees(angle_between(cur, pool))
+        t = np.maximum(t, [trapezoid_duration(x, rot_speed_deg_s, rot_accel_deg_s2)
+                           for x in ang])
+    return t + np.asarray(per_pose_s, dtype=float)
 
 
 @dataclass

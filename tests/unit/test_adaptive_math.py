@@ -1,0 +1,311 @@
+"""tmscal.calib.adaptive: the prediction, the next-pose criterion, the bootstrap and the stopping
+rule of adaptive acquisition, against simulated rigs with known truth (tmscal.sim.SimRig
+driven directly: move_flange, then averaged observations)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tmscal.acquisition.sample import spread_of
+from tmscal.calib import Applied, Calibration, solve
+from tmscal.calib import adaptive as ad
+from tmscal.calib.bound import STEPS, _placement_error, crb, sim_noise_options
+from tmscal.calib.ml import Problem
+from tmscal.errors import CalibrationError
+from tmscal.geometry import angle_between, make_pose, pose_mean
+from tmscal.poses import make_plan
+from tmscal.sim import TMS_RIG_P0, TOOL_8700340_MM, Noise, SimRig, tms_rig_truth
+
+TRUTH = tms_rig_truth()
+POOL = make_plan("eq14", TMS_RIG_P0, 300, 1, 100.0, 10.0)
+REGION = POOL[:100]
+
+
+class Session:
+    """Poses measured on a SimRig: A (reported), averaged B, C, and ml's ``spreads``."""
+
+    def __init__(self, rig: SimRig, samples: int = 20) -> None:
+        self.rig, self.samples = rig, samples
+        self.A: list[np.ndarray] = []
+        self.B: list[np.ndarray] = []
+        self.C: list[np.ndarray] = []
+        self.spreads: list[dict] = []
+
+    def measure(self, P: np.ndarray) -> None:
+        self.rig.move_flange(P)
+        self.A.append(self.rig.reported_flange())
+        rec: dict = {"spread": {}, "samples": {}}
+        for body, out, key in (("marker", self.B, "B"), ("probe", self.C, "C")):
+            obs = self.rig.observe(body, self.samples)
+            m = pose_mean(obs)
+            out.append(m)
+            rec["spread"][body] = spread_of(obs, m)
+            rec["samples"][key] = self.samples
+        self.spreads.append(rec)
+
+    def arrays(self) -> tuple[np.ndarray | None, ...]:
+        if not self.A:
+            return None, None, None
+        return np.array(self.A), np.array(self.B), np.array(self.C)
+
+    def predict(self, settings: ad.AdaptiveSettings, region: np.ndarray = REGION
+                ) -> ad.Prediction:
+        A, B, C = self.arrays()
+        return ad.predict(A, B, C, region, settings, spreads=self.spreads)
+
+
+def rig(seed: int, noise: Noise | None = None) -> SimRig:
+    return SimRig(TRUTH, noise or Noise(), np.random.default_rng(seed), start=TMS_RIG_P0)
+
+
+def run_adaptive(r: SimRig, settings: ad.AdaptiveSettings, pool: np.ndarray = POOL,
+                 samples: int = 20) -> tuple[ad.Step, list[int]]:
+    """An adaptive run on the rig (next_step until it stops); the last step and the poses."""
+    s = Session(r, samples)
+    used: list[int] = []
+    while True:
+        A, B, C = s.arrays()
+        step = ad.next_step(A, B, C, used, pool, TMS_RIG_P0, settings, spreads=s.spreads or None)
+        if step.index is None:
+            return step, used
+        used.append(step.index)
+        s.measure(pool[step.index])
+
+
+# --- settings and minimum ---
+
+@pytest.mark.parametrize("field,value", [
+    ("target_mm", 0.0), ("target_mm", float("nan")), ("target_mm", "0.1"),
+    ("confidence", 1.0), ("confidence", 0.0), ("max_poses", 2), ("max_poses", 10.0),
+    ("bootstrap", 2), ("bootstrap", 50), ("pool", 10), ("region", 0), ("region", 2000),
+    ("max_poses", True)])
+def test_settings_refuse_bad_values_naming_the_field(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=field):
+        ad.AdaptiveSettings(**{field: value})
+
+
+def test_bootstrap_default_is_minimum_plus_one() -> None:
+    assert ad.AdaptiveSettings().bootstrap_poses(2) == ad.minimum_poses(2) + 1
+    assert ad.AdaptiveSettings(bootstrap=7).bootstrap_poses(2) == 7
+    with pytest.raises(ValueError, match="bodies"):
+        ad.minimum_poses(3)
+
+
+@pytest.mark.parametrize("bodies", [1, 2])
+def test_minimum_poses_is_where_the_information_becomes_full_rank(bodies: int) -> None:
+    truth = {"X": TRUTH.X, "Y": TRUTH.Y, "Z": TRUTH.Z}
+    noise = sim_noise_options(0.05, 0.05, 0.05, TOOL_8700340_MM)
+    m = ad.minimum_poses(bodies)
+    idx = ad.bootstrap_indices(POOL, m, TMS_RIG_P0)
+    C = POOL if bodies == 2 else None
+    with pytest.raises(CalibrationError, match="not identifiable"):
+        crb(POOL[idx[:m - 1]], POOL[idx[:m - 1]], None if C is None else C[idx[:m - 1]],
+            truth, noise)
+    cov = crb(POOL[idx], POOL[idx], None if C is None else C[idx], truth, noise)
+    assert np.all(np.isfinite(cov))
+
+
+# --- the placement Jacobian against calib.bound's error model ---
+
+@pytest.mark.parametrize("model,g0", [("none", None), ("axis", np.array([1e-3, -1e-3, 0.0])),
+                                      ("affine", np.array([1e-3, 0, 0, 5e-4, 0, 0]))])
+def test_placement_jacobian_matches_finite_differences_of_the_bound_model(
+        model: str, g0: np.ndarray | None) -> None:
+    rng = np.random.default_rng(4)
+    bodies = [np.linalg.inv(TRUTH.Z) @ POOL[:5] @ W for W in (TRUTH.X, TRUTH.Y)]
+    Ws = [W @ make_pose(np.eye(3), rng.normal(0, 1, 3)) for W in (TRUTH.X, TRUTH.Y)]
+    prob = Problem(POOL[:5], bodies, Ws, TRUTH.Z, model, g0)
+    J = ad.placement_jacobians(prob, REGION[:4])
+    k = prob.n_params
+    _, Z, G = prob.unpack(np.zeros(k))
+    for r in range(4):
+        Nt = np.linalg.inv(Z) @ REGION[r] @ Ws[1]
+        N = Nt.copy()
+        N[:3, 3] = np.linalg.solve(G, Nt[:3, 3])  # as measured (distorted positions)
+        Jn = np.zeros((3, k))
+        for i in range(k):
+            h = 1e-7 if i >= 18 else STEPS[(i % 6) // 3]
+            e = np.zeros(k)
+            e[i] = h
+            Jn[:, i] = (_placement_error(prob, e, N, 1) - _placement_error(prob, -e, N, 1)
+                        )[3:] / (2 * h)
+        scale = np.abs(Jn).max(axis=0) + 1e-9
+        assert np.all(np.abs(J[r] - Jn) <= 1e-4 * scale + 1e-6)
+
+
+# --- the prediction is honest ---
+
+def test_prediction_covers_the_true_error_at_about_its_confidence() -> None:
+    """40 simulated sessions on the same 8 well-spread poses, different noise seeds: the true
+    mean coil-placement error over the region must be at or below the 95 % prediction in at
+    least 85 % of them (binomial sd at 40 runs: 3.4 points; 85 % is 3 sd below 95 %), and the
+    50 % prediction must be neither always nor never exceeded (25–85 %: not merely huge)."""
+    idx = ad.bootstrap_indices(POOL, 8, TMS_RIG_P0)
+    settings = ad.AdaptiveSettings(confidence=0.95)
+    hit95 = hit50 = 0
+    runs = 40
+    for seed in range(runs):
+        s = Session(rig(1000 + seed))
+        for i in idx:
+            s.measure(POOL[i])
+        p = s.predict(settings)
+        true = ad.true_coil_error(p.calibration, TRUTH.Y, TRUTH.Z, REGION)
+        hit95 += true <= p.coil_mm
+        hit50 += true <= p.quantile(0.5)
+    assert hit95 >= 0.85 * runs
+    assert 0.25 * runs <= hit50 <= 0.85 * runs
+
+
+def test_prediction_of_a_noise_free_rig_is_zero_and_stops_at_the_bootstrap() -> None:
+    settings = ad.AdaptiveSettings()
+    step, used = run_adaptive(rig(5, Noise.none()), settings)
+    assert step.stop == "target"
+    assert len(used) == settings.bootstrap_poses(2)
+    assert step.prediction is not None and step.prediction.coil_mm < 1e-6
+
+
+def test_very_noisy_rig_stops_at_max_poses_and_says_so() -> None:
+    noisy = Noise(fiducial_sigma_mm=1.0, robot_rot_sigma_deg=0.5, robot_trans_sigma_mm=1.0)
+    settings = ad.AdaptiveSettings(max_poses=7)
+    step, used = run_adaptive(rig(6, noisy), settings)
+    assert step.stop == "max_poses"
+    assert len(used) == 7 and len(set(used)) == 7
+    assert step.prediction is not None and step.prediction.coil_mm > settings.target_mm
+
+
+# --- the next pose ---
+
+def test_candidate_information_predicts_the_covariance_after_measuring_there() -> None:
+    """Σ' = (P⁻¹ + I_c)⁻¹ from the current fit against ml's own covariance after the pose is
+    really measured (unscaled: the noise as given, so only the Jacobians are compared)."""
+    s = Session(rig(7), samples=1)
+    for i in ad.bootstrap_indices(POOL, 6, TMS_RIG_P0):
+        s.measure(POOL[i])
+    settings = ad.AdaptiveSettings()
+    A, B, C = s.arrays()
+    opts = {"scale_covariance": False}
+    p = ad.predict(A, B, C, REGION, settings, **opts)
+    c = 250
+    after = float(ad._criteria(p, ad.candidate_information(p, POOL[c:c + 1]))[0])
+    s.measure(POOL[c])
+    A, B, C = s.arrays()
+    q = ad.predict(A, B, C, REGION, settings, **opts)
+    assert after == pytest.approx(q.criterion_mm2, rel=0.05)
+    assert after < p.criterion_mm2
+
+
+def test_chosen_poses_beat_random_poses_on_the_true_error() -> None:
+    """Same rigs, same bootstrap; then 6 poses by choose_next or 6 random unused pool poses:
+    the mean true coil-placement error over 6 rigs must be lower with the chosen ones."""
+    settings = ad.AdaptiveSettings(target_mm=1e-9, bootstrap=4, max_poses=10)
+    err = {"chosen": [], "random": []}
+    for seed in range(6):
+        step, used = run_adaptive(rig(2000 + seed), settings, samples=5)
+        cal = step.prediction.calibration
+        err["chosen"].append(ad.true_coil_error(cal, TRUTH.Y, TRUTH.Z, REGION))
+        boot = used[:4]
+        pick = np.random.default_rng(seed).choice(np.setdiff1d(np.arange(len(POOL)), boot), 6,
+                                                  replace=False)
+        s = Session(rig(2000 + seed), samples=5)
+        for i in list(boot) + list(pick):
+            s.measure(POOL[i])
+        cal = s.predict(settings).calibration
+        err["random"].append(ad.true_coil_error(cal, TRUTH.Y, TRUTH.Z, REGION))
+    assert np.mean(err["chosen"]) < np.mean(err["random"])
+
+
+def test_choose_next_weighs_robot_time_and_skips_unavailable() -> None:
+    s = Session(rig(8))
+    for i in ad.bootstrap_indices(POOL, 5, TMS_RIG_P0):
+        s.measure(POOL[i])
+    p = s.predict(ad.AdaptiveSettings())
+    avail = np.ones(len(POOL), dtype=bool)
+    best, info = ad.choose_next(p, POOL, avail, np.ones(len(POOL)))
+    assert info["gain_mm2"] > 0 and info["criterion_mm2"] < p.criterion_mm2
+    cost = np.ones(len(POOL))
+    cost[best] = 1e6
+    assert ad.choose_next(p, POOL, avail, cost)[0] != best
+    avail[best] = False
+    assert ad.choose_next(p, POOL, avail, np.ones(len(POOL)))[0] != best
+    with pytest.raises(ValueError, match="no candidate"):
+        ad.choose_next(p, POOL, np.zeros(len(POOL), dtype=bool), np.ones(len(POOL)))
+    with pytest.raises(ValueError, match="cost_s"):
+        ad.choose_next(p, POOL, np.ones(len(POOL), dtype=bool), np.zeros(len(POOL)))
+
+
+# --- bootstrap ---
+
+def _spread(poses: np.ndarray, p0: np.ndarray) -> float:
+    """Smallest pairwise distance in the bootstrap's combined metric."""
+    s_t = np.sqrt(np.mean(np.sum((POOL[:, :3, 3] - p0[:3, 3]) ** 2, axis=1)))
+    s_r = np.sqrt(np.mean(angle_between(p0, POOL) ** 2))
+    d = [np.hypot(np.linalg.norm(a[:3, 3] - b[:3, 3]) / s_t, angle_between(a, b) / s_r)
+         for i, a in enumerate(poses) for b in poses[i + 1:]]
+    return float(min(d))
+
+
+def test_bootstrap_is_deterministic_and_better_spread_than_random_picks() -> None:
+    k = 6
+    idx = ad.bootstrap_indices(POOL, k, TMS_RIG_P0)
+    assert idx == ad.bootstrap_indices(POOL.copy(), k, TMS_RIG_P0)
+    assert len(set(idx)) == k
+    far = np.linalg.norm(POOL[:, :3, 3] - TMS_RIG_P0[:3, 3], axis=1)
+    assert idx[0] in np.argsort(far)[-len(POOL) // 2:]  # starts far from P0
+    rng = np.random.default_rng(0)
+    rand = [_spread(POOL[rng.choice(len(POOL), k, replace=False)], TMS_RIG_P0)
+            for _ in range(100)]
+    assert _spread(POOL[idx], TMS_RIG_P0) > np.max(rand)
+    with pytest.raises(ValueError, match="k must be"):
+        ad.bootstrap_indices(POOL, 0, TMS_RIG_P0)
+
+
+def test_next_step_refuses_a_history_that_is_not_its_bootstrap() -> None:
+    settings = ad.AdaptiveSettings()
+    first = ad.next_step(None, None, None, [], POOL, TMS_RIG_P0, settings)
+    assert first.phase == "bootstrap" and first.index is not None
+    s = Session(rig(9))
+    s.measure(POOL[first.index + 1])
+    A, B, C = s.arrays()
+    with pytest.raises(ValueError, match="bootstrap"):
+        ad.next_step(A, B, C, [first.index + 1], POOL, TMS_RIG_P0, settings)
+
+
+# --- stopping and the true error ---
+
+def test_stop_reason() -> None:
+    s = Session(rig(10))
+    for i in ad.bootstrap_indices(POOL, 5, TMS_RIG_P0):
+        s.measure(POOL[i])
+    p = s.predict(ad.AdaptiveSettings())
+    above = ad.AdaptiveSettings(target_mm=p.coil_mm * 0.99, max_poses=6)
+    at = ad.AdaptiveSettings(target_mm=p.coil_mm, max_poses=6)
+    assert ad.stop_reason(p, 5, above) is None
+    assert ad.stop_reason(p, 6, above) == "max_poses"
+    assert ad.stop_reason(p, 5, at) == "target"
+    assert ad.stop_reason(None, 5, at) is None
+
+
+def test_true_coil_error_is_the_offset_of_z() -> None:
+    v = np.array([0.03, -0.04, 0.0])  # a base-frame shift of Z moves every placement by v
+    Z = TRUTH.Z.copy()
+    Z[:3, 3] += v
+    cal = Calibration("test", 3, X=TRUTH.X, Z=Z, X_raw=TRUTH.X, Z_raw=Z, Y=TRUTH.Y,
+                      Y_raw=TRUTH.Y, applied=Applied.ORTHONORMAL)
+    assert ad.true_coil_error(cal, TRUTH.Y, TRUTH.Z, REGION) == pytest.approx(0.05, rel=1e-9)
+    exact = solve(REGION[:5], np.linalg.inv(TRUTH.Z) @ REGION[:5] @ TRUTH.X,
+                  np.linalg.inv(TRUTH.Z) @ REGION[:5] @ TRUTH.Y, method="qr36",
+                  orthonormal=True)
+    assert ad.true_coil_error(exact, TRUTH.Y, TRUTH.Z, REGION) < 1e-6
+
+
+@pytest.mark.parametrize("rot", [None, (5.0, 10.0)])
+def test_candidate_cost_is_the_motion_models_move_time(rot: tuple | None) -> None:
+    """Against tmscal.motion.move_duration pose by pose (with slow rotation caps, the rotation
+    profile sets the time of some moves)."""
+    from tmscal.motion import move_duration
+    caps = rot or (None, None)
+    cost = ad.candidate_cost_s(POOL[7], POOL[:20], 250.0, 1200.0, 1.5, *caps)
+    want = [move_duration(POOL[7], P, 250.0, 1200.0, *caps) + 1.5 for P in POOL[:20]]
+    assert cost == pytest.approx(want, rel=1e-12)
+    assert cost[7] == pytest.approx(1.5)
