@@ -21,6 +21,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
+from tmscal.acquisition.run import _settings
 from tmscal.acquisition.sample import (
     STILL_FLOOR_MM,
     noise_sigma_mm,
@@ -447,3 +448,41 @@ def test_config_sampling_keys_are_accepted_in_range_or_refused_by_name(kw):
     assert 0 < s.still_window_s <= 60 and 1 <= s.min_samples
     assert s.still_tol_mm is None or 0 < s.still_tol_mm <= 10
     assert s.sem_mm is None or (0 < s.sem_mm <= 10 and s.min_samples <= s.samples)
+
+
+# --- a run's sampling settings: new, and resumed from a session header -----------------------
+
+def _cfg(**sampling):
+    return parse_config({"sampling": sampling}, "rig.yaml")
+
+
+def test_a_new_run_records_every_sampling_option_in_the_header():
+    st_ = _settings(_cfg(settle_s=0.5, sem_mm=0.01, min_samples=12, still_tol_mm=0.05), None,
+                    None)
+    h = st_.to_header()
+    assert h == {"samples": 100, "settle_s": 0.5, "min_share": 0.8, "robot_reads": 10,
+                 "settle": "still", "still_window_s": 0.2, "still_tol_mm": 0.05,
+                 "min_samples": 12, "sem_mm": 0.01}
+    # and a resume with that header under the default config takes every one back
+    back = _settings(_cfg(), {"sampling": h}, None)
+    assert back.to_header() == h
+    assert len(back.notes) == 4          # settle_s, still_tol_mm, min_samples, sem_mm
+
+
+def test_a_session_from_before_stillness_resumes_as_it_was_recorded():
+    old = {"sampling": {"samples": 50, "settle_s": 1.0, "min_share": 0.8, "robot_reads": 10}}
+    st_ = _settings(_cfg(sem_mm=0.01), old, None)
+    assert (st_.settle, st_.sem_mm, st_.samples, st_.settle_s) == ("fixed", None, 50, 1.0)
+    assert any("before settling by stillness" in n for n in st_.notes)
+
+
+@pytest.mark.parametrize("bad", [{"settle": "wait"}, {"settle": None},
+                                 {"still_tol_mm": -1.0}, {"sem_mm": "0.01"},
+                                 {"min_samples": 0}, {"min_samples": 2.5},
+                                 {"still_window_s": None}, {"sem_mm": float("inf")}])
+def test_a_header_value_the_config_would_refuse_is_ignored(bad):
+    cfg = _cfg(sem_mm=0.02, still_tol_mm=0.05)
+    h = {**_settings(cfg, None, None).to_header(), **bad}
+    st_ = _settings(cfg, {"sampling": h}, None)
+    assert st_.to_header() == _settings(cfg, None, None).to_header()
+    assert st_.notes == []
