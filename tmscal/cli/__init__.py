@@ -256,4 +256,4 @@ def main(verbose: int) -> None:
 
 
 
-from . import compare, export, offline, rig, stream  # noqa: E402,F401  (registers the commands)
+from . import compare, export, offline, report, rig, stream  # noqa: E402,F401  (registers the commands)

@@ -1,0 +1,71 @@
+"""``tmscal report``: one self-contained HTML page of a session and its calibration, for a lab
+notebook (the page is built by :mod:`tmscal.report.html`; docs/report.md)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from . import (
+    FORCE_HELP,
+    INPUT_FILE,
+    STRICT_HELP,
+    _read_session,
+    _write_atomic,
+    check_outputs,
+    handle_errors,
+    main,
+)
+from .offline import _MethodChoice
+
+
+@main.command()
+@click.argument("session_file", type=INPUT_FILE)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The HTML file to write (one file: figures embedded, no external links).")
+@click.option("--calib", "calib_file", type=INPUT_FILE, default=None,
+              help="Report this stored calibration (`tmscal solve -o` YAML or `tmscal export "
+                   "--format json`) evaluated on the session, instead of solving the session.")
+@click.option("--method", type=_MethodChoice(), default="qr36", show_default=True,
+              help="Without --calib: the method the session is solved with (see tmscal "
+                   "solve --help). Methods without their own uncertainty get ml's beside it.")
+@click.option("--folds", type=click.IntRange(2, 100), default=5, show_default=True,
+              help="Without --calib: k-fold cross-validation of the held-out errors, as "
+                   "tmscal solve.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
+@handle_errors
+def report(session_file: Path, output: Path, calib_file: Path | None, method: str, folds: int,
+           force: bool, strict: bool) -> None:
+    """Write an HTML report of a session for the lab notebook: the rig and its devices, the
+    plan and its spread, the sample spreads and skipped poses, the calibration with its
+    uncertainty, the held-out errors, the convergence curve (error against the number of
+    poses) and the residuals by pose with the outlier poses named (docs/report.md).
+
+    The page is self-contained (figures as embedded PNG, no scripts, no external links), so
+    it can be attached, mailed or printed as it is. Needs matplotlib (extra 'plot')."""
+    from tqdm import tqdm
+
+    from ..errors import MissingExtraError
+    from ..exports.calibfile import read_calibration
+    from ..report.html import html_report
+    from ..session import sha256_of
+
+    inputs = [session_file] + ([calib_file] if calib_file is not None else [])
+    check_outputs({"--output": output}, inputs, force)
+    session = _read_session(session_file, strict)
+    calib = read_calibration(calib_file) if calib_file is not None else None
+    with tqdm(desc="report", unit="solve", disable=None, file=sys.stderr,
+              leave=False) as bar:
+        def stage(name: str) -> None:
+            bar.set_description(f"report: {name}")
+
+        try:
+            page = html_report(session, sha256_of(session_file), method=method.lower(),
+                               calib=calib, folds=folds, progress=stage, solves=bar.update)
+        except ImportError as e:
+            raise MissingExtraError("tmscal report", "plot", str(e)) from None
+    _write_atomic(output, page)
+    click.echo(f"wrote {output} ({len(page.encode()) / 1e6:.1f} MB)")
