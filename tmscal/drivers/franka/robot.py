@@ -72,6 +72,10 @@ def fault_from_exception(e: BaseException, what: str, host: str) -> DeviceError:
     if name == "IncompatibleVersionException":
         return DeviceError(msg + " (a Panda needs franky built against libfranka 0.9.x; see "
                            "docs/devices.md)", text=name, device="franka")
+    if name == "RealtimeException":
+        return DeviceError(msg + " (robot.options.realtime: true needs a real-time kernel and "
+                           "real-time priority for this user; false runs without)", text=name,
+                           device="franka")
     return DeviceError(msg, text=name, device="franka")
 
 

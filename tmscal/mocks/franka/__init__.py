@@ -16,6 +16,8 @@ protocol. The mock adds three things around it:
 * **The arm starts at the rig's start pose** (``plan.start`` or the built-in P0): the initial
   joint angles come from a damped least-squares inverse kinematics on the same model (or
   ``initial_q``, rad, from ``mock.robot``).
+* **O_T_EE is the measured pose**, as libfranka documents it: franky-sim 1.0.4 reports the
+  desired pose there (``_measured_o_t_ee`` says why and restores it).
 * **Loopback only.** franky-sim 1.0.4 binds its TCP command port to the given host but its UDP
   state socket to 0.0.0.0; the servers here bind the UDP socket to the same loopback host.
 
@@ -134,6 +136,15 @@ def _loopback_servers(franky_sim: Any, gripper_mod: Any) -> tuple[type, type]:
     return robot, gripper
 
 
+def _measured_o_t_ee(robot: Any) -> None:
+    """franky-sim 1.0.4's ``BaseRobot.kinematics`` returns pinocchio's frame placement by
+    reference, and the desired pose ``O_T_EE_d`` is computed after the measured ``O_T_EE`` in
+    every step, so the reported ``O_T_EE`` aliases ``O_T_EE_d`` (the commanded pose, not the
+    measured one libfranka documents). A copy per call, on this robot only, restores it."""
+    kinematics = robot.kinematics
+    robot.kinematics = lambda q: kinematics(q).copy()
+
+
 class FrankaMock(MockDevice):
     """franky-sim serving ``rig`` on ``host`` (loopback; libfranka's fixed ports, TCP 1337).
 
@@ -187,6 +198,7 @@ class FrankaMock(MockDevice):
         self._sim = mj.MujocoSimulator()
         self._sim.init()
         self._robot = self._sim.add_robot(initial_q=tuple(q0))
+        _measured_o_t_ee(self._robot)
         self._server = Server(self._sim, hostname_candidates=[self.host])
         try:
             self._server.init()
