@@ -319,28 +319,30 @@ def _check_where(dev: _Devices, s: _State, pool: np.ndarray, nxt: int, p0: np.nd
 
 class _PhaseClock:
     """Robot time by phase from the loop's phase reports: each report closes the previous
-    phase; ``take()`` closes the last and returns {phase: s} for the pose."""
+    phase; ``take()`` closes the last and returns {phase: s} for the pose. Phases outside
+    ``PHASES`` (reconnecting) are not robot time. ``clock``: monotonic seconds."""
 
-    def __init__(self, forward: Callable[[int, str], None] | None) -> None:
+    def __init__(self, forward: Callable[[int, str], None] | None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.forward = forward
+        self.clock = clock
         self.spent: dict[str, float] = {}
         self.phase: str | None = None
         self.t = 0.0
 
     def __call__(self, i: int, name: str) -> None:
-        self._close()
-        self.phase, self.t = name, time.monotonic()
+        self._close(self.clock())
+        self.phase = name
         if self.forward:
             self.forward(i, name)
 
-    def _close(self) -> None:
+    def _close(self, now: float) -> None:
         if self.phase in PHASES:
-            self.spent[self.phase] = (self.spent.get(self.phase, 0.0)
-                                      + time.monotonic() - self.t)
-        self.phase = None
+            self.spent[self.phase] = self.spent.get(self.phase, 0.0) + now - self.t
+        self.phase, self.t = None, now
 
     def take(self) -> dict[str, float]:
-        self._close()
+        self._close(self.clock())
         out = {k: round(self.spent.get(k, 0.0), 6) for k in PHASES}
         self.spent = {}
         return out
