@@ -54,6 +54,7 @@ from tmscal.errors import (
 from tmscal.geometry import make_pose, rot_x, rot_y, rot_z
 from tmscal.mocks.clock import FAST, REAL_TIME
 from tmscal.mocks.denso import DensoFaults, DensoMock
+from tmscal.motion import trapezoid_duration
 from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
 
 pytestmark = pytest.mark.e2e
@@ -437,7 +438,10 @@ def test_open_replaces_a_low_external_speed_left_on_the_controller(rig: SimRig) 
         m.ext_speed = 10.0  # left by the pendant: every move would take 10 × as long
         with DensoRobot(port=port_of(m.start()), max_linear_speed_mm_s=1000.0) as robot:
             robot.move_to(TMS_RIG_P0 @ make_pose(t=[0, 100, 0]), speed_mm_s=50.0)
-        assert m.last_motion_s == pytest.approx(100.0 / 50.0)  # 100 mm at 50 mm/s
+            accel = robot.accel_mm_s2
+        # 100 mm at 50 mm/s with the driver's acceleration (the trapezoid; ExtSpeed 10 %
+        # would make it ten times slower)
+        assert m.last_motion_s == pytest.approx(trapezoid_duration(100.0, 50.0, accel))
 
 
 # --- CurPos integrity (issue 8) and acceleration (issue 2) ------------------------------------

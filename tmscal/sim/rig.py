@@ -54,6 +54,7 @@ from ..geometry import (
     make_pose,
     matrix_from_rotvec,
     random_rotation,
+    rotvec_from_matrix,
 )
 
 #: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
@@ -240,6 +241,19 @@ class Settle:
         R = (matrix_from_rotvec(axis * math.radians(self.rotation_deg * f))
              if self.rotation_deg > 0 else np.eye(3))
         return direction * (self.amplitude_mm * f), R
+
+
+def straight_path(start: np.ndarray, target: np.ndarray, f: float) -> np.ndarray:
+    """The pose (base_from_flange 4×4 mm) at share ``f`` (0…1) of a straight Cartesian move
+    from ``start`` to ``target``: the translation on the straight line, the rotation on the
+    geodesic (the path a UR ``movel`` or a DENSO ``MOVE L`` takes)."""
+    if f >= 1.0:
+        return np.array(target, dtype=np.float64)
+    out = np.eye(4)
+    out[:3, 3] = start[:3, 3] + f * (target[:3, 3] - start[:3, 3])
+    rel = rotvec_from_matrix(start[:3, :3].T @ target[:3, :3])
+    out[:3, :3] = start[:3, :3] @ matrix_from_rotvec(f * rel)
+    return out
 
 
 def _three(value: object, name: str, broadcast: bool) -> tuple[float, float, float]:

@@ -30,6 +30,7 @@ from ...drivers.denso.hresult import (
     hresult_name,
 )
 from ...drivers.denso.packet import Fn, function_name
+from ...drivers.denso.robot import DEFAULT_MAX_LINEAR_ACCEL_MM_S2
 from ...drivers.denso.variant import (
     NUMERIC_VTS,
     VT_ARRAY,
@@ -43,7 +44,8 @@ from ...drivers.denso.variant import (
     Variant,
 )
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
-from ...sim.rig import SimRig
+from ...motion import Trapezoid
+from ...sim.rig import SimRig, straight_path
 from ..clock import Clock
 from . import args
 from .args import PCT_MIN, Refusal
@@ -70,21 +72,26 @@ Handler = Callable[[Session, int, list[Variant]], Any]
 class DensoController:
     """The state one RC8 shares between its connections, and the b-CAP functions on it.
 
-    ``rig`` is moved on ``clock`` at up to ``max_linear_speed_mm_s`` (SPEED=100 and
-    ExtSpeed=100); ``motion_time_s`` fixes every motion's duration on the real-time clock;
-    ``robot_names`` are the names Controller_GetRobot accepts. ``stats`` counts connections,
-    requests, moves, keep-alives, busy replies and dropped connections.
+    ``rig`` is moved on ``clock`` along a trapezoidal profile (:mod:`tmscal.motion`) at up
+    to ``max_linear_speed_mm_s`` and ``max_linear_accel_mm_s2`` (the values at 100 %:
+    SPEED=100 and ExtSpeed=100; ACCEL/DECEL=100 and ExtSpeed accel/decel=100);
+    ``motion_time_s`` fixes every motion's duration instead; ``robot_names`` are the names
+    Controller_GetRobot accepts. ``stats`` counts connections, requests, moves,
+    keep-alives, busy replies and dropped connections.
     """
 
     def __init__(self, rig: SimRig, clock: Clock, max_linear_speed_mm_s: float,
                  faults: DensoFaults | None, motion_time_s: float | None,
-                 robot_names: tuple[str, ...]) -> None:
-        if not (math.isfinite(max_linear_speed_mm_s) and max_linear_speed_mm_s > 0):
-            raise ValueError(f"max_linear_speed_mm_s must be finite and > 0, got "
-                             f"{max_linear_speed_mm_s}")
+                 robot_names: tuple[str, ...],
+                 max_linear_accel_mm_s2: float = DEFAULT_MAX_LINEAR_ACCEL_MM_S2) -> None:
+        for name, v in (("max_linear_speed_mm_s", max_linear_speed_mm_s),
+                        ("max_linear_accel_mm_s2", max_linear_accel_mm_s2)):
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {v}")
         self.rig = rig
         self.clock = clock
         self.max_linear_speed_mm_s = float(max_linear_speed_mm_s)
+        self.max_linear_accel_mm_s2 = float(max_linear_accel_mm_s2)
         self.faults = faults or DensoFaults()
         self.motion_time_s = motion_time_s
         self.robot_names = tuple(robot_names)
@@ -106,7 +113,11 @@ class DensoController:
         #: it was still comes to rest: (target, time; inf on the fast clock = the next request)
         self.motion: Job | None = None
         self.coast: tuple[np.ndarray, float] | None = None
-        #: modelled duration (s) of the last move, distance / (SPEED × ExtSpeed × max speed),
+        #: real-time clock: the path of the move under way (clock time → commanded
+        #: base_from_flange, mm) that the rig's true flange follows until the arm is still
+        self.path: Callable[[float], np.ndarray] | None = None
+        self._profile = Trapezoid(0.0, 1.0, 1.0)   # the last move's (see _duration)
+        #: modelled duration (s) of the last move's trapezoidal profile (see ``_duration``),
         #: computed on both clocks (the fast clock does not wait for it)
         self.last_motion_s: float | None = None
         self.fig = -1
@@ -267,6 +278,9 @@ class DensoController:
             if self.motion is not None:
                 self.motion.halted = True
             self.coast = None  # an arm still settling stops where it is (no kinematics)
+            if self.path is not None:   # a real-time move stops on its path
+                self.rig.move_flange(self.path(self.clock.now()))
+                self.path = None
 
     def _on_robot_move(self, sess: Session, serial: int, a: list[Variant]) -> Any:
         self._get(sess, a[0], "robot")
@@ -405,7 +419,7 @@ class DensoController:
         target = matrix_from_denso_p(p[:6])
         if not np.isfinite(target).all():
             raise Refusal(E_INVALIDARG, f"pose {p} gives a non-finite target")
-        duration = self._duration(target, pct)
+        duration = self._duration(target, pct, accel, decel)
         self.move_accel, self.move_decel = accel, decel
         if p[6] >= 0:
             self.fig = int(p[6])
@@ -431,6 +445,8 @@ class DensoController:
         sess.job = job
         with self._lock:
             self.motion = job
+            if not hold and duration > 0:
+                self._follow(target, now, duration)
         return None if nxt else DEFERRED
 
     def arrive(self, target: np.ndarray, at: float) -> None:
@@ -439,6 +455,7 @@ class DensoController:
         with self._lock:
             if at <= self.clock.now():
                 self.coast = None
+                self.path = None
                 self.rig.move_flange(target)
             else:
                 self.coast = (target, at)
@@ -452,6 +469,7 @@ class DensoController:
             target, at = self.coast
             if (request and math.isinf(at)) or at <= self.clock.now():
                 self.coast = None
+                self.path = None
                 self.rig.move_flange(target)
 
     def end_motion(self, job: Job) -> None:
@@ -459,16 +477,44 @@ class DensoController:
             if self.motion is job:
                 self.motion = None
 
-    def _duration(self, target: np.ndarray, pct: float) -> float:
+    def _follow(self, target: np.ndarray, t0: float, duration: float) -> None:
+        """The rig's true flange follows the move from the reported pose to ``target``
+        (straight line and rotation geodesic) on the profile ``_profile`` stretched to
+        ``duration`` s, starting at clock time ``t0``."""
+        start = self.rig.reported_flange()
+        prof = self._profile
+        scale = prof.duration / duration if prof.duration > 0 else 0.0
+
+        def path(now: float) -> np.ndarray:
+            f = prof.fraction((now - t0) * scale) if scale > 0 else min(1.0, (now - t0)
+                                                                        / duration)
+            return straight_path(start, target, f)
+
+        clock = self.clock
+        self.path = path
+        self.rig.follow(lambda: path(clock.now()))
+
+    def _duration(self, target: np.ndarray, pct: float, accel_pct: float | None = None,
+                  decel_pct: float | None = None) -> float:
         """Seconds a move to ``target`` (base_from_flange, mm) at SPEED ``pct`` % takes until
-        the arm is still: distance / (SPEED × ExtSpeed × ``max_linear_speed_mm_s``), or
-        ``motion_time_s``; recorded in ``last_motion_s`` on both clocks, 0 on the fast one."""
+        the arm is still: the trapezoidal profile (:mod:`tmscal.motion`) over the distance
+        with speed cap SPEED × ExtSpeed × ``max_linear_speed_mm_s`` and acceleration a_eff,
+        the harmonic mean of the acceleration ACCEL × ExtSpeed accel and the deceleration
+        DECEL × ExtSpeed decel (each × ``max_linear_accel_mm_s2``; an omitted ACCEL/DECEL
+        is 100 %), which gives the asymmetric profile's duration exactly; or
+        ``motion_time_s``. Recorded in ``last_motion_s`` on both clocks; 0 on the fast one."""
         speed = self.max_linear_speed_mm_s * pct / 100.0 * self.ext_speed / 100.0
+        full = self.max_linear_accel_mm_s2
+        acc = full * (100.0 if accel_pct is None else accel_pct) / 100.0 * self.ext_accel / 100.0
+        dec = full * (100.0 if decel_pct is None else decel_pct) / 100.0 * self.ext_decel / 100.0
         dist = float(np.linalg.norm(target[:3, 3] - self.rig.reported_flange()[:3, 3]))
-        if self.motion_time_s is not None:
-            modelled = float(self.motion_time_s)
-        else:
-            modelled = dist / speed if speed > 0 else math.inf
+        try:
+            self._profile = Trapezoid(dist, speed, 2.0 / (1.0 / acc + 1.0 / dec))
+        except (ValueError, ZeroDivisionError):
+            raise Refusal(E_INVALIDARG, f"a move of {dist:g} mm at {speed:g} mm/s and "
+                          f"{acc:g}/{dec:g} mm/s² never ends") from None
+        modelled = (float(self.motion_time_s) if self.motion_time_s is not None
+                    else self._profile.duration)
         if not math.isfinite(modelled):
             raise Refusal(E_INVALIDARG, f"a move of {dist:g} mm at {speed:g} mm/s never ends")
         self.last_motion_s = modelled

@@ -23,7 +23,7 @@ from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
 from ..server import MockDevice, TCPListener
 from .args import Refusal
-from .controller import DEFERRED, DensoController
+from .controller import DEFAULT_MAX_LINEAR_ACCEL_MM_S2, DEFERRED, DensoController
 from .state import DensoFaults, Session
 
 log = logging.getLogger(__name__)
@@ -36,10 +36,14 @@ class DensoMock(DensoController, MockDevice):
     """A b-CAP server on ``host:port`` (loopback only; port 0 → ephemeral, a real RC8 uses
     5007) serving ``rig``.
 
-    ``clock``: REAL_TIME (motions take distance / speed seconds) or FAST (immediate).
+    ``clock``: REAL_TIME (motions take their trapezoidal profile's time) or FAST
+    (immediate; ``last_motion_s`` still holds the modelled time).
     ``max_linear_speed_mm_s``: the linear speed at SPEED=100 and ExtSpeed=100 (mm/s).
-    ``faults``: :class:`DensoFaults`. ``motion_time_s``: a fixed duration for every motion
-    on the real-time clock (None: distance / speed). ``robot_names``: names GetRobot accepts.
+    ``max_linear_accel_mm_s2``: the linear acceleration (and deceleration) at ACCEL=100 and
+    ExtSpeed accel=100 (mm/s²; default the DENSO driver's, so the percentages it sends give
+    back the acceleration it was asked for). ``faults``: :class:`DensoFaults`.
+    ``motion_time_s``: a fixed duration for every motion (None: the profile's).
+    ``robot_names``: names GetRobot accepts.
     ``start()`` returns ``"host:port"``; ``close()`` stops it; usable as a context
     manager. ``stats`` counts requests, moves, keep-alives and busy replies.
     """
@@ -47,11 +51,12 @@ class DensoMock(DensoController, MockDevice):
     def __init__(self, rig: SimRig, host: str = "127.0.0.1", port: int = 0,
                  clock: Clock = REAL_TIME, max_linear_speed_mm_s: float = 1000.0,
                  faults: DensoFaults | None = None, motion_time_s: float | None = None,
-                 robot_names: tuple[str, ...] = ("Arm",)) -> None:
+                 robot_names: tuple[str, ...] = ("Arm",),
+                 max_linear_accel_mm_s2: float = DEFAULT_MAX_LINEAR_ACCEL_MM_S2) -> None:
         # the listener refuses a non-loopback host before anything else is checked
         self._listener = TCPListener(host, port, self._serve, "DensoMock host")
         super().__init__(rig, clock, max_linear_speed_mm_s, faults, motion_time_s,
-                         robot_names)
+                         robot_names, max_linear_accel_mm_s2)
 
     @property
     def host(self) -> str:

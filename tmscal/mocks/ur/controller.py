@@ -17,6 +17,7 @@ import math
 import re
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import InitVar, dataclass
 from typing import Any
@@ -25,7 +26,6 @@ import numpy as np
 
 from ...geometry import (
     pose_from_rotvec,
-    rotvec_from_matrix,
     rotvec_pose_from_matrix,
 )
 from ...sim.rig import SimRig
@@ -112,8 +112,9 @@ URFaults.drop_connection_at_move = property(  # type: ignore[assignment,misc]
 class URController:
     """The controller state machine serving ``rig`` (see the module docstring).
 
-    ``clock``: ``REAL_TIME``, moves take distance/speed seconds; ``FAST``, they complete at
-    once. ``faults``: ``URFaults`` to inject. ``program_running``: a control program runs at
+    ``clock``: ``REAL_TIME``, moves take their trapezoidal profile's time (``motion``);
+    ``FAST``, they complete at once (``last_motion_s`` holds the modelled time on both).
+    ``faults``: ``URFaults`` to inject. ``program_running``: a control program runs at
     start (runtime_state 2, ready); False, the controller starts stopped. ``robot_mode``
     (RTDE values, ``ROBOT_MODE_RUNNING`` by default; ``ROBOT_MODE_POWER_OFF``: powered off)
     and ``remote_control`` (the pendant's Remote/Local Control switch) are the operator's:
@@ -146,6 +147,10 @@ class URController:
         self._program_loaded = program_running
         self._executing = False
         self._motion: Motion | None = None
+        #: modelled duration (s) of the last move's trapezoidal profile, on every clock (the
+        #: fast clock does not wait for it), and of every move, oldest first (bounded)
+        self.last_motion_s: float | None = None
+        self.motion_log: deque[float] = deque(maxlen=100_000)
         self._interrupted: Motion | None = None   # resumed by dashboard "play"
         self._async_wr_count = 0
         self._async_op_id = 0
@@ -352,7 +357,7 @@ class URController:
         m, self._interrupted = self._interrupted, None
         self.runtime_state = RUNTIME_PLAYING
         if m is not None:
-            self._start_motion(m.target, m.speed, m.asynchronous, self.clock.now(),
+            self._start_motion(m.target, m.speed, m.accel, m.asynchronous, self.clock.now(),
                                "resumed move", resumed=True)
 
     def _protective_stop(self, m: Motion) -> None:
@@ -450,8 +455,8 @@ class URController:
                 return
         if cmd in (CMD_MOVEL, CMD_MOVEJ_IK):
             # moveJ_IK takes a pose and is executed like moveL
-            self._start_motion(pose_from_rotvec(d[0:6]), d[6], bool(self.in_int[1]), now,
-                               MOVE_CMDS[cmd])
+            self._start_motion(pose_from_rotvec(d[0:6]), d[6], d[7], bool(self.in_int[1]),
+                               now, MOVE_CMDS[cmd])
         elif cmd in (CMD_MOVEJ, CMD_MOVEL_FK):
             # No kinematics: joint targets are recorded and reported, the flange stays put.
             self.target_q = [float(v) for v in d[0:6]]
@@ -472,28 +477,38 @@ class URController:
                 self.out_double[i] = 0.0
             self.out_int[0] = 2
 
-    def _start_motion(self, target: np.ndarray, speed: float, asynchronous: bool, now: float,
-                      what: str, resumed: bool = False) -> None:
-        """Start a linear move of the flange to ``target`` (base_from_flange 4×4 mm) at
-        ``speed`` m/s. A synchronous move signals done when it ends (see ``_advance``)."""
+    def _start_motion(self, target: np.ndarray, speed: float, accel: float,
+                      asynchronous: bool, now: float, what: str, resumed: bool = False) -> None:
+        """Start a linear move of the flange to ``target`` (base_from_flange 4×4 mm) on a
+        trapezoidal profile capped at ``speed`` m/s and ``accel`` m/s² (rad/s, rad/s² for the
+        rotation; see :mod:`.motion`). Its modelled duration goes to ``last_motion_s`` on
+        every clock; on the real-time clock the rig's flange follows the profile. A
+        synchronous move signals done when it ends (see ``_advance``)."""
         start = self._flange_now(now)
-        dist_m = float(np.linalg.norm(target[:3, 3] - start[:3, 3])) / 1000.0
-        angle = float(np.linalg.norm(rotvec_from_matrix(start[:3, :3].T @ target[:3, :3])))
         speed = speed if speed > 0 else 0.25
-        duration = 0.0 if self.clock.fast else max(dist_m, angle) / speed
-        if not (np.isfinite(target).all() and math.isfinite(duration)):
-            self._runtime_error(f"{what}: target or duration not finite ({duration} s)")
+        accel = accel if accel > 0 else 1.2
+        target = np.asarray(target, dtype=np.float64).copy()
+        if not np.isfinite(target).all():
+            self._runtime_error(f"{what}: target not finite")
+            return
+        m = Motion(start, target, now, asynchronous, speed, accel, instant=self.clock.fast)
+        if not math.isfinite(m.modelled_s):
+            self._runtime_error(f"{what}: duration not finite ({m.modelled_s} s)")
             return
         self._abort_motion(now)
-        stop_at, kind = None, "protective"
         if not resumed and self.faults.protective_stop_at_move == self.move_count:
-            stop_at = 0.5
+            m.stop_fraction = 0.5
         elif not resumed and self.faults.power_off_at_move == self.move_count:
-            stop_at, kind = 0.5, "power_off"
-        self._motion = Motion(start, np.asarray(target, dtype=np.float64).copy(), now,
-                              duration, asynchronous, speed, stop_at, kind)
-        log.debug("UR mock: %s move %d, %.1f mm, %.3f rad, %.3f s%s", what, self.move_count,
-                  dist_m * 1000, angle, duration, " (async)" if asynchronous else "")
+            m.stop_fraction, m.stop_kind = 0.5, "power_off"
+        self._motion = m
+        self.last_motion_s = m.modelled_s
+        self.motion_log.append(m.modelled_s)
+        if m.duration > 0:
+            clock = self.clock
+            self.rig.follow(lambda: m.pose_at(m.fraction(clock.now())))
+        log.debug("UR mock: %s move %d, %.1f mm, %.3f s%s", what, self.move_count,
+                  float(np.linalg.norm(target[:3, 3] - start[:3, 3])), m.modelled_s,
+                  " (async)" if asynchronous else "")
         if asynchronous:
             self._write_async(0)
             if not resumed:

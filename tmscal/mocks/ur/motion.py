@@ -1,49 +1,91 @@
-"""A linear move of the UR mock's flange: interpolation along the straight line and the
-rotation geodesic, and the TCP speed it implies."""
+"""A linear move of the UR mock's flange on a trapezoidal velocity profile
+(:mod:`tmscal.motion`): the straight line and the rotation geodesic, both driven by one path
+parameter, and the TCP speed it implies.
+
+The caps are ``movel``'s: tool speed ``speed`` (m/s) and acceleration ``accel`` (m/s²) for
+the translation; the rotation profile reads the same two numbers as rad/s and rad/s², as a
+UR controller does for a tool-space move that mostly rotates (``movel(p, a, v)`` documents
+``a`` and ``v`` as the tool's, and a rotation-only ``movel`` runs at v rad/s). The move takes
+the longer of the two profiles (:func:`tmscal.motion.move_duration`); the other part is
+slowed to that duration by following the same path parameter: the share covered of the
+governing (longer) profile (``Trapezoid.fraction``).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...geometry import matrix_from_rotvec, rotvec_from_matrix
+from ...geometry import rotvec_from_matrix
+from ...motion import Trapezoid
+from ...sim.rig import straight_path
+
+#: the step (s) of the central difference that gives the TCP speed from the profile
+_DT = 1e-4
 
 
 @dataclass
 class Motion:
-    """A linear move of the flange (base_from_flange 4×4 mm) under way."""
+    """A linear move of the flange (base_from_flange 4×4 mm) under way, started at ``t0``
+    (the mock clock's seconds). ``modelled_s`` is the profile's duration (s) on every clock;
+    ``duration`` is 0 when ``instant`` (the fast clock: the move completes at once)."""
 
     start: np.ndarray          # base_from_flange 4×4 mm at the start
     target: np.ndarray         # base_from_flange 4×4 mm commanded
     t0: float
-    duration: float            # s
     asynchronous: bool
-    speed: float               # m/s (rad/s for rotation-only moves)
+    speed: float               # m/s (rad/s for the rotation)
+    accel: float               # m/s² (rad/s² for the rotation)
+    instant: bool = False
     stop_fraction: float | None = None   # a fault stops the motion at this fraction
     stop_kind: str = "protective"        # that fault: "protective" stop or "power_off"
+    modelled_s: float = field(init=False)
+    _profile: Trapezoid = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        d_mm = float(np.linalg.norm(self.target[:3, 3] - self.start[:3, 3]))
+        angle = float(np.linalg.norm(self._rotvec()))
+        translation = Trapezoid(d_mm, self.speed * 1000.0, self.accel * 1000.0)
+        rotation = Trapezoid(angle, self.speed, self.accel)
+        # the governing profile; its duration is move_duration(start, target, 1000 v,
+        # 1000 a, degrees(v), degrees(a)) (a profile's duration does not depend on the unit)
+        self._profile = max(translation, rotation, key=lambda p: p.duration)
+        self.modelled_s = self._profile.duration
+
+    @property
+    def duration(self) -> float:
+        """Seconds the move lasts on the mock's clock (0 on the fast clock)."""
+        return 0.0 if self.instant else self.modelled_s
+
+    def _rotvec(self) -> np.ndarray:
+        return rotvec_from_matrix(self.start[:3, :3].T @ self.target[:3, :3])
+
+    def _share(self, t: float) -> float:
+        """The path parameter (0…1) ``t`` s after the start."""
+        return self._profile.fraction(t)
 
     def fraction(self, now: float) -> float:
+        """The share of the path covered at ``now`` (0…1, on the trapezoid, not linear in
+        time)."""
         if self.duration <= 0:
             return 1.0
-        return min(1.0, max(0.0, (now - self.t0) / self.duration))
+        return self._share(now - self.t0)
 
     def pose_at(self, f: float) -> np.ndarray:
-        """Interpolated base_from_flange (mm): translation lerp, rotation along the geodesic."""
-        if f >= 1.0:
-            return self.target.copy()
-        out = np.eye(4)
-        out[:3, 3] = self.start[:3, 3] + f * (self.target[:3, 3] - self.start[:3, 3])
-        rel = self.start[:3, :3].T @ self.target[:3, :3]
-        out[:3, :3] = self.start[:3, :3] @ matrix_from_rotvec(f * rotvec_from_matrix(rel))
-        return out
+        """base_from_flange (mm) at path share ``f``: the straight line for the translation,
+        the geodesic for the rotation."""
+        return straight_path(self.start, self.target, f)
 
     def velocity(self, now: float) -> list[float]:
         """TCP speed [vx, vy, vz (m/s), wx, wy, wz (rad/s)] in the base frame (zero when
-        done)."""
+        done): the path's direction times the rate of the path parameter (a central
+        difference of the profile)."""
         if self.duration <= 0 or self.fraction(now) >= 1.0:
             return [0.0] * 6
-        v = (self.target[:3, 3] - self.start[:3, 3]) / 1000.0 / self.duration
-        rel = self.start[:3, :3].T @ self.target[:3, :3]
-        w = self.start[:3, :3] @ rotvec_from_matrix(rel) / self.duration
+        t = now - self.t0
+        rate = (self._share(t + _DT) - self._share(max(t - _DT, 0.0))) / (t + _DT
+                                                                         - max(t - _DT, 0.0))
+        v = (self.target[:3, 3] - self.start[:3, 3]) / 1000.0 * rate
+        w = self.start[:3, :3] @ self._rotvec() * rate
         return [float(x) for x in (*v, *w)]
