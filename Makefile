@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/tracker.py
 	$(BIN)/python benchmarks/acquisition.py --robot ur
 	$(BIN)/python benchmarks/acquisition.py --robot denso
+	$(BIN)/python benchmarks/time_to_calibrate.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info
