@@ -192,3 +192,14 @@ def test_noise_free_rig_settles_to_the_commanded_pose() -> None:
                  time_s=lambda: 0.0)
     rig.move_flange(_target())
     np.testing.assert_array_equal(rig.flange, _target())
+
+
+def test_realtime_config_runs_on_the_real_clock_with_settling(configs_dir) -> None:
+    cfg = load_config(configs_dir / "mock-ur-polaris-realtime.yaml")
+    assert cfg.mock is not None and cfg.mock.clock == "real"
+    assert build_sim_rig(cfg).settle == Settle(0.3, 0.25, 4.0)
+    assert cfg.sampling.settle == "still" and cfg.sampling.settle_s == 1.0
+    assert cfg.plan.poses == 500
+    assert cfg.robot is not None
+    assert cfg.robot.speed_mm_s <= cfg.safety.max_speed_mm_s
+    assert cfg.robot.accel_mm_s2 <= cfg.safety.max_accel_mm_s2
