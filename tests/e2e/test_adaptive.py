@@ -14,14 +14,19 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
 
 from tmscal.acquisition.adaptive import acquire_adaptive, settings_for
+from tmscal.acquisition.devices import envelope_for
 from tmscal.acquisition.plan import PlanSpec
 from tmscal.config import load_config
+from tmscal.errors import SafetyError
 from tmscal.mocks.rig import spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 
-from ..rigs import NOISE_FREE_MOCK, endpoints_kwargs, point_config, wait_for_lines
+from ..fuzz import fuzz_settings
+from ..rigs import NOISE_FREE_MOCK, endpoints_kwargs, point_config, wait_for_lines, write_config
 
 #: the mock rig's noise, far above the target: no dozen poses can reach 0.05 mm
 VERY_NOISY = {"fiducial_sigma_mm": 1.0, "robot_rot_sigma_deg": 0.5, "robot_trans_sigma_mm": 1.0}
@@ -36,7 +41,6 @@ def check_adaptive_session(path, pool_size: int | None = None) -> list:
     """The session's invariants: indices 0…n−1 in order of acquisition, every commanded pose
     a distinct pool pose (the pool regenerated from the header) and inside the envelope the
     header's config gives around P0. Returns the records in index order."""
-    from tmscal.acquisition.devices import envelope_for
     from tmscal.config import parse_config
 
     s = read_session(path)
@@ -146,3 +150,41 @@ def test_demo_adaptive_json_recovers_the_truth_within_the_prediction(mock_config
         sum(res["robot_time_s"][k] for k in ("moving", "settling", "sampling")))
     assert 0 < res["true_coil_mm"] <= res["predicted_coil_mm"] <= 0.07
     assert res["method"] == "qr36" and res["n_solve"] == res["poses_used"]
+
+
+_SHRINK = st.tuples(*[st.floats(0, 330)] * 5, st.floats(0, 350))  # box sides: −x −y −z +x +y +z
+
+
+@pytest.mark.e2e
+@fuzz_settings(examples=3)
+@given(seed=st.integers(0, 2**16), radius=st.floats(10, 120), rotation=st.floats(1, 15),
+       offset=st.floats(40, 250), max_rot=st.floats(4, 25), shrink=_SHRINK)
+@example(seed=1, radius=40, rotation=5, offset=200, max_rot=20, shrink=(0,) * 6)  # runs
+@example(seed=2, radius=100, rotation=10, offset=200, max_rot=20,
+         shrink=(300, 0, 0, 0, 0, 0))  # the pool leaves the box: refused
+def test_every_pose_an_adaptive_run_commands_is_inside_the_envelope(
+        tmp_path_factory, seed, radius, rotation, offset, max_rot, shrink):
+    """Random envelopes (offset and rotation limits, a workspace box shrunk around P0 and the
+    coil) and rig and plan seeds: the run is refused before anything moves, or every pose
+    the robot mock was told to go to is inside the envelope around P0."""
+    lo = np.array([100.0, -400.0, 0.0]) + shrink[:3]
+    hi = np.array([900.0, 400.0, 800.0]) - shrink[3:]
+    tmp = tmp_path_factory.mktemp("env")
+    cfg = load_config(write_config(
+        tmp, "mock-denso-polaris.yaml", robot={"port": 0}, sampling={"samples": 3},
+        plan={"seed": seed, "radius_mm": radius, "rotation_deg": rotation},
+        safety={"max_offset_mm": offset, "max_rotation_deg": max_rot,
+                "workspace_min_mm": lo.tolist(), "workspace_max_mm": hi.tolist()},
+        adaptive={"max_poses": 6, "pool": 150, "region": 50}, mock={"seed": seed}))
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        p0 = mr.rig.commanded.copy()
+        try:
+            acquire_adaptive(cfg, tmp / "s.jsonl", **endpoints_kwargs(mr.endpoints))
+        except SafetyError as e:
+            assert "Nothing was moved" in str(e)
+            assert not mr.rig.moves
+            return
+        moves = list(mr.rig.moves)
+    assert len(moves) >= 4
+    env = envelope_for(cfg, p0)
+    assert not [env.violations(M) for M in moves if env.violations(M)]
