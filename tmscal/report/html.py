@@ -111,6 +111,8 @@ def _rig(session: Session, sha256: str) -> str:
             ["created", h.get("created", "?")], ["config", name or "(no name)"],
             ["bodies", ", ".join(session.bodies)],
             ["poses recorded", len(session.poses)]]
+    if isinstance(cfg, dict) and isinstance(cfg.get("simulate"), dict):
+        rows.append(["simulated", ", ".join(f"{k} {v}" for k, v in cfg["simulate"].items())])
     if h.get("sampling"):
         rows.append(["sampling", ", ".join(f"{k} {v}" for k, v in h["sampling"].items())])
     if session.truth:
@@ -191,6 +193,8 @@ def _draw_spreads(session: Session, path: str) -> None:
         a.grid(True, alpha=0.3)
     ax[0].legend(frameon=False, title="red lines: skipped poses" if skipped else None)
     ax[1].set_xlabel("session pose index")
+    from matplotlib.ticker import MaxNLocator
+    ax[1].xaxis.set_major_locator(MaxNLocator(integer=True))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
