@@ -151,3 +151,26 @@ def test_reported_spread_is_the_sample_scatter(runs, n):
     ms = float(np.mean(runs[n]["spread"] ** 2))
     want = 3 * SIGMA_T_MM ** 2 * (n - 1) / n
     assert abs(ms / want - 1) < 0.1, f"n={n}: mean spread² {ms:.4f}, want {want:.4f}"
+
+
+# --- samples by need -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("sem", [0.1, 0.05])
+def test_samples_by_need_reach_the_standard_error_they_were_asked_for(sem):
+    # with sem_mm the count is the first k at which spread/√k ≤ sem_mm: about 3σ²/sem²
+    # frames (19 and 75 here), and the averaged pose's 3D error then has an RMS of about
+    # sem_mm over REPS seeded runs (relative SE ≈ 1/√(2·3·REPS) ≈ 2.4 %; stopping when the
+    # sample spread happens to be low adds a little: the margin is 12 %)
+    rng = np.random.default_rng(int(1000 * sem))
+    tr, rob = NoisyTracker(rng).open(), NoisyRobot(rng).open()
+    err, counts = [], []
+    for _ in range(REPS):
+        s = sample_pose(rob, tr, 1000, settle_s=0.0, sleep=lambda _s: None, sem_mm=sem,
+                        min_samples=10)
+        assert s.problem is None and s.samples["marker"] == s.frames < 1000
+        err.append(np.linalg.norm(s.bodies["marker"][:3, 3] - TRUE["marker"][:3, 3]))
+        counts.append(s.frames)
+    rms = float(np.sqrt(np.mean(np.square(err))))
+    assert abs(rms / sem - 1) < 0.12, f"RMS error {rms:.4f} mm for sem_mm {sem}"
+    want = 3 * SIGMA_T_MM ** 2 / sem ** 2
+    assert abs(np.mean(counts) / want - 1) < 0.15, f"{np.mean(counts):.1f} frames, ~{want:.0f}"
