@@ -230,3 +230,27 @@ def test_a_host_off_loopback_is_refused_without_allow_remote(polaris, calib_file
     assert r.returncode == 2
     assert "--host" in r.stderr and "--allow-remote" in r.stderr
     assert "OpenIGTLink server" not in r.stdout
+
+
+def test_only_usable_tools_are_sent_and_z_applies_to_the_probe():
+    """``frame_transforms`` on hand-made frames: a tool partly out of the volume, missing or
+    out of the volume is left out; the coil in the base is Z · C."""
+    from tmscal.calib import Calibration
+    from tmscal.drivers.base import ToolState, TrackerFrame
+    from tmscal.stream import frame_transforms
+
+    truth = tms_rig_truth()
+    cal = Calibration("qr36", 10, X=truth.X, Z=truth.Z, X_raw=truth.X, Z_raw=truth.Z,
+                      Y=truth.Y, Y_raw=truth.Y)
+    C = np.linalg.inv(truth.Z) @ np.eye(4)
+    C[:3, 3] = [10.0, -20.0, -1500.0]
+    seen = ToolState(pose=C)
+    for bad in (ToolState(pose=C, partially_out_of_volume=True),
+                ToolState(pose=C, out_of_volume=True), ToolState(pose=None, missing=True)):
+        fr = TrackerFrame(frame=1, host_time=0.0, tools={"marker": seen, "probe": bad})
+        assert set(frame_transforms(fr, cal)) == {"MarkerToTracker", "TrackerToRobotBase"}
+        fr = TrackerFrame(frame=1, host_time=0.0, tools={"marker": bad, "probe": seen})
+        got = frame_transforms(fr, cal)
+        assert set(got) == {"CoilToRobotBase", "CoilToTracker", "TrackerToRobotBase"}
+        expected = truth.Z[:3, :3] @ C[:3, 3] + truth.Z[:3, 3]
+        assert np.allclose(got["CoilToRobotBase"][:3, 3], expected, atol=1e-9)
