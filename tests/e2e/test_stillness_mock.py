@@ -15,6 +15,7 @@ at all, and the runs are deterministic.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -88,3 +89,28 @@ def test_samples_by_need_once_still_take_fewer_frames_and_record_the_noise(mock_
     assert np.median(still_spread) < 0.06 < np.median(fixed_spread)
     # both meet the standard error they were asked for: their means are near the truth
     assert still_err.mean() < 0.03 and fixed_err.mean() < 0.03
+
+
+@pytest.mark.e2e
+def test_a_coil_that_never_settles_is_skipped_with_the_reason(mock_config, tmp_path):
+    # a swing that keeps going (τ 60 s) on the real-time clock: every pose waits settle_s,
+    # is tried again (a second move), then recorded as skipped naming the spread it saw
+    poses = 3
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           plan={"poses": poses, "radius_mm": 20, "rotation_deg": 2},
+                           sampling={"samples": 10, "settle": "still", "settle_s": 0.3},
+                           mock={"clock": "real", "noise": NOISE,
+                                 "settle": {**SETTLE, "tau_s": 60.0}})
+    cfg = load_config(cfg_path)
+    out = tmp_path / "never.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        res = acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
+        moves = len(mr.rig.moves)
+    assert (res.recorded, res.skipped) == (0, poses)
+    assert moves == 2 * poses
+    for p in read_session(out).poses:
+        assert p.B is None and p.C is None and p.skipped is not None
+        assert p.skipped.startswith("not still after 0.3 s (marker ")
+        # the swing's RMS over a 0.2 s window of a 0.3 mm, 4 Hz sine: about 0.3/√2 ≈ 0.2 mm
+        spread = float(re.search(r"marker ([0-9.]+) mm RMS", p.skipped).group(1))
+        assert 0.1 < spread < 0.3, p.skipped
