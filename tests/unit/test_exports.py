@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import json
+import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -211,5 +212,8 @@ def test_export_refuses_bad_use(files):
                                    files / "x.tfm", "--easy-handeye2")
     assert "--frame" in fails("export", files / "qr36.yaml", "--format", "easy-handeye", "-o",
                               files / "x.yaml", "--frame", "robot=base")
+    fifo = files / "fifo"
+    os.mkfifo(fifo)
+    assert "FIFO" in fails("export", fifo, "--format", "json", "-o", files / "z.json")
     assert "s.jsonl" in fails("export", files / "s.jsonl", "--format", "json", "-o",
                               files / "y.json")

@@ -223,7 +223,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     if calib_file is not None:
         _check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
                       fitting=bool(options or handheld_pose is not None or train is not None
-                                   or in_sample or orthonormal))
+                                   or in_sample or orthonormal or method.lower() != "qr36"))
         return
     opts = _parse_options(options)
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)

@@ -92,7 +92,8 @@ def render(cf: CalibrationFile) -> str:
     """The device-set XML text (comments name the frames and units)."""
     cal = cf.calibration
     date = _date(cf.created)
-    known = "from the session's rig config" if cf.tools else "placeholders: fill in CHECK"
+    known = ("as the session's rig config wrote them (relative to its folder)" if cf.tools
+             else "placeholders: fill in CHECK")
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f"<!-- tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 "
              "numbers row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
