@@ -191,7 +191,7 @@ def _decide(s: _State, pool: np.ndarray, p0: np.ndarray, settings: AdaptiveSetti
         A, B, C, opts = prediction_inputs(session.poses, session.bodies)
         try:
             pred = predict(A, B, C, pool[:settings.region], settings, **opts)
-        except CalibrationError as e:  # e.g. degenerate poses: spread further
+        except (CalibrationError, np.linalg.LinAlgError) as e:  # degenerate: spread further
             log.warning("no prediction from %d poses yet (%s)", s.used, e)
         if pred is not None:
             reason = stop_reason(pred, len(s.records), settings)
