@@ -44,7 +44,7 @@ def _rig() -> SimRig:
 def _targets() -> list[np.ndarray]:
     return [compose(TMS_RIG_P0, make_pose(rot_z(0.10), [10.0, -5.0, 3.0])),
             compose(TMS_RIG_P0, make_pose(rot_x(-0.15), [-80.0, 12.5, 0.0])),
-            compose(TMS_RIG_P0, make_pose(rot_z(0.6), [0.0, 2.0, 0.0])),
+            compose(TMS_RIG_P0, make_pose(rot_z(1.5), [0.0, 2.0, 0.0])),
             compose(TMS_RIG_P0, make_pose(np.eye(3), [40.0, 150.0, 25.0]))]
 
 
@@ -61,14 +61,14 @@ def test_ur_mock_move_durations_are_the_trapezoid_at_the_commanded_caps() -> Non
                          "accel": accel})
         durations = list(mock.motion_log)
     assert res["error"] is None, res["error"]
-    v, a = speed / 1000.0, accel / 1000.0  # what moveL carries: m/s, m/s² (rad/s, rad/s²)
+    v, a = speed / 1000.0, accel / 1000.0  # what moveL carries: m/s, m/s²; rotation 4 × that
     starts = [TMS_RIG_P0, *targets[:-1]]
-    want = [move_duration(s, t, speed, accel, math.degrees(v), math.degrees(a))
+    want = [move_duration(s, t, speed, accel, math.degrees(4 * v), math.degrees(4 * a))
             for s, t in zip(starts, targets, strict=True)]
     assert durations == pytest.approx(want, rel=1e-9)
     # the third move is mostly a rotation: its time comes from the rotation profile
     angle = float(rotation_angle(targets[1][:3, :3].T @ targets[2][:3, :3]))   # rad
-    assert durations[2] == pytest.approx(trapezoid_duration(angle, v, a), rel=1e-9)
+    assert durations[2] == pytest.approx(trapezoid_duration(angle, 4 * v, 4 * a), rel=1e-9)
 
 
 def _bcap(mock: Any) -> tuple[Any, int]:

@@ -1,5 +1,6 @@
 """The UR mock's motion model: a trapezoidal velocity profile (tmscal.motion) at movel's speed
-and acceleration caps (the same numbers as rad/s and rad/s² for the rotation), the modelled
+and acceleration caps (four times the same numbers as rad/s and rad/s² for the rotation), the
+modelled
 duration recorded on both clocks, and the flange (what the tracker sees) on the profile
 mid-move, checked against the closed-form kinematics on an injected clock."""
 
@@ -69,7 +70,7 @@ def test_short_move_is_triangular() -> None:
 
 
 @pytest.mark.parametrize("target", [
-    make_pose(rot_z(0.4), [5.0, 0.0, 0.0]),          # rotation sets the time
+    make_pose(rot_z(1.4), [5.0, 0.0, 0.0]),          # rotation sets the time
     make_pose(rot_x(-0.1), [-60.0, 20.0, 10.0]),     # translation sets the time
     make_pose(rot_z(1.2) @ rot_x(0.3), [0.0, 0.0, 0.0]),
 ])
@@ -80,7 +81,8 @@ def test_durations_follow_the_one_motion_model_for_several_moves(target) -> None
     start = rig.reported_flange()
     goal = TMS_RIG_P0 @ target
     _command(ctl, goal, v, a)
-    want = move_duration(start, goal, 1000 * v, 1000 * a, math.degrees(v), math.degrees(a))
+    want = move_duration(start, goal, 1000 * v, 1000 * a, math.degrees(4 * v),
+                         math.degrees(4 * a))
     assert ctl.last_motion_s == pytest.approx(want, rel=1e-12)
     assert list(ctl.motion_log) == [ctl.last_motion_s]
 
@@ -129,12 +131,12 @@ def test_a_pause_stops_the_flange_on_its_path() -> None:
                                atol=1e-9)
 
 
-def test_motion_profile_rotation_reads_speed_as_rad_per_s() -> None:
-    # a pure rotation of 0.5 rad at 0.2 "m/s" = 0.2 rad/s, 1 rad/s²: T = θ/ω + ω/α
-    m = Motion(TMS_RIG_P0, TMS_RIG_P0 @ make_pose(rot_z(0.5)), 0.0, False, 0.2, 1.0)
-    assert m.modelled_s == pytest.approx(0.5 / 0.2 + 0.2 / 1.0, rel=1e-12)
+def test_motion_profile_rotation_caps_are_four_times_the_tool_caps() -> None:
+    # a pure rotation of 2 rad at 0.2 m/s, 1 m/s² → 0.8 rad/s, 4 rad/s²: T = θ/ω + ω/α
+    m = Motion(TMS_RIG_P0, TMS_RIG_P0 @ make_pose(rot_z(2.0)), 0.0, False, 0.2, 1.0)
+    assert m.modelled_s == pytest.approx(2.0 / 0.8 + 0.8 / 4.0, rel=1e-12)
     w = np.linalg.norm(m.velocity(1.0)[3:])
-    assert w == pytest.approx(0.2, rel=1e-6)
+    assert w == pytest.approx(0.8, rel=1e-6)
     assert Motion(TMS_RIG_P0, TMS_RIG_P0, 0.0, False, 0.2, 1.0).fraction(0.0) == 1.0
     assert Motion(TMS_RIG_P0, TMS_RIG_P0 @ make_pose(rot_z(0.5)), 0.0, False, 0.2, 1.0,
                   instant=True).duration == 0.0

@@ -3,12 +3,13 @@
 parameter, and the TCP speed it implies.
 
 The caps are ``movel``'s: tool speed ``speed`` (m/s) and acceleration ``accel`` (m/s²) for
-the translation; the rotation profile reads the same two numbers as rad/s and rad/s², as a
-UR controller does for a tool-space move that mostly rotates (``movel(p, a, v)`` documents
-``a`` and ``v`` as the tool's, and a rotation-only ``movel`` runs at v rad/s). The move takes
-the longer of the two profiles (:func:`tmscal.motion.move_duration`); the other part is
-slowed to that duration by following the same path parameter: the share covered of the
-governing (longer) profile (``Trapezoid.fraction``).
+the translation, and ``ROTATION_FACTOR`` (4) times the same numbers as rad/s and rad/s² for
+the rotation, as a UR controller derives them for ``movel`` (answer on the Universal Robots
+forum, "MoveL: Tool Angular Speed", 2021; not in UR's script manual: CHECK at a rig). A
+profile is fitted to the translation distance and one to the rotation angle (here the
+geodesic angle); the move takes the longer (:func:`tmscal.motion.move_duration` with these
+caps) and the other part is slowed to that duration by following the same path parameter:
+the share covered of the governing profile (``Trapezoid.fraction``).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from ...geometry import rotvec_from_matrix
 from ...motion import Trapezoid
 from ...sim.rig import straight_path
 
+#: the rotation caps of a movel: this many rad/s (rad/s²) per m/s (m/s²) of the tool caps
+ROTATION_FACTOR = 4.0
 #: the step (s) of the central difference that gives the TCP speed from the profile
 _DT = 1e-4
 
@@ -35,8 +38,8 @@ class Motion:
     target: np.ndarray         # base_from_flange 4×4 mm commanded
     t0: float
     asynchronous: bool
-    speed: float               # m/s (rad/s for the rotation)
-    accel: float               # m/s² (rad/s² for the rotation)
+    speed: float               # m/s (× ROTATION_FACTOR: rad/s for the rotation)
+    accel: float               # m/s² (× ROTATION_FACTOR: rad/s² for the rotation)
     instant: bool = False
     stop_fraction: float | None = None   # a fault stops the motion at this fraction
     stop_kind: str = "protective"        # that fault: "protective" stop or "power_off"
@@ -47,9 +50,9 @@ class Motion:
         d_mm = float(np.linalg.norm(self.target[:3, 3] - self.start[:3, 3]))
         angle = float(np.linalg.norm(self._rotvec()))
         translation = Trapezoid(d_mm, self.speed * 1000.0, self.accel * 1000.0)
-        rotation = Trapezoid(angle, self.speed, self.accel)
+        rotation = Trapezoid(angle, ROTATION_FACTOR * self.speed, ROTATION_FACTOR * self.accel)
         # the governing profile; its duration is move_duration(start, target, 1000 v,
-        # 1000 a, degrees(v), degrees(a)) (a profile's duration does not depend on the unit)
+        # 1000 a, degrees(4 v), degrees(4 a)) (a profile's duration does not depend on the unit)
         self._profile = max(translation, rotation, key=lambda p: p.duration)
         self.modelled_s = self._profile.duration
 
