@@ -162,3 +162,22 @@ def test_old_files_without_z_probe_still_load(files, tmp_path):
     R = back.Z_probe[:3, :3]
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
     assert np.abs(back.Z_probe[:3, :3] - back.Z_probe_raw[:3, :3]).max() < 1e-2
+
+
+def test_solve_calib_in_process_refusals_and_same_session_warning(files):
+    def one_line(*args):
+        r = CliRunner().invoke(main, [str(a) for a in args])
+        assert r.exit_code != 0
+        lines = [ln for ln in r.output.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("error:"), r.output
+        return lines[0]
+
+    s, c = files / "s.jsonl", files / "qr36.yaml"
+    assert "--calib" in one_line("solve", s, "--calib", c, "--train", 20)
+    assert "--calib" in one_line("solve", s, "--calib", c, "-o", files / "new.yaml")
+    assert "--calib" in one_line("solve", s, "--calib", c, "--method", "ml")
+    assert "nope.yaml" in one_line("solve", s, "--calib", files / "nope.yaml")
+    assert "d.jsonl" in one_line("solve", s, "--calib", files / "d.jsonl")
+    out = run("solve", s, "--calib", c).output
+    assert "WARNING: this is the session the calibration was solved on" in out
+    assert "in-sample" in out
