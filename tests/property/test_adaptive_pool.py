@@ -1,7 +1,7 @@
 """Every pose an adaptive selection can return lies inside the safety envelope: random envelopes
 (tmscal.drivers.base.Envelope: offset, rotation, workspace box, tool points), random plans and
 rig seeds; the candidate pool is checked with acquisition.plan.check_plan first, then the
-bootstrap and choose_next (through calib.adaptive.next_step) pick poses on a simulated rig.
+bootstrap and choose_next pick poses on a simulated rig.
 The limits are checked here by hand from the drawn numbers, never through ``Envelope``."""
 
 from __future__ import annotations
@@ -43,18 +43,15 @@ def inside_by_hand(P: np.ndarray, lim: dict, tol: float = TOL) -> bool:
 
 def select(pool: np.ndarray, env: Envelope, rig: SimRig, settings: ad.AdaptiveSettings
            ) -> list[int]:
-    """An adaptive selection: the pool checked before anything moves, then next_step's
-    poses measured on the rig until it stops."""
+    """An adaptive selection: the pool checked before anything moves, then the bootstrap and
+    choose_next's poses measured on the rig until stop_reason stops it."""
     check_plan(pool, env)
-    used: list[int] = []
     A, B, C, spreads = [], [], [], []
-    while True:
-        arr = (np.array(A), np.array(B), np.array(C)) if A else (None, None, None)
-        step = ad.next_step(*arr, used, pool, TMS_RIG_P0, settings, spreads=spreads or None)
-        if step.index is None:
-            return used
-        used.append(step.index)
-        rig.move_flange(pool[step.index])
+    used: list[int] = []
+
+    def measure(i: int) -> None:
+        used.append(i)
+        rig.move_flange(pool[i])
         A.append(rig.reported_flange())
         rec: dict = {"spread": {}, "samples": {"B": 10, "C": 10}}
         for body, out in (("marker", B), ("probe", C)):
@@ -62,6 +59,18 @@ def select(pool: np.ndarray, env: Envelope, rig: SimRig, settings: ad.AdaptiveSe
             out.append(pose_mean(obs))
             rec["spread"][body] = spread_of(obs, out[-1])
         spreads.append(rec)
+
+    for i in ad.bootstrap_indices(pool, settings.bootstrap_poses(2), TMS_RIG_P0):
+        measure(i)
+    while True:
+        pred = ad.predict(np.array(A), np.array(B), np.array(C), pool[:settings.region],
+                          settings, spreads=spreads)
+        if ad.stop_reason(pred, len(used), settings):
+            return used
+        avail = np.ones(len(pool), dtype=bool)
+        avail[used] = False
+        cost = ad.candidate_cost_s(rig.commanded, pool, 250.0, 1200.0, 0.5)
+        measure(ad.choose_next(pred, pool, avail, cost)[0])
 
 
 def pool_extent(pool: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:

@@ -60,17 +60,25 @@ def rig(seed: int, noise: Noise | None = None) -> SimRig:
 
 
 def run_adaptive(r: SimRig, settings: ad.AdaptiveSettings, pool: np.ndarray = POOL,
-                 samples: int = 20) -> tuple[ad.Step, list[int]]:
-    """An adaptive run on the rig (next_step until it stops); the last step and the poses."""
+                 samples: int = 20) -> tuple[str, ad.Prediction, list[int]]:
+    """A simulated adaptive run on the rig: the bootstrap, then predict → stop_reason →
+    choose_next (robot time by the motion model at 250 mm/s, 1200 mm/s², + 0.5 s per pose)
+    until it stops. Returns (stop reason, last prediction, pool indices measured)."""
     s = Session(r, samples)
-    used: list[int] = []
+    used = ad.bootstrap_indices(pool, settings.bootstrap_poses(2), TMS_RIG_P0)
+    for i in used:
+        s.measure(pool[i])
     while True:
-        A, B, C = s.arrays()
-        step = ad.next_step(A, B, C, used, pool, TMS_RIG_P0, settings, spreads=s.spreads or None)
-        if step.index is None:
-            return step, used
-        used.append(step.index)
-        s.measure(pool[step.index])
+        pred = s.predict(settings, pool[:settings.region])
+        why = ad.stop_reason(pred, len(used), settings)
+        if why is not None:
+            return why, pred, used
+        avail = np.ones(len(pool), dtype=bool)
+        avail[used] = False
+        cost = ad.candidate_cost_s(r.commanded, pool, 250.0, 1200.0, 0.5)
+        i, _ = ad.choose_next(pred, pool, avail, cost)
+        used.append(i)
+        s.measure(pool[i])
 
 
 # --- settings and minimum ---
@@ -159,19 +167,19 @@ def test_prediction_covers_the_true_error_at_about_its_confidence() -> None:
 
 def test_prediction_of_a_noise_free_rig_is_zero_and_stops_at_the_bootstrap() -> None:
     settings = ad.AdaptiveSettings()
-    step, used = run_adaptive(rig(5, Noise.none()), settings)
-    assert step.stop == "target"
+    why, pred, used = run_adaptive(rig(5, Noise.none()), settings)
+    assert why == "target"
     assert len(used) == settings.bootstrap_poses(2)
-    assert step.prediction is not None and step.prediction.coil_mm < 1e-6
+    assert pred.coil_mm < 1e-6
 
 
 def test_very_noisy_rig_stops_at_max_poses_and_says_so() -> None:
     noisy = Noise(fiducial_sigma_mm=1.0, robot_rot_sigma_deg=0.5, robot_trans_sigma_mm=1.0)
     settings = ad.AdaptiveSettings(max_poses=7)
-    step, used = run_adaptive(rig(6, noisy), settings)
-    assert step.stop == "max_poses"
+    why, pred, used = run_adaptive(rig(6, noisy), settings)
+    assert why == "max_poses"
     assert len(used) == 7 and len(set(used)) == 7
-    assert step.prediction is not None and step.prediction.coil_mm > settings.target_mm
+    assert pred.coil_mm > settings.target_mm
 
 
 # --- the next pose ---
@@ -201,8 +209,8 @@ def test_chosen_poses_beat_random_poses_on_the_true_error() -> None:
     settings = ad.AdaptiveSettings(target_mm=1e-9, bootstrap=4, max_poses=10)
     err = {"chosen": [], "random": []}
     for seed in range(6):
-        step, used = run_adaptive(rig(2000 + seed), settings, samples=5)
-        cal = step.prediction.calibration
+        _, pred, used = run_adaptive(rig(2000 + seed), settings, samples=5)
+        cal = pred.calibration
         err["chosen"].append(ad.true_coil_error(cal, TRUTH.Y, TRUTH.Z, REGION))
         boot = used[:4]
         pick = np.random.default_rng(seed).choice(np.setdiff1d(np.arange(len(POOL)), boot), 6,
@@ -260,15 +268,12 @@ def test_bootstrap_is_deterministic_and_better_spread_than_random_picks() -> Non
         ad.bootstrap_indices(POOL, 0, TMS_RIG_P0)
 
 
-def test_next_step_refuses_a_history_that_is_not_its_bootstrap() -> None:
-    settings = ad.AdaptiveSettings()
-    first = ad.next_step(None, None, None, [], POOL, TMS_RIG_P0, settings)
-    assert first.phase == "bootstrap" and first.index is not None
-    s = Session(rig(9))
-    s.measure(POOL[first.index + 1])
-    A, B, C = s.arrays()
-    with pytest.raises(ValueError, match="bootstrap"):
-        ad.next_step(A, B, C, [first.index + 1], POOL, TMS_RIG_P0, settings)
+def test_a_longer_bootstrap_starts_with_the_shorter_one() -> None:
+    """Greedy farthest point is prefix-consistent: the loop replaces a skipped bootstrap pose
+    by the next one of a longer list."""
+    long = ad.bootstrap_indices(POOL, 12, TMS_RIG_P0)
+    for k in (1, 4, 7):
+        assert ad.bootstrap_indices(POOL, k, TMS_RIG_P0) == long[:k]
 
 
 # --- stopping and the true error ---

@@ -17,8 +17,8 @@ The pieces:
 * :func:`choose_next`: the candidate with the largest expected reduction of the mean-square
   coil-placement error over the region per second of robot time (an L-optimal design);
 * :func:`stop_reason`: "target" or "max_poses";
-* :func:`next_step`: the whole decision for one step, a function of the poses measured so far
-  (so a resumed run re-derives it from the session);
+* :func:`candidate_cost_s`: robot time per candidate by the one motion model
+  (tmscal.motion);
 * :func:`true_coil_error`: the error against a known truth (simulation, benchmarks).
 """
 
@@ -45,9 +45,9 @@ from .ml import (
     undistortion,
 )
 
-__all__ = ["AdaptiveSettings", "Prediction", "Step", "minimum_poses", "bootstrap_indices",
-           "predict", "choose_next", "stop_reason", "next_step", "candidate_cost_s",
-           "true_coil_error", "MC_DRAWS"]
+__all__ = ["AdaptiveSettings", "Prediction", "minimum_poses", "bootstrap_indices", "predict",
+           "placement_jacobians", "candidate_information", "choose_next", "stop_reason",
+           "candidate_cost_s", "true_coil_error", "MC_DRAWS"]
 
 #: Monte Carlo draws of the parameter error behind the predicted quantile (fixed seed 0)
 MC_DRAWS = 4000
@@ -411,49 +411,6 @@ def candidate_cost_s(current: np.ndarray, pool: np.ndarray, speed_mm_s: float,
         t = np.maximum(t, [trapezoid_duration(x, rot_speed_deg_s, rot_accel_deg_s2)
                            for x in ang])
     return t + np.asarray(per_pose_s, dtype=float)
-
-
-@dataclass
-class Step:
-    """One decision of an adaptive run: ``index`` (the pool pose to measure next, or None),
-    ``phase`` ("bootstrap", "adaptive" or "stop"), ``stop`` (None, "target" or
-    "max_poses"), ``prediction`` (None during the bootstrap) and ``info`` (choose_next's)."""
-
-    index: int | None
-    phase: str
-    stop: str | None = None
-    prediction: Prediction | None = None
-    info: dict[str, float] = field(default_factory=dict)
-
-
-def next_step(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, used: list[int],
-              pool: np.ndarray, p0: np.ndarray, settings: AdaptiveSettings,
-              cost_s: np.ndarray | None = None, **ml_options: Any) -> Step:
-    """What to do after the poses measured so far: ``used`` pool indices in the order
-    measured, with their A, B, C ((n, 4, 4) mm, n = len(used)). The first
-    ``settings.bootstrap_poses`` are :func:`bootstrap_indices` of the pool around ``p0``;
-    after them every step predicts (:func:`predict`, region = the first ``settings.region``
-    pool poses), stops (:func:`stop_reason`) or picks an unused candidate
-    (:func:`choose_next` with ``cost_s``, (n_pool,) s; None: every pose costs 1 s).
-    A pure function of its inputs, so a resumed run re-derives its state from the session."""
-    n = len(used)
-    bodies = 1 if C is None else 2
-    nb = settings.bootstrap_poses(bodies)
-    if n < nb:
-        boot = bootstrap_indices(pool, nb, p0)
-        if list(used) != boot[:n]:
-            raise ValueError(f"next_step: the poses measured {list(used)} are not the "
-                             f"bootstrap's first {n} {boot[:n]}")
-        return Step(boot[n], "bootstrap")
-    pred = predict(A, B, C, pool[:settings.region], settings, **ml_options)
-    why = stop_reason(pred, n, settings)
-    if why is not None:
-        return Step(None, "stop", why, pred)
-    avail = np.ones(len(pool), dtype=bool)
-    avail[list(used)] = False
-    cost = np.ones(len(pool)) if cost_s is None else cost_s
-    i, info = choose_next(pred, pool, avail, cost)
-    return Step(i, "adaptive", None, pred, info)
 
 
 def true_coil_error(cal: Calibration, truth_Y: np.ndarray, truth_Z: np.ndarray,
