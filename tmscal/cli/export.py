@@ -7,16 +7,16 @@ from pathlib import Path
 
 import click
 
+from ..exports import FORMATS
 from . import FORCE_HELP, INPUT_FILE, _write_atomic, check_outputs, handle_errors, main
 
-_FORMAT_HELP = "; ".join(f"{k}: {v[1]}" for k, v in
-                         __import__("tmscal.exports", fromlist=["FORMATS"]).FORMATS.items())
+_FORMAT_HELP = "; ".join(f"{k}: {v[1]}" for k, v in FORMATS.items())
 
 
 @main.command()
 @click.argument("calib_file", type=INPUT_FILE, metavar="CALIB")
 @click.option("--format", "fmt", required=True,
-              type=click.Choice(["itk", "plus", "easy-handeye", "invesalius", "json"]),
+              type=click.Choice(list(FORMATS)),
               help=_FORMAT_HELP + ".")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="File to write (e.g. Z.tfm, plus.xml, handeye.yaml, robot.rbtf, calib.json).")

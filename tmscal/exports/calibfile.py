@@ -182,12 +182,12 @@ def _header(doc: Any, src: str) -> tuple[str, Applied, int]:
 
 
 def parse_calibration(doc: Any, src: str = "<calibration>") -> Calibration:
-    """A :class:`Calibration` from a parsed calibration document (a dict as the file holds
+    """A :class:`Calibration` (X = flange_from_marker, Y = flange_from_probe, Z =
+    base_from_tracker, 4×4 mm) from a parsed calibration document (a dict as the file holds
     it). Raises CalibrationError naming ``src`` and the key."""
-    check = ConfigError  # check_tree raises ConfigError; re-raised as CalibrationError
     try:
-        check_tree(doc, src)
-    except check as e:
+        check_tree(doc, src)  # the rig config's bounds; its ConfigError becomes ours
+    except ConfigError as e:
         raise CalibrationError(str(e)) from None
     method, applied, n = _header(doc, src)
     mats: dict[str, np.ndarray | None] = {}
@@ -249,7 +249,8 @@ def _load_text(text: str, src: str) -> Any:
 
 def read_calibration(path: str | Path) -> CalibrationFile:
     """Read a calibration file (YAML of ``tmscal solve -o`` or JSON of ``tmscal export
-    --format json``). Raises CalibrationError naming the file (and the key)."""
+    --format json``): X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker,
+    4×4 mm. Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
     try:

@@ -51,8 +51,9 @@ def _truth(session: Session, cf: CalibrationFile, C: np.ndarray | None) -> dict[
 
 def check_calibration(session: Session, cf: CalibrationFile,
                       session_sha256: str | None = None) -> dict[str, Any]:
-    """Evaluate the stored calibration ``cf`` on every usable pose of ``session`` (no
-    fitting). Returns plain JSON types: "calibration" (file, method, poses, applied, created,
+    """Evaluate the stored calibration ``cf`` (X, Y, Z: 4×4 mm) on every usable pose of
+    ``session`` (A, B, C: 4×4 mm), no fitting. Returns plain JSON types, errors in mm and
+    degrees: "calibration" (file, method, poses, applied, created,
     session path and SHA-256 it was solved on, the errors it was stored with), "session"
     (path, SHA-256, poses used, skipped), "same_session" (True when the SHA-256s match: then
     the errors are in-sample, not a check), "errors" (e_t_mm, theta_t_deg, per body trans_mm
@@ -92,7 +93,8 @@ def _row(label: str, t: float, r: float, stored: tuple[float, float] | None = No
 
 
 def format_check(res: dict[str, Any]) -> str:
-    """The human output of ``tmscal solve SESSION --calib CALIB``."""
+    """The human output of ``tmscal solve SESSION --calib CALIB`` (mm and degrees, named in
+    the column headers)."""
     c, s, e = res["calibration"], res["session"], res["errors"]
     st = c.get("errors") or {}
     src = c["session"]
