@@ -211,7 +211,10 @@ class FrankaRobot(Robot):
         while not self._robot.join_motion(_JOIN_SLICE_S):
             if self._halt.is_set() or deadline.expired():
                 self._robot.stop()
-                self._robot.join_motion(5.0)
+                try:  # the preempted motion ends with libfranka's "Move command preempted!"
+                    self._robot.join_motion(5.0)
+                except Exception as e:
+                    log.debug("franka %s: after stop: %s", self.host, e)
                 if self._halt.is_set():
                     raise RobotFault(f"franka {self.host}: move_to halted by stop()",
                                      device=self.name)
