@@ -54,7 +54,8 @@ def check_calibration(session: Session, cf: CalibrationFile,
     """Evaluate the stored calibration ``cf`` (X, Y, Z: 4×4 mm) on every usable pose of
     ``session`` (A, B, C: 4×4 mm), no fitting. Returns plain JSON types, errors in mm and
     degrees: "calibration" (file, method, poses, applied, created,
-    session path and SHA-256 it was solved on, the errors it was stored with), "session"
+    session path and SHA-256 it was solved on, the errors it was stored with, the versions
+    that wrote it), "session"
     (path, SHA-256, poses used, skipped), "same_session" (True when the SHA-256s match: then
     the errors are in-sample, not a check), "errors" (e_t_mm, theta_t_deg, per body trans_mm
     and rot_deg, e_z/θ_z for QR24), "outliers", "truth" (None without one). Raises
@@ -76,6 +77,7 @@ def check_calibration(session: Session, cf: CalibrationFile,
         "calibration": {"file": str(cf.path), "method": cal.method, "n_poses": cal.n_poses,
                         "applied": str(cal.applied), "created": cf.created,
                         "session": stored, "errors": cf.doc.get("errors"),
+                        "versions": (cf.doc.get("provenance") or {}).get("versions"),
                         "errors_on": (cf.doc.get("poses") or {}).get("errors_on")},
         "session": {"path": str(session.path), "sha256": session_sha256, "n_poses": len(A),
                     "n_skipped": sum(p.skipped is not None for p in session.poses),
@@ -101,8 +103,9 @@ def format_check(res: dict[str, Any]) -> str:
     lines = [f"stored {c['method'].upper()} calibration {c['file']} checked on {s['path']} "
              "(no fitting)",
              f"  calibration: solved on {c['n_poses']} poses of {src.get('path', '?')} "
-             f"(sha256 {str(src.get('sha256', '?'))[:12]}…), written {c['created'] or '?'}, "
-             f"{c['applied']} matrices applied",
+             f"(sha256 {str(src.get('sha256', '?'))[:12]}…), written {c['created'] or '?'}"
+             + (f" by tmscal {c['versions'].get('tmscal')}" if c.get("versions") else "")
+             + f", {c['applied']} matrices applied",
              f"  this session: {s['n_poses']} usable poses ({', '.join(s['bodies'])})"
              + (f", {s['n_skipped']} skipped at acquisition" if s["n_skipped"] else "")]
     if res["same_session"]:
