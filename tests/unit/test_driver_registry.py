@@ -67,7 +67,7 @@ def _ep(name, value):
 def test_entry_point_registers_a_driver(entry_points, value):
     entry_points.append(_ep("kuka", value))
     assert registry.get_spec("kuka", "robot") is KUKA
-    assert registry.driver_names("robot") == ["ur", "denso", "kuka"]
+    assert registry.driver_names("robot") == ["ur", "denso", "franka", "kuka"]
 
 
 @pytest.mark.parametrize("value, match", [
@@ -118,7 +118,8 @@ def test_spec_is_checked():
 
 
 def test_unknown_driver_lists_the_known_ones():
-    with pytest.raises(ConfigError, match=r"unknown driver 'kuka'; known drivers: denso, ndi, ur"):
+    with pytest.raises(ConfigError,
+                       match=r"unknown driver 'kuka'; known drivers: denso, franka, ndi, ur"):
         driver_class("kuka")
 
 
