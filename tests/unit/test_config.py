@@ -16,7 +16,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 @pytest.mark.parametrize("name", ["mock-ur-polaris.yaml", "mock-denso-polaris.yaml",
                                   "mock-polaris.yaml", "mock-ur.yaml", "mock-denso.yaml",
-                                  "mock-ur-polaris-realtime.yaml"])
+                                  "mock-ur-polaris-realtime.yaml",
+                                  "mock-franka-polaris.yaml"])
 def test_shipped_mock_configs_load(name):
     cfg = load_config(CONFIGS / name)
     assert cfg.mock is not None
@@ -25,7 +26,8 @@ def test_shipped_mock_configs_load(name):
     np.testing.assert_array_equal(rig.commanded, TMS_RIG_P0)
 
 
-@pytest.mark.parametrize("name", ["ur-polaris.yaml", "denso-polaris.yaml"])
+@pytest.mark.parametrize("name", ["ur-polaris.yaml", "denso-polaris.yaml",
+                                  "franka-polaris.yaml"])
 def test_templates_name_the_rom_to_fix(name):
     with pytest.raises(ConfigError, match=r"key 'tracker.tools.marker': ROM file not found"):
         load_config(CONFIGS / name)
