@@ -100,17 +100,18 @@ def format_check(res: dict[str, Any]) -> str:
     c, s, e = res["calibration"], res["session"], res["errors"]
     st = c.get("errors") or {}
     src = c["session"]
-    lines = [f"stored {c['method'].upper()} calibration {c['file']} checked on {s['path']} "
-             "(no fitting)",
-             f"  calibration: solved on {c['n_poses']} poses of {src.get('path', '?')} "
-             f"(sha256 {str(src.get('sha256', '?'))[:12]}…), written {c['created'] or '?'}"
-             + (f" by tmscal {c['versions'].get('tmscal')}" if c.get("versions") else "")
-             + f", {c['applied']} matrices applied",
-             f"  this session: {s['n_poses']} usable poses ({', '.join(s['bodies'])})"
-             + (f", {s['n_skipped']} skipped at acquisition" if s["n_skipped"] else "")]
+    head = [f"stored {c['method'].upper()} calibration {c['file']} checked on {s['path']} "
+            "(no fitting)",
+            f"  calibration: solved on {c['n_poses']} poses of {src.get('path', '?')} "
+            f"(sha256 {str(src.get('sha256', '?'))[:12]}…), written {c['created'] or '?'}"
+            + (f" by tmscal {c['versions'].get('tmscal')}" if c.get("versions") else "")
+            + f", {c['applied']} matrices applied",
+            f"  this session: {s['n_poses']} usable poses ({', '.join(s['bodies'])})"
+            + (f", {s['n_skipped']} skipped at acquisition" if s["n_skipped"] else "")]
     if res["same_session"]:
-        lines.append("  WARNING: this is the session the calibration was solved on: the "
-                     "errors below are in-sample, not a check")
+        head.append("  WARNING: this is the session the calibration was solved on: the "
+                    "errors below are in-sample, not a check")
+    lines = [w for ln in head for w in textwrap.wrap(ln, 98, subsequent_indent="    ")]
     lines += ["", f"  {'every pose held out':<36}{'trans mm':>12}{'rot deg':>12}"
               f"{'stored mm':>14}{'stored deg':>12}"]
 
