@@ -157,9 +157,9 @@ class FrankaRobot(Robot):
             log.warning("franka %s: stop at close failed: %s", self.host, e)
 
     def identity(self) -> dict[str, Any]:
-        """Driver, host, franky version, the end-effector frames at open (``F_T_NE_mm``,
-        ``NE_T_EE_mm``, ``F_T_EE_mm``: 4×4 mm), the joint positions at open (rad) and the
-        robot mode."""
+        """Driver, host, franky version and the end-effector frames at open (``F_T_NE_mm``,
+        ``NE_T_EE_mm``, ``F_T_EE_mm``: 4×4 mm); nothing that changes while the robot moves
+        (the joint angles: ``joint_positions()``), so a reconnect finds the same identity."""
         return {"driver": self.name, "host": self.host, **self._identity}
 
     def joint_positions(self) -> list[float]:
@@ -301,6 +301,4 @@ def _identity_of(state: Any) -> dict[str, Any]:
         version = None
     return {"franky_version": version,
             "F_T_NE_mm": mm(state.F_T_NE, "F_T_NE"), "NE_T_EE_mm": mm(state.NE_T_EE, "NE_T_EE"),
-            "F_T_EE_mm": mm(state.F_T_EE, "F_T_EE"),
-            "joint_positions_rad": [float(v) for v in state.q],
-            "robot_mode": getattr(state.robot_mode, "name", str(state.robot_mode))}
+            "F_T_EE_mm": mm(state.F_T_EE, "F_T_EE")}
