@@ -210,3 +210,56 @@ def test_constructor_refuses_bad_options(kw, match):
     args = {"host": "172.16.0.2", **kw}
     with pytest.raises(ValueError, match=match):
         FrankaRobot(**args)
+
+
+# --- without the extra; the mock's start pose and its refusals (no simulator running) -------
+
+def test_a_franka_config_without_franky_names_the_extra(monkeypatch, tmp_path):
+    import importlib.util
+
+    from tests.rigs import write_config
+    from tmscal.acquisition.devices import make_robot
+    from tmscal.config import load_config
+    from tmscal.errors import MissingExtraError
+
+    cfg = load_config(write_config(tmp_path, "mock-franka-polaris.yaml"))
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "franky" else real(name, *a))
+    with pytest.raises(MissingExtraError) as ei:
+        make_robot(cfg)
+    msg = str(ei.value)
+    assert "\n" not in msg and "driver 'franka'" in msg and "pip install 'tmscal[franka]'" in msg
+
+
+def test_mock_start_pose_by_inverse_kinematics_on_the_urdf():
+    pin = pytest.importorskip("pinocchio", reason="franky-sim (the test extra) is missing")
+    franky_sim = pytest.importorskip("franky_sim", reason="franky-sim is not installed")
+    from tmscal.mocks.franka import flange_ik
+    from tmscal.sim import TMS_RIG_P0
+
+    q = flange_ik(TMS_RIG_P0, franky_sim.DEFAULT_INITIAL_JOINT_POS)
+    model = pin.buildModelFromXML(franky_sim.FR3_URDF)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    T = np.array(data.oMf[model.getFrameId("link8")].homogeneous)
+    T[:3, 3] *= 1000.0
+    np.testing.assert_allclose(T, TMS_RIG_P0, atol=1e-3)
+    with pytest.raises(ValueError, match="cannot reach the start pose"):
+        flange_ik(make_pose(DOWN, [500.0, 0.0, 2000.0]), franky_sim.DEFAULT_INITIAL_JOINT_POS)
+
+
+def test_mock_refuses_the_fast_clock_and_a_public_host():
+    pytest.importorskip("franky_sim", reason="franky-sim is not installed")
+    from tmscal.errors import ConfigError
+    from tmscal.mocks.clock import FAST
+    from tmscal.mocks.franka import FrankaMock
+    from tmscal.sim import SimRig, tms_rig_truth
+
+    rig = SimRig(tms_rig_truth())
+    with pytest.raises(ValueError, match="mock.clock: real"):
+        FrankaMock(rig, host="127.0.0.2", clock=FAST)
+    with pytest.raises(ConfigError, match="not a loopback address"):
+        FrankaMock(rig, host="0.0.0.0")
+    with pytest.raises(ValueError, match="initial_q must be 7 finite joint angles"):
+        FrankaMock(rig, host="127.0.0.2", initial_q=[0.0] * 6)
