@@ -253,8 +253,10 @@ def _ml_uncertainty(session: Session, res: SolveResult) -> tuple[SolveResult | N
     if not ml.uncertainty:
         return None, "ml gave no uncertainty on this session"
     note = (f"{res.method.upper()} gives no uncertainty of its own; shown is the prediction "
-            "of the maximum-likelihood solver (ml) on the same poses, whose solution is as "
-            "accurate (docs/methods.md)")
+            "of the maximum-likelihood solver (ml) for its own solution on the same poses, "
+            "which reaches the Cramér–Rao bound on the simulated rig (docs/methods.md): a "
+            f"lower limit for {res.method.upper()}'s error, and about its size where "
+            f"{res.method.upper()} is near the bound (tmscal compare shows how near)")
     return dataclasses.replace(res, method="ml", uncertainty=ml.uncertainty,
                                distortion=ml.distortion), note
 
