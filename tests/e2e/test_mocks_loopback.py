@@ -60,6 +60,7 @@ def test_other_addresses_are_refused(host: str) -> None:
     ("mock-denso-polaris.yaml", {"robot.host": "0.0.0.0"}, "key 'robot.host' (0.0.0.0)"),
     ("mock-ur-polaris.yaml", {"robot.host": "192.168.56.101"},
      "key 'robot.host' (192.168.56.101)"),
+    ("mock-franka-polaris.yaml", {"robot.host": "0.0.0.0"}, "key 'robot.host' (0.0.0.0)"),
 ])
 def test_tmscal_mock_refuses_non_loopback_endpoints(tmp_path: Path, base: str,
                                                     changes: dict[str, str],
@@ -105,6 +106,8 @@ def _free_port() -> int:
                                  "robot.host": "localhost"}),
     ("mock-ur-polaris.yaml", {"tracker.port": "socket://127.0.0.1:{}",
                               "robot.host": "127.0.0.88"}),
+    ("mock-franka-polaris.yaml", {"tracker.port": "socket://127.0.0.1:{}",
+                                  "robot.host": "127.0.0.89"}),
 ])
 def test_started_servers_listen_on_loopback_only(tmp_path: Path, base: str,
                                                  changes: dict[str, Any]) -> None:
