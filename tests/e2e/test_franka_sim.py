@@ -133,6 +133,30 @@ def test_the_rig_acceptance_suite_passes_on_the_franka_rig(tmp_path):
     assert "move_outcome: RobotFault: franka 127.0.0.165: move_to halted by stop()" in text
 
 
+def test_every_socket_of_the_mock_is_on_loopback(tmp_path):
+    """franky-sim binds its UDP state socket to 0.0.0.0; the mock's servers bind it to the
+    robot's loopback host: checked with a franky client connected (the UDP link exists)."""
+    import ipaddress
+    import socket
+
+    import franky
+
+    from tmscal.mocks.rig import start_mock_rig
+
+    from ..rigs import write_config
+    cfg = load_config(write_config(tmp_path, BASE, robot={"host": "127.0.0.166"}))
+    with start_mock_rig(cfg, tracker_transport="tcp") as mr:
+        mock = mr.devices[-1]
+        client = franky.Robot("127.0.0.166", realtime_config=franky.RealtimeConfig.Ignore)
+        assert len(client.state.q) == 7  # state arrived over UDP
+        socks = mock._sockets
+        kinds = {s.type for s in socks}
+        assert socket.SOCK_DGRAM in kinds and socket.SOCK_STREAM in kinds, socks
+        addrs = [s.getsockname()[0] for s in socks]
+        assert all(ipaddress.ip_address(a).is_loopback for a in addrs), addrs
+        del client
+
+
 def _cli(*args: str) -> subprocess.CompletedProcess:
     p = subprocess.run([sys.executable, "-m", "tmscal.cli", *args], capture_output=True,
                        text=True, timeout=200, stdin=subprocess.DEVNULL)

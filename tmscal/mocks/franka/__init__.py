@@ -234,6 +234,22 @@ class FrankaMock(MockDevice):
         self._last = T
         self.rig.move_flange(T)
 
+    @property
+    def _sockets(self) -> list[socket.socket]:
+        """Every socket franky-sim's servers hold now (the listening TCP socket, a client's
+        TCP connection, the UDP state socket once a client connected; the gripper's too), so
+        tests can check what the mock binds."""
+        out: list[socket.socket] = []
+        servers = list(self._server.robot_servers) if self._server is not None else []
+        servers += [g for rs in servers
+                    if (g := getattr(rs, "_FrankaRobotServer__gripper_server", None))]
+        for srv in servers:
+            for name in ("server_socket", "tcp_socket", "udp_socket"):
+                sock = getattr(srv, f"_FrankaServer__{name}", None)
+                if sock is not None and sock.fileno() >= 0:
+                    out.append(sock)
+        return out
+
     def flange(self) -> np.ndarray:
         """The flange pose (base_from_flange, 4×4 mm) last put into the rig."""
         assert self._last is not None, "franka mock not started"
