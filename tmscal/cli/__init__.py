@@ -244,11 +244,13 @@ def main(verbose: int) -> None:
       tmscal solve sim.jsonl --train 250   QR36 on 250 poses, errors on the rest
       tmscal study sim.jsonl --plot f.png  convergence: error against the pose count
       tmscal compare sim.jsonl             every method side by side (error, time)
+      tmscal report sim.jsonl -o r.html    one HTML page for the lab notebook
     \b
     At the rig (or against `tmscal mock CONFIG`):
       tmscal track CONFIG                  live tool poses: are the tools right?
       tmscal robot CONFIG                  robot identity and flange pose
       tmscal acquire CONFIG -o s.jsonl     record a session (--dry-run first)
+      tmscal stream CONFIG --calib c.yaml  the live coil pose to 3D Slicer (OpenIGTLink)
     """
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
