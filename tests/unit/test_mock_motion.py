@@ -140,3 +140,13 @@ def test_motion_profile_rotation_caps_are_four_times_the_tool_caps() -> None:
     assert Motion(TMS_RIG_P0, TMS_RIG_P0, 0.0, False, 0.2, 1.0).fraction(0.0) == 1.0
     assert Motion(TMS_RIG_P0, TMS_RIG_P0 @ make_pose(rot_z(0.5)), 0.0, False, 0.2, 1.0,
                   instant=True).duration == 0.0
+
+
+@pytest.mark.parametrize("v, a", [(1e307, 1.0), (0.1, 1e308)])
+def test_caps_the_profile_cannot_use_are_a_runtime_error_and_nothing_moves(v, a) -> None:
+    rig = quiet_tms_rig()
+    ctl = URController(rig, clock=FAST)
+    _command(ctl, TMS_RIG_P0 @ make_pose(np.eye(3), [300.0, 0.0, 0.0]), v, a)
+    assert ctl.runtime_state == 1                        # the program stopped
+    np.testing.assert_array_equal(rig.flange, TMS_RIG_P0)
+    assert ctl.last_motion_s is None

@@ -491,7 +491,11 @@ class URController:
         if not np.isfinite(target).all():
             self._runtime_error(f"{what}: target not finite")
             return
-        m = Motion(start, target, now, asynchronous, speed, accel, instant=self.clock.fast)
+        try:   # a speed or acceleration too large to scale (e.g. 1e307 m/s) is refused
+            m = Motion(start, target, now, asynchronous, speed, accel, instant=self.clock.fast)
+        except ValueError as e:
+            self._runtime_error(f"{what}: {e}")
+            return
         if not math.isfinite(m.modelled_s):
             self._runtime_error(f"{what}: duration not finite ({m.modelled_s} s)")
             return
