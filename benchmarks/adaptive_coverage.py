@@ -18,7 +18,9 @@ share of runs with true ≤ predicted beside the confidence (with its 95 % binom
 
 Then the table of the issue on the same rig, ``--table-rigs`` rig seeds: the mean true
 coil-placement error over the region for k = 6, 10, 14, 20 poses, random pool poses solved
-by QR36 (and by ml), against the adaptive selection (no stop) solved by ml.
+by QR36 (and by ml), against the adaptive selection (no stop) solved by ml, choosing per second
+of robot time (as a run does) and per pose (every candidate costing the same), each with the
+simulated robot time to the k-th pose.
 """
 
 from __future__ import annotations
@@ -73,26 +75,29 @@ class Run:
 
 
 def adaptive_run(rig: SimRig, pool: np.ndarray, settings: ad.AdaptiveSettings, samples: int,
-                 caps: tuple[float, float], per_pose_s: float, record: tuple[int, ...] = ()
-                 ) -> tuple[str, ad.Prediction, Run, dict[int, ad.Prediction]]:
+                 caps: tuple[float, float], per_pose_s: float, record: tuple[int, ...] = (),
+                 per_second: bool = True
+                 ) -> tuple[str, ad.Prediction, Run, dict[int, tuple[ad.Prediction, float]]]:
     """The bootstrap, then predict → stop_reason → choose_next until it stops; (the stopping
-    reason, the last prediction, the run, the predictions at the ``record`` pose counts)."""
+    reason, the last prediction, the run, {k: (prediction, robot s)} at the ``record`` pose
+    counts). ``per_second`` False: every candidate costs the same (the design per pose)."""
     run = Run(rig, samples)
     used = ad.bootstrap_indices(pool, settings.bootstrap_poses(2), TMS_RIG_P0)
     for i in used:
         run.measure(pool[i], *caps)
-    seen: dict[int, ad.Prediction] = {}
+    seen: dict[int, tuple[ad.Prediction, float]] = {}
     while True:
         A, B, C = run.arrays()
         pred = ad.predict(A, B, C, pool[:settings.region], settings, spreads=run.spreads)
         if len(used) in record:
-            seen[len(used)] = pred
+            seen[len(used)] = (pred, run.moving_s + per_pose_s * len(used))
         why = ad.stop_reason(pred, len(used), settings)
         if why is not None:
             return why, pred, run, seen
         avail = np.ones(len(pool), dtype=bool)
         avail[used] = False
-        cost = ad.candidate_cost_s(rig.commanded, pool, *caps, per_pose_s)
+        cost = ad.candidate_cost_s(rig.commanded, pool, *caps, per_pose_s) if per_second \
+            else np.ones(len(pool))
         i, _ = ad.choose_next(pred, pool, avail, cost)
         used.append(i)
         run.measure(pool[i], *caps)
@@ -136,39 +141,50 @@ def coverage(a: argparse.Namespace, cfg, pool: np.ndarray, settings: ad.Adaptive
           f"simulated robot time {m[3]:.1f} s")
 
 
+TABLE = (("qr36", "random pool poses, QR36"), ("ml", "random pool poses, ml"),
+         ("per_s", "adaptive per second, ml"), ("per_pose", "adaptive per pose, ml"))
+
+
 def table(a: argparse.Namespace, cfg, pool: np.ndarray, noise: Noise) -> None:
+    """The issue's table: mean true error at k poses, random against adaptive, and the
+    simulated robot time to the k-th pose."""
     truth = tms_rig_truth()
     settings = ad.AdaptiveSettings(target_mm=1e-9, max_poses=max(KS), pool=len(pool),
                                    region=a.region)
     region = pool[:settings.region]
     caps = (cfg.robot.speed_mm_s, cfg.robot.accel_mm_s2)
     per_pose = a.settle_s + a.table_samples / cfg.tracker.frame_rate_hz
-    err: dict[str, dict[int, list[float]]] = {m: {k: [] for k in KS}
-                                              for m in ("qr36", "ml", "adaptive")}
+    err: dict[str, dict[int, list[float]]] = {m: {k: [] for k in KS} for m, _ in TABLE}
+    secs: dict[str, dict[int, list[float]]] = {m: {k: [] for k in KS} for m, _ in TABLE}
     for r in range(a.table_rigs):
         seed = 10_000 + a.seed + r
+        for m, per_s in (("per_s", True), ("per_pose", False)):
+            rig = SimRig(truth, noise, np.random.default_rng(seed), start=TMS_RIG_P0)
+            seen = adaptive_run(rig, pool, settings, a.table_samples, caps, per_pose, KS,
+                                per_s)[3]
+            for k in KS:
+                err[m][k].append(ad.true_coil_error(seen[k][0].calibration, truth.Y, truth.Z,
+                                                    region))
+                secs[m][k].append(seen[k][1])
         rig = SimRig(truth, noise, np.random.default_rng(seed), start=TMS_RIG_P0)
-        _, _, _, seen = adaptive_run(rig, pool, settings, a.table_samples, caps, per_pose, KS)
-        for k in KS:
-            err["adaptive"][k].append(ad.true_coil_error(seen[k].calibration, truth.Y,
-                                                         truth.Z, region))
-        rig = SimRig(truth, noise, np.random.default_rng(seed), start=TMS_RIG_P0)
-        pick = np.random.default_rng(seed).permutation(len(pool))[:max(KS)]
         run = Run(rig, a.table_samples)
-        for i in pick:
+        for j, i in enumerate(np.random.default_rng(seed).permutation(len(pool))[:max(KS)]):
             run.measure(pool[i], *caps)
+            if j + 1 in KS:
+                for m in ("qr36", "ml"):
+                    secs[m][j + 1].append(run.moving_s + per_pose * (j + 1))
         A, B, C = run.arrays()
         for k in KS:
             for m in ("qr36", "ml"):
                 opts = {"distortion": "none", "spreads": run.spreads[:k]} if m == "ml" else {}
                 cal = solve(A[:k], B[:k], C[:k], method=m, **opts)
                 err[m][k].append(ad.true_coil_error(cal, truth.Y, truth.Z, region))
-    print(f"\nmean true coil-placement error over the region (mm), {a.table_rigs} rig seeds, "
-          f"{a.table_samples} frames per pose")
-    print(f"{'k':<34}" + "".join(f"{k:>8}" for k in KS))
-    for m, label in (("qr36", "random pool poses, QR36"), ("ml", "random pool poses, ml"),
-                     ("adaptive", "adaptive selection, ml")):
-        print(f"{label:<34}" + "".join(f"{np.mean(err[m][k]):>8.3f}" for k in KS))
+    print(f"\nmean true coil-placement error over the region, mm (simulated robot time to the "
+          f"k-th pose, s); {a.table_rigs} rig seeds, {a.table_samples} frames per pose")
+    print(f"{'k':<28}" + "".join(f"{k:>15}" for k in KS))
+    for m, label in TABLE:
+        print(f"{label:<28}" + "".join(f"{np.mean(err[m][k]):>8.3f} ({np.mean(secs[m][k]):>4.0f})"
+                                       for k in KS))
 
 
 def main() -> None:
