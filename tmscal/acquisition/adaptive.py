@@ -113,12 +113,14 @@ def settings_for(cfg: RigConfig, **overrides: Any) -> AdaptiveSettings:
     """AdaptiveSettings from the config's ``adaptive:`` section, keyword overrides (not None)
     winning; ConfigError naming the key (or the option) when they do not fit together."""
     vals = dataclasses.asdict(cfg.adaptive)
-    vals.update({k: v for k, v in overrides.items() if v is not None})
+    given = {k: v for k, v in overrides.items() if v is not None}
+    vals.update(given)
     try:
         return AdaptiveSettings(**vals)
     except ValueError as e:
-        raise ConfigError(f"{cfg.path}: key 'adaptive' (with the command line's overrides): "
-                          f"{e}") from None
+        opts = ", ".join(f"--{k.replace('_', '-')} {v:g}" for k, v in given.items())
+        raise ConfigError(f"{cfg.path}: key 'adaptive'{' with ' + opts if opts else ''}: {e}"
+                          f" (pool {vals['pool']}, max_poses {vals['max_poses']})") from None
 
 
 def stop_message(reason: str | None, pred: Prediction | None, settings: AdaptiveSettings,
