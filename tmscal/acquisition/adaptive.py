@@ -279,6 +279,10 @@ def _resume_run(cfg: RigConfig, out: Path, dev: _Devices, overrides: dict[str, A
         check_plan(pool, envelope)
         dev.open(envelope)
         st = _settings(cfg, header, samples)
+        recorded_target = header["adaptive"].get("target_mm")
+        if (cfg.sampling.sem_mm is None and isinstance(recorded_target, float)
+                and st.sem_mm == SEM_FRACTION * recorded_target):  # the run's own: no news
+            st.notes = [n for n in st.notes if not n.startswith("sampling.sem_mm ")]
         notes = st.notes + notes
         summary = writer.session.damage_summary()
         if summary:
