@@ -354,6 +354,62 @@ class _PhaseClock:
         return out
 
 
+@dataclass
+class _Run:
+    """What one adaptive run works with once started: the devices, the session, the pool and
+    its envelope, the sampling and adaptive settings, and the robot-time clock."""
+
+    cfg: RigConfig
+    out: Path
+    dev: _Devices
+    writer: SessionWriter
+    spec: PlanSpec
+    pool: np.ndarray
+    envelope: Any
+    st: _Settings
+    settings: AdaptiveSettings
+    clock: _PhaseClock
+    hint: str
+    t0: float
+    t_offset: float
+
+    def measure(self, s: _State, j: int, watch: SkipWatch, sleep: Callable[[float], None],
+                on_pose: Callable[[int, int, PoseRecord], None] | None) -> int:
+        """Pool pose j as session pose ``s.next_index``: moved to through ``Robot.move_to``,
+        settled, sampled (reconnecting after device faults), saved with its pool index and
+        robot time. Returns the device faults recovered."""
+        session = self.writer.session
+        rec, faults = _pose_with_reconnect(
+            self.dev, self.cfg, self.envelope, s.next_index, self.pool[j], self.st, sleep,
+            lambda: self.t_offset + time.monotonic() - self.t0,
+            lambda: f"The session {self.out} holds {len(session.poses)} poses; {self.hint}",
+            self.clock)
+        rec = _valid_or_skipped(rec)
+        rec.pool, rec.robot_s = j, self.clock.take()
+        report = None if on_pose is None else (  # done = poses in the session
+            lambda d, t, r: on_pose(len(session.poses), self.settings.max_poses, r))
+        _save_pose(self.writer, rec, watch, s.next_index + 1, report, self.hint)
+        return faults
+
+
+def _start(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
+           settings: AdaptiveSettings | None, overrides: dict[str, Any], samples: int | None,
+           on_phase: Callable[[int, str], None] | None, hint: str, t0: float
+           ) -> tuple[_Run, list[str]]:
+    """Start a new run (settings: given, else the config's) or resume one (the header's)."""
+    if resume:
+        writer, spec, pool, envelope, st, settings, notes = _resume_run(cfg, out, dev,
+                                                                        overrides, samples)
+    else:
+        settings = settings or settings_for(cfg)
+        spec, pool, envelope, st = _new_run(cfg, out, dev, settings, samples)
+        notes = list(st.notes)
+        writer = _create(out, cfg, dev, spec, st, settings)
+    t_offset = max((p.time for p in writer.session.poses), default=0.0)
+    return _Run(cfg, out, dev, writer, spec, pool, envelope, st, settings,
+                _PhaseClock(on_phase), hint, t0, t_offset), notes
+
+
 def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
                      settings: AdaptiveSettings | None = None, resume: bool = False,
                      overrides: dict[str, Any] | None = None, samples: int | None = None,
@@ -379,65 +435,45 @@ def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
     if cfg.tracker is None or not {"marker", "probe"} <= set(cfg.tracker.tools):
         raise ConfigError(f"{cfg.path}: key 'tracker.tools': adaptive acquisition predicts the "
                           "coil placement: name the marker tool 'marker' and the probe 'probe'")
-    t_start = time.monotonic()
+    t0 = time.monotonic()
     dev = _Devices(cfg, tracker_port, robot_host, robot_port)
-    writer: SessionWriter | None = None
+    run: _Run | None = None
     faults = new = 0
-    stopped = clean = False
+    clean = False
     hint = "resume with: " + resume_command(cfg.path, out, tracker_port, robot_host)
     try:
-        if resume:
-            writer, spec, pool, envelope, st, settings, notes = _resume_run(
-                cfg, out, dev, dict(overrides or {}), samples)
-        else:
-            settings = settings or settings_for(cfg)
-            spec, pool, envelope, st = _new_run(cfg, out, dev, settings, samples)
-            notes = list(st.notes)
-            writer = _create(out, cfg, dev, spec, st, settings)
+        run, notes = _start(cfg, out, dev, resume, settings, dict(overrides or {}), samples,
+                            on_phase, hint, t0)
         for note in notes:
             log.warning("resuming %s with %s", out, note)
-        session = writer.session
-        s = _State.of(session.poses, spec.p0)
+        session, p0, settings = run.writer.session, run.spec.p0, run.settings
+        s = _State.of(session.poses, p0)
         if on_start:
             on_start(len(s.records), settings.max_poses, len(s.records) - s.used)
         watch = SkipWatch(cfg.run)
-        clock = _PhaseClock(on_phase)
-        t_offset = max((p.time for p in session.poses), default=0.0)
-        checked = False
         while True:
-            reason, j, pred, info = _decide(s, pool, spec.p0, settings, cfg, st, session)
+            reason, j, pred, info = _decide(s, run.pool, p0, settings, cfg, run.st, session)
             if pred is not None and on_predict:
                 on_predict(pred, {"stop": reason, "next": j, **info})
             if reason is not None or should_stop():
-                stopped = reason is None
                 break
             assert j is not None
-            if not checked:
-                _check_where(dev, s, pool, j, spec.p0, envelope, out, resume)
-                checked = True
-            rec, n_faults = _pose_with_reconnect(
-                dev, cfg, envelope, s.next_index, pool[j], st, sleep,
-                lambda: t_offset + time.monotonic() - t_start,
-                lambda: (f"The session {out} holds {len(session.poses)} poses; {hint}"),
-                clock)
-            faults += n_faults
-            rec = _valid_or_skipped(rec)
-            rec.pool, rec.robot_s = j, clock.take()
-            report = None if on_pose is None else (  # done = poses in the session
-                lambda d, t, r: on_pose(len(session.poses), settings.max_poses, r))
-            _save_pose(writer, rec, watch, s.next_index + 1, report, hint)
+            if new == 0:
+                _check_where(dev, s, run.pool, j, p0, run.envelope, out, resume)
+            faults += run.measure(s, j, watch, sleep, on_pose)
             new += 1
-            s = _State.of(session.poses, spec.p0)
+            s = _State.of(session.poses, p0)
         clean = True
         return AdaptiveResult(
             path=out, recorded=s.used, skipped=len(s.records) - s.used, new_poses=new,
-            stopped=stopped, faults=faults, elapsed_s=time.monotonic() - t_start, stop=reason,
-            message=stop_message(reason, pred, settings, len(s.records)), prediction=pred,
-            robot_time_s=robot_time_of(session.poses), settings=settings, notes=notes)
+            stopped=reason is None, faults=faults, elapsed_s=time.monotonic() - t0,
+            stop=reason, message=stop_message(reason, pred, settings, len(s.records)),
+            prediction=pred, robot_time_s=robot_time_of(session.poses), settings=settings,
+            notes=notes)
     finally:
         dev.close(stop_robot=not clean)
-        if writer is not None:
-            writer.close()
+        if run is not None:
+            run.writer.close()
 
 
 __all__ += ["AcquisitionStopped"]
