@@ -1,9 +1,10 @@
 """End to end, adaptive acquisition (docs/adaptive.md) on the protocol-level mocks (real
 sockets and ptys; the CLI and the mocks in child processes where a test kills or runs the
 command): the stopping rule stops at the bootstrap on a noise-free rig and at max_poses on a
-very noisy one, saying which; kill -9 then --resume loses and repeats no pose and reaches the
-same decision as an uninterrupted run; ``demo --adaptive --json`` recovers the mock rig's
-truth within the predicted error."""
+very noisy one, saying which; Ctrl-C leaves a resumable session; kill -9 then --resume loses
+and repeats no pose and reaches the same decision as an uninterrupted run; ``demo --adaptive
+--json`` recovers the mock rig's truth within the predicted error; every pose commanded is
+inside the envelope (random envelopes and seeds)."""
 
 from __future__ import annotations
 
@@ -93,6 +94,27 @@ def test_very_noisy_rig_stops_at_max_poses_and_says_so(mock_config, tmp_path):
     pred = json.loads(s.stdout)["adaptive"]
     assert pred["n_poses"] == 7 and pred["predicted_coil_mm"] > 0.05
     assert f"predicted {pred['predicted_coil_mm']:.3g} mm" in r.stdout
+
+
+@pytest.mark.e2e
+def test_ctrl_c_finishes_the_pose_in_flight_and_leaves_a_resumable_session(mock_config,
+                                                                          tmp_path):
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           sampling={"samples": 3})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg_path, transport="tcp") as mp:
+        run_cfg = point_config(cfg_path, mp.endpoints)
+        proc = subprocess.Popen([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg),
+                                 "-o", str(out), "--adaptive"], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        wait_for_lines(out, 6, proc)
+        assert proc.poll() is None, "the run ended before Ctrl-C"
+        proc.send_signal(signal.SIGINT)
+        stdout, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert "stopped early (resumable)" in stdout and f"-o {out} --resume" in stdout
+    recs = check_adaptive_session(out)
+    assert len(recs) >= 5 and not read_session(out).torn_tail
 
 
 def _uninterrupted_stop(cfg_path, tmp_path) -> tuple[str, int]:
