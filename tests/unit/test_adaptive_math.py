@@ -314,3 +314,34 @@ def test_candidate_cost_is_the_motion_models_move_time(rot: tuple | None) -> Non
     want = [move_duration(POOL[7], P, 250.0, 1200.0, *caps) + 1.5 for P in POOL[:20]]
     assert cost == pytest.approx(want, rel=1e-12)
     assert cost[7] == pytest.approx(1.5)
+
+
+def _off_truth() -> tuple[list[np.ndarray], np.ndarray]:
+    rng = np.random.default_rng(11)
+    Ws = [W @ make_pose(np.eye(3), rng.normal(0, 2, 3)) for W in (TRUTH.X, TRUTH.Y)]
+    return Ws, TRUTH.Z @ make_pose(np.eye(3), rng.normal(0, 5, 3))
+
+
+def test_residual_jacobians_match_ml_central_differences() -> None:
+    """The analytic candidate Jacobian against ml's own finite differences of its residuals
+    (Problem.jacobian), with an estimate away from the truth."""
+    Ws, Z = _off_truth()
+    P = POOL[20:26]
+    J = ad.residual_jacobians(Problem(POOL[:5], [POOL[:5]] * 2, Ws, Z), P)
+    N = [np.linalg.inv(Z) @ P @ W for W in Ws]
+    ref = Problem(P, N, Ws, Z).jacobian(np.zeros(18), np.eye(12))
+    assert J.shape == (6, 12, 18)
+    assert np.allclose(J.reshape(-1, 18), ref, atol=1e-6 * np.abs(ref).max())
+
+
+def test_residual_jacobians_with_a_small_distortion_approach_the_rigid_ones() -> None:
+    """With a tracker scale of 1 + 10⁻⁶ (ml's numerical path) the rigid parameters' columns
+    are the analytic rigid ones, and the scale's column is not zero."""
+    Ws, Z = _off_truth()
+    P = POOL[20:26]
+    rigid = ad.residual_jacobians(Problem(POOL[:5], [POOL[:5]] * 2, Ws, Z), P)
+    scaled = ad.residual_jacobians(Problem(POOL[:5], [POOL[:5]] * 2, Ws, Z, "scale",
+                                           np.array([1e-6])), P)
+    assert scaled.shape == (6, 12, 19)
+    assert np.allclose(scaled[:, :, :18], rigid, atol=1e-4 * np.abs(rigid).max())
+    assert np.abs(scaled[:, 9:12, 18]).max() > 100.0  # mm per unit scale, tools ~1.5 m away

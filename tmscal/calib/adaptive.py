@@ -46,8 +46,8 @@ from .ml import (
 )
 
 __all__ = ["AdaptiveSettings", "Prediction", "minimum_poses", "bootstrap_indices", "predict",
-           "placement_jacobians", "candidate_information", "choose_next", "stop_reason",
-           "candidate_cost_s", "true_coil_error", "MC_DRAWS"]
+           "placement_jacobians", "residual_jacobians", "candidate_information", "choose_next",
+           "stop_reason", "candidate_cost_s", "true_coil_error", "MC_DRAWS"]
 
 #: Monte Carlo draws of the parameter error behind the predicted quantile (fixed seed 0)
 MC_DRAWS = 4000
@@ -214,6 +214,13 @@ def _problem_of(cal: Calibration, A: np.ndarray, bodies: list[np.ndarray]) -> Pr
     return Problem(A, bodies, Ws, cal.Z, model, _g_of(model, G), moments)
 
 
+def _skew(v: np.ndarray) -> np.ndarray:
+    """[v]× (…, 3, 3) of vectors v (…, 3)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    return out - np.swapaxes(out, -1, -2)
+
+
 def placement_jacobians(prob: Problem, region: np.ndarray) -> np.ndarray:
     """Jacobians (R, 3, k) of the coil-centre placement error (mm, base frame) with respect to
     ml's parameters, at the estimate, for the flange poses ``region`` (R, 4, 4) mm.
@@ -229,11 +236,8 @@ def placement_jacobians(prob: Problem, region: np.ndarray) -> np.ndarray:
     tn = Nt[:, :3, 3]
     J = np.zeros((len(region), 3, k))
     RZ = Z[:3, :3]
-    skew = np.zeros((len(region), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -tn[:, 2], tn[:, 1], -tn[:, 0]
-    skew -= np.swapaxes(skew, 1, 2)
     jz = 6 * m
-    J[:, :, jz:jz + 3] = -RZ[None] @ skew
+    J[:, :, jz:jz + 3] = -RZ[None] @ _skew(tn)
     J[:, :, jz + 3:jz + 6] = np.eye(3)
     jy = 6 * (m - 1)
     J[:, :, jy + 3:jy + 6] = -region[:, :3, :3]
@@ -309,27 +313,46 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
                       noise=noise, draws_mm=draws)
 
 
+def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:
+    """Raw Jacobians (n, 6m, k) of ml's residuals (per body [rotation vector rad; translation
+    mm], :meth:`Problem.residuals`) at the estimate, for one more pose at each flange pose of
+    ``poses`` (n, 4, 4) mm, measured where the estimate puts the bodies, Ñ = Ẑ⁻¹ P Ŵ (so
+    E = (P W)⁻¹ Z Ñ = I). Without a distortion, analytically: for body j, ∂r/∂ω_W = [−I; 0],
+    ∂r/∂t_W = [0; −R̂_Wᵀ], ∂r/∂ω_Z = [R_Ñᵀ; −R_Ñᵀ [t_Ñ]×], ∂r/∂t_Z = [0; R_Ñᵀ R̂_Zᵀ]. With a
+    distortion, by ml's own central differences (:meth:`Problem.jacobian`), the positions of
+    Ñ distorted to first order by Ĝ⁻¹."""
+    k, m = prob.n_params, len(prob.Ws)
+    Ws, Z, G = prob.unpack(np.zeros(k))
+    N = [invert(Z)[None] @ poses @ W[None] for W in Ws]
+    if prob.model != "none":
+        for Nj in N:
+            Nj[:, :3, 3] = Nj[:, :3, 3] @ np.linalg.inv(G).T
+        cand = Problem(poses, N, prob.Ws, prob.Z0, prob.model, prob.g0, prob.moments)
+        return cand.jacobian(np.zeros(k), np.eye(6 * m)).reshape(len(poses), 6 * m, k)
+    J = np.zeros((len(poses), 6 * m, k))
+    for j, (W, Nj) in enumerate(zip(Ws, N, strict=True)):
+        r = 6 * j
+        RNt = np.swapaxes(Nj[:, :3, :3], 1, 2)
+        J[:, r:r + 3, r:r + 3] = -np.eye(3)
+        J[:, r + 3:r + 6, r + 3:r + 6] = -W[:3, :3].T
+        J[:, r:r + 3, 6 * m:6 * m + 3] = RNt
+        J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -RNt @ _skew(Nj[:, :3, 3])
+        J[:, r + 3:r + 6, 6 * m + 3:6 * m + 6] = RNt @ Z[:3, :3].T
+    return J
+
+
 def candidate_information(pred: Prediction, poses: np.ndarray) -> np.ndarray:
     """Fisher information (n, k, k) one more pose at each of ``poses`` (n, 4, 4
     base_from_flange mm) would add, in the units of ``pred.covariance`` (unscaled): J_cᵀ J_c,
     J_c the whitened Jacobian of ml's residuals at the estimate for the tracker poses the
-    estimate predicts there (Ẑ⁻¹ P_c X̂ and Ẑ⁻¹ P_c Ŷ, distorted to first order by Ĝ⁻¹ on
-    their positions), with ml's noise model (robot σ, the session's mean tracker covariance)."""
+    estimate predicts there (:func:`residual_jacobians`), whitened with ml's noise model
+    (robot σ, the session's mean tracker covariance)."""
     prob = pred.problem
-    k = prob.n_params
-    Ws, Z, G = prob.unpack(np.zeros(k))
-    Zi = invert(Z)
-    Gi = np.linalg.inv(G)
-    bodies = []
-    for W in Ws:
-        N = Zi[None] @ poses @ W[None]
-        N[:, :3, 3] = N[:, :3, 3] @ Gi.T
-        bodies.append(N)
-    cand = Problem(poses, bodies, prob.Ws, prob.Z0, prob.model, prob.g0, prob.moments)
+    Ws = prob.unpack(np.zeros(prob.n_params))[0]
     rs_mm, rs_rad, tracker = pred.noise
-    whiten = _whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker[None]))
-    Jc = cand.jacobian(np.zeros(k), whiten).reshape(len(poses), -1, k)
-    return np.einsum("nqk,nql->nkl", Jc, Jc)
+    Li = _whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker[None]))
+    Jc = Li[None] @ residual_jacobians(prob, np.asarray(poses, dtype=float))
+    return np.swapaxes(Jc, 1, 2) @ Jc
 
 
 def _criteria(pred: Prediction, info: np.ndarray) -> np.ndarray:
