@@ -12,7 +12,7 @@ import pytest
 
 from tmscal.acquisition import adaptive as loop
 from tmscal.acquisition.plan import PlanSpec
-from tmscal.acquisition.run import _settings
+from tmscal.acquisition.settings import sampling_settings as _settings
 from tmscal.calib.adaptive import AdaptiveSettings, bootstrap_indices
 from tmscal.config import load_config
 from tmscal.errors import ConfigError, SessionError

@@ -21,7 +21,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
-from tmscal.acquisition.run import _settings
 from tmscal.acquisition.sample import (
     STILL_FLOOR_MM,
     noise_sigma_mm,
@@ -29,6 +28,7 @@ from tmscal.acquisition.sample import (
     stillness,
     window_frames,
 )
+from tmscal.acquisition.settings import sampling_settings as _settings
 from tmscal.config import parse_config
 from tmscal.drivers.base import Robot, ToolState, Tracker, TrackerFrame
 from tmscal.errors import ConfigError

@@ -62,11 +62,11 @@ from .run import (
     _Devices,
     _pose_with_reconnect,
     _save_pose,
-    _Settings,
-    _settings,
     _valid_or_skipped,
     resume_command,
 )
+from .settings import SamplingSettings as _Settings
+from .settings import sampling_settings as _settings
 from .skips import SkipWatch
 
 log = logging.getLogger(__name__)
