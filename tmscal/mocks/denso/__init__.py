@@ -19,15 +19,15 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
   the rig are shared by all connections, like one physical controller.
 * A move needs TakeArm (else E_ACCESSDENIED 0x80070005: a stand-in, as the real controller's
   code for this could not be checked) and the motor on (else 0x81501003).
-* Motion takes ``distance / speed`` seconds on the real-time clock (``motion_time_s``
-  overrides it), none on the fast clock; ``rig.move_flange(target)`` is called when the
-  motion ends. Speed = ``SPEED`` option (percent, default 100) × ExtSpeed (percent) ×
-  ``max_linear_speed_mm_s``. ExtSpeed ``[speed, accel, decel]`` (percent; accel and decel
-  default to speed² / 100 as on the RC8) and the ACCEL/DECEL move options are recorded
-  (``ext_accel``, ``ext_decel``, ``ext_speed_log``, ``move_accel``, ``move_decel``) but do
-  not change the timing. Every percentage must be finite and in [0.01, 100] (else
-  E_INVALIDARG). The mock has no kinematics: CurJnt returns zeros, and a halted
-  motion leaves the rig where it was (the blocking move then answers E_FAIL).
+* Motion runs on the trapezoidal profile of :mod:`tmscal.motion` on the real-time clock
+  (``motion_time_s`` overrides its duration), at once on the fast clock (the modelled
+  duration is still recorded in ``last_motion_s``). Speed = ``SPEED`` option (percent,
+  default 100) × ExtSpeed (percent) × ``max_linear_speed_mm_s``; acceleration = ACCEL /
+  DECEL (percent) × ExtSpeed accel / decel (percent; default speed² / 100 as on the RC8) ×
+  ``max_linear_accel_mm_s2``, the profile running at their harmonic mean (docs/devices.md).
+  Every percentage must be finite and in [0.01, 100] (else E_INVALIDARG). The mock has no
+  kinematics: CurJnt returns zeros. A halted real-time motion stops on its path (the
+  blocking move then answers E_FAIL).
 * While a motion runs, any request on its connection, Robot_Halt included, gets E_BUSY_PROC
   (0x809100AA), as from DENSO's reference b-CAP server; Robot_Halt from any other connection
   stops the arm. With NEXT the move answers at once but the connection stays busy until the

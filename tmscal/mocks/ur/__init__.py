@@ -23,9 +23,10 @@ The unmodified ``ur_rtde`` client library (``RTDEControlInterface``, ``RTDERecei
   from ur_rtde's script sender on the PC (``FLAG_USE_EXT_UR_CAP``).
 
 The emulated control script follows ur_rtde's register handshake (``controller``). A linear
-move puts the rig's flange at ``pose_from_rotvec(pose)``; in real time it takes distance /
-speed seconds (rotation-only moves: angle / speed, speed read as rad/s) and the reported TCP
-pose is interpolated on the way; on the fast clock it is immediate. ``actual_TCP_pose`` is
+move puts the rig's flange at ``pose_from_rotvec(pose)``; in real time it runs on the
+trapezoidal profile of :mod:`tmscal.motion` at movel's v and a (rotation: 4·v rad/s, 4·a
+rad/s², docs/devices.md) and the flange follows the path; on the fast clock it is immediate
+(its modelled duration is still recorded in ``last_motion_s``). ``actual_TCP_pose`` is
 ``rotvec_pose_from_matrix(rig.reported_flange())``: the mock's TCP offset is zero, so TCP =
 flange. Joint values are fixed placeholders (the mock has no kinematics).
 

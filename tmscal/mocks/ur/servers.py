@@ -68,7 +68,7 @@ class URMock(URController, MockDevice):
         Loopback address to bind (127.0.0.0/8, ::1 or localhost; anything else raises
         ``ConfigError``); ports are UR's fixed ones.
     clock:
-        ``REAL_TIME``: moves take distance/speed seconds; ``FAST``: moves complete at once.
+        ``REAL_TIME``: moves take their trapezoidal profile's time; ``FAST``: at once.
         Data streaming runs at the client's requested rate on both.
     faults:
         ``URFaults`` to inject.
