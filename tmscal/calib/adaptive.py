@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import inspect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -143,7 +143,6 @@ class Prediction:
     region_q: np.ndarray
     noise: tuple[float, float, np.ndarray]
     draws_mm: np.ndarray
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def quantile(self, q: float) -> float:
         """The predicted mean coil-placement error over the region (mm) at confidence q."""
