@@ -345,3 +345,16 @@ def test_residual_jacobians_with_a_small_distortion_approach_the_rigid_ones() ->
     assert scaled.shape == (6, 12, 19)
     assert np.allclose(scaled[:, :, :18], rigid, atol=1e-4 * np.abs(rigid).max())
     assert np.abs(scaled[:, 9:12, 18]).max() > 100.0  # mm per unit scale, tools ~1.5 m away
+
+
+def test_prediction_and_choice_are_reproducible_from_the_same_poses() -> None:
+    """A resumed run re-derives its decisions from the session: the same poses must give the
+    same prediction and the same next pose (the Monte Carlo has a fixed seed)."""
+    s = Session(rig(12))
+    for i in ad.bootstrap_indices(POOL, 5, TMS_RIG_P0):
+        s.measure(POOL[i])
+    p1, p2 = s.predict(ad.AdaptiveSettings()), s.predict(ad.AdaptiveSettings())
+    assert p1.coil_mm == p2.coil_mm and p1.sigma_mm == p2.sigma_mm
+    cost = ad.candidate_cost_s(POOL[3], POOL, 250.0, 1200.0, 0.5)
+    avail = np.ones(len(POOL), dtype=bool)
+    assert ad.choose_next(p1, POOL, avail, cost) == ad.choose_next(p2, POOL, avail, cost)
