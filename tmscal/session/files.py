@@ -95,6 +95,25 @@ class Session:
         C = np.stack([p.C for p in use]) if has_c else None
         return A, B, C, [p.index for p in use]
 
+    def joints(self, indices: list[int]) -> np.ndarray:
+        """The recorded joint angles (m, n) rad of the poses ``indices`` (e.g. from
+        ``arrays``), in that order. Raises SessionError naming the first pose that has none,
+        or whose joint count differs from the first pose's."""
+        by_index = {p.index: p for p in self.poses}
+        rows: list[list[float]] = []
+        where = self.path or "session"
+        for i in indices:
+            q = by_index[i].joints_rad if i in by_index else None
+            if q is None:
+                raise SessionError(f"{where}: pose {i} has no joint angles ('joints_rad'); "
+                                   "the robot's driver did not report them when it was "
+                                   "recorded")
+            if rows and len(q) != len(rows[0]):
+                raise SessionError(f"{where}: pose {i} has {len(q)} joint angles, pose "
+                                   f"{indices[0]} has {len(rows[0])}")
+            rows.append(list(q))
+        return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+
 
 def _open_regular(p: Path, flags: int, what: str) -> int:
     """os.open for a regular file only: a FIFO, device or directory is refused without

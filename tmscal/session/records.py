@@ -210,8 +210,47 @@ def _check_pose(obj: Any) -> PoseRecord:
     if robot_s is not None and not (isinstance(robot_s, dict) and all(
             _is_number(v) and 0 <= v < 1e9 for v in robot_s.values())):
         raise _Bad("field 'robot_s' must be an object of seconds (finite numbers ≥ 0)")
+    joints = _numbers(obj.get("joints_rad"), "joints_rad", "joint angles (rad)", _MAX_JOINTS,
+                      _MAX_JOINT_RAD)
+    wrench = _numbers(obj.get("wrench"), "wrench", "[Fx, Fy, Fz N, Tx, Ty, Tz N·m]", 6,
+                      _MAX_WRENCH, exact=True)
+    wspread = _numbers(obj.get("wrench_spread"), "wrench_spread",
+                       "spreads [N, N, N, N·m, N·m, N·m] ≥ 0", 6, _MAX_WRENCH, exact=True,
+                       nonneg=True)
     return PoseRecord(index=idx, time=t, samples=samples, spread=spread, skipped=skipped,
-                      pool=pool, robot_s=robot_s, **mats)
+                      pool=pool, robot_s=robot_s, joints_rad=joints, wrench=wrench,
+                      wrench_spread=wspread, **mats)
+
+
+#: at most this many joint angles per pose (DENSO's CurJnt carries up to 32 axes)
+_MAX_JOINTS = 32
+#: a joint angle beyond ±1000 rad, a force or torque beyond 10⁶ N or N·m is corruption
+_MAX_JOINT_RAD = 1e3
+_MAX_WRENCH = 1e6
+
+
+def _numbers(value: Any, name: str, what: str, n: int, bound: float, exact: bool = False,
+             nonneg: bool = False) -> list[float] | None:
+    """An optional list of finite numbers (None for an absent field or null): exactly ``n``
+    with ``exact``, else 1 to ``n``; each of magnitude below ``bound`` (and ≥ 0 with
+    ``nonneg``)."""
+    if value is None:
+        return None
+    count = f"{n}" if exact else f"1 to {n}"
+    if not (type(value) is list and (len(value) == n if exact else 1 <= len(value) <= n)
+            and all(_is_number(x) for x in value)):
+        raise _Bad(f"field '{name}': expected a list of {count} numbers ({what})")
+    out = []
+    for x in value:
+        try:
+            f = float(x)
+        except OverflowError:
+            f = math.inf
+        if not (math.isfinite(f) and abs(f) < bound) or (nonneg and f < 0):
+            raise _Bad(f"field '{name}': {str(x)[:40]} is out of range (a finite number"
+                       f"{' ≥ 0' if nonneg else ''} of magnitude below {bound:g})")
+        out.append(f)
+    return out
 
 
 @dataclass
@@ -222,7 +261,12 @@ class PoseRecord:
     (the reason) for a pose that is not usable. Adaptive runs (docs/adaptive.md) also record
     ``pool``, the index of the commanded pose in the run's candidate pool, and ``robot_s``,
     the robot time the pose took by phase ({"moving", "settling", "sampling"}: s); both are
-    optional and absent from other sessions."""
+    optional and absent from other sessions. ``joints_rad``: the robot's joint angles at the
+    pose (rad, as many as it has), when its driver reports them; ``wrench``: the averaged
+    force-torque reading [Fx, Fy, Fz N, Tx, Ty, Tz N·m] in the sensor frame, and
+    ``wrench_spread`` its standard deviation per channel (same units), for a session with a
+    force-torque sensor (docs/selfcal.md). All three are optional; a session without them
+    reads as before."""
 
     index: int
     A: np.ndarray | None
@@ -235,6 +279,9 @@ class PoseRecord:
     skipped: str | None = None
     pool: int | None = None
     robot_s: dict[str, float] | None = None
+    joints_rad: list[float] | None = None
+    wrench: list[float] | None = None
+    wrench_spread: list[float] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The session line for this pose (matrices as nested lists, mm)."""
@@ -250,6 +297,10 @@ class PoseRecord:
             d["pool"] = int(self.pool)
         if self.robot_s is not None:
             d["robot_s"] = {str(k): float(v) for k, v in self.robot_s.items()}
+        for k in ("joints_rad", "wrench", "wrench_spread"):
+            v = getattr(self, k)
+            if v is not None:
+                d[k] = np.asarray(v, dtype=np.float64).tolist()
         return d
 
 
