@@ -1,5 +1,6 @@
-"""Device contracts shared by every driver: ``Tracker``, ``Robot``, ``TrackerFrame``, the
-safety ``Envelope``, and (re-exported) the driver registry and the typed errors.
+"""Device contracts shared by every driver: ``Tracker``, ``Robot``, ``ForceTorque``,
+``TrackerFrame``, the safety ``Envelope``, and (re-exported) the driver registry and the
+typed errors.
 
 A driver subclasses ``Tracker`` or ``Robot`` and fills the private hooks (``_open``,
 ``_close``, ``_read`` / ``_flange_pose``, ``_move_to``, ``_stop``); the base class owns the
@@ -7,7 +8,8 @@ public behaviour: the context-manager lifecycle (``close()`` is safe twice and a
 ``open()``), and, for robots, the safety check that runs before every motion is sent.
 
 Frames and units: tracker poses are ``tracker_from_<tool>`` 4×4 in mm; robot poses are
-``base_from_flange`` 4×4 in mm; speeds are mm/s.
+``base_from_flange`` 4×4 in mm; speeds are mm/s; wrenches are [Fx, Fy, Fz N, Tx, Ty, Tz
+N·m] in the force-torque sensor's frame.
 """
 
 from __future__ import annotations
@@ -402,8 +404,32 @@ class Robot(_Device):
     def _stop(self) -> None: ...
 
 
+class ForceTorque(_Device):
+    """A six-axis force-torque sensor. ``read(n)`` returns ``n`` consecutive samples as an
+    (n, 6) float64 array [Fx, Fy, Fz (N), Tx, Ty, Tz (N·m)] in the SENSOR frame (the frame
+    the sensor's calibration defines; for a wrist sensor, fixed to the flange). The driver
+    converts counts to units at its edge and raises ``DeviceError`` subclasses, never bare
+    exceptions; ``close()`` stops any stream it started (docs/devices.md)."""
+
+    def read(self, n: int = 1) -> np.ndarray:
+        """``n`` ≥ 1 samples, (n, 6): N and N·m, sensor frame."""
+        if not self._opened:
+            raise DeviceError(f"{self.name}: read() on a force-torque sensor that is not open")
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+            raise ValueError(f"{self.name}: read(n) needs an integer n ≥ 1, got {n!r}")
+        out = np.asarray(self._read(int(n)), dtype=np.float64)
+        if out.shape != (n, 6):  # pragma: no cover - a driver bug
+            raise DeviceError(f"{self.name}: driver returned shape {out.shape}, expected "
+                              f"({n}, 6)")
+        return out
+
+    @abstractmethod
+    def _read(self, n: int) -> np.ndarray: ...
+
+
 __all__ = [
-    "ToolState", "TrackerFrame", "Tracker", "Robot", "Envelope", "DriverSpec", "driver_class",
+    "ToolState", "TrackerFrame", "Tracker", "Robot", "ForceTorque", "Envelope", "DriverSpec",
+    "driver_class",
     "ConfigError", "ConnectionLost", "DeviceError", "DeviceTimeout",
     "ProtocolError", "RobotFault", "SafetyError", "SessionError", "TmscalError",
 ]
