@@ -389,6 +389,13 @@ class Robot(_Device):
         self.envelope.check_pose(target, "move_to target")
         self._move_to(target, float(speed))
 
+    def joint_positions(self) -> np.ndarray:
+        """The joint angles now (rad, one per axis), for the session (``joints_rad``) and
+        kinematic self-calibration. Drivers that can read them override this; the default
+        raises NotImplementedError naming the driver."""
+        raise NotImplementedError(f"{self.name}: this robot driver does not report joint "
+                                  "angles")
+
     def stop(self) -> None:
         """Halt any motion (best effort; never raises on a closed robot)."""
         if self._opened:

@@ -262,6 +262,15 @@ class DensoRobot(Robot):
                                 device=self.name)
         return T
 
+    def joint_positions(self) -> np.ndarray:
+        """The joint angles now (rad), from CurJnt (degrees on the wire, converted here). A
+        reply that is not 1 to 32 finite numbers raises ``ProtocolError``; trailing axes the
+        controller pads with (an 8-axis array for a 6-axis arm) are kept as they come."""
+        if not self._opened:
+            raise DeviceError(f"{self.name}: joint_positions() on a robot that is not open")
+        assert self._robot is not None
+        return np.radians(np.array(self.client.cur_jnt(self._robot), dtype=np.float64))
+
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
         """Blocking MOVE L to base_from_flange ``pose`` (4×4 mm) at ``speed_mm_s``."""
         assert self._robot is not None

@@ -52,7 +52,7 @@ log = logging.getLogger(__name__)
 
 #: What the driver asks the controller to stream (everything its checks read).
 RECEIVE_VARIABLES = ["timestamp", "actual_TCP_pose", "robot_mode", "safety_mode",
-                     "safety_status_bits", "runtime_state", "robot_status_bits"]
+                     "safety_status_bits", "runtime_state", "robot_status_bits", "actual_q"]
 _SAFE_MODES = (1, 2)   # NORMAL, REDUCED: motion allowed
 _POLL_S = 0.005          # how often a wait looks at the worker or the receive stream (s)
 _FRESH_POLL_S = 0.0005   # how often a wait for new data looks at the timestamp (s)
@@ -273,6 +273,17 @@ class URRobot(Robot):
             raise ProtocolError(f"ur {self.host}: getActualTCPPose returned {v!r}, expected 6 "
                                 "finite values", device=self.name)
         return base_from_flange_from_tcp(v, self.flange_from_tcp)
+
+    def joint_positions(self) -> np.ndarray:
+        """The six joint angles now (rad), from RTDE ``actual_q`` (``getActualQ``)."""
+        if not self._opened:
+            raise DeviceError(f"{self.name}: joint_positions() on a robot that is not open")
+        self._check_connected("joint_positions")
+        v = self._call("getActualQ", self._rx.getActualQ)
+        if len(v) != 6 or not np.all(np.isfinite(v)):
+            raise ProtocolError(f"ur {self.host}: getActualQ returned {v!r}, expected 6 "
+                                "finite values", device=self.name)
+        return np.array(v, dtype=np.float64)
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
         self._check_connected("move_to")
