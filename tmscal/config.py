@@ -15,6 +15,7 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     adaptive: {target_mm, confidence, max_poses, bootstrap, pool, region}
     mock:     {clock: fast|real, seed, truth: tms|random|{X, Y, Z}, noise: {...},
                settle: {amplitude_mm, tau_s, freq_hz, rotation_deg},
+               kinematics: {arm: ur5e|vs060, errors: paper|all|none, seed},
                tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...}}
 
 Lengths are mm, angles degrees (``_deg``), speeds mm/s, times seconds. Relative file paths
@@ -63,6 +64,7 @@ from .config_checks import (
     INT_BOUND,
     build,
     check_adaptive,
+    check_kinematics,
     check_sampling,
     check_tree,
     construct,
@@ -198,7 +200,10 @@ class MockConfig:
     """The mock rig: clock ("fast" or "real"), RNG seed, truth ("tms" built-in rig,
     "random" truth as in Wang et al. 2018, or explicit {X, Y, Z} 4×4 mm), noise
     (``sim.Noise`` fields), settle (``sim.Settle`` fields: the coil's damped oscillation
-    after each move; None: no oscillation), per-device options and faults."""
+    after each move; None: no oscillation), per-device options and faults, and kinematics
+    ({arm: ur5e|vs060, errors: paper|all|none, seed}: the mock robot moves a serial arm
+    whose true parameters differ from its controller's nominal ones; None: no arm model;
+    docs/selfcal.md)."""
 
     clock: str = "fast"
     seed: int = 0
@@ -207,6 +212,7 @@ class MockConfig:
     settle: dict[str, float] | None = None
     tracker: dict[str, Any] = field(default_factory=dict)
     robot: dict[str, Any] = field(default_factory=dict)
+    kinematics: dict[str, Any] | None = None
 
 
 @dataclass
@@ -442,6 +448,7 @@ def _parse_mock(data: Any, src: str) -> MockConfig | None:
     elif mock.truth not in ("tms", "random"):
         raise err(src, "mock.truth", f"expected 'tms', 'random' or {{X, Y, Z}}, "
                   f"got {show(mock.truth)}")
+    mock.kinematics = check_kinematics(mock.kinematics, src, mock.seed)
     if mock.settle is not None:
         from .sim.rig import Settle
         construct(Settle, f"{src}: key 'mock.settle'", **mock.settle)

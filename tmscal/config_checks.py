@@ -23,7 +23,8 @@ from .errors import ConfigError
 
 __all__ = ["err", "show", "join", "check_tree", "build", "number", "coerce", "xyz", "positive",
            "in_range", "key_lines", "with_line", "construct", "MAX_DEPTH", "MAX_VALUES",
-           "INT_BOUND", "check_adaptive", "check_sampling", "SETTLE_MODES"]
+           "INT_BOUND", "check_adaptive", "check_sampling", "SETTLE_MODES",
+           "check_kinematics", "KINEMATIC_ARMS", "KINEMATIC_ERRORS"]
 
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
@@ -303,3 +304,36 @@ def check_sampling(s: Any, src: str) -> None:
         if s.min_samples > s.samples:
             raise err(src, "sampling.min_samples", f"{s.min_samples} is above samples "
                       f"{s.samples} (the floor of samples by need is above their cap)")
+
+
+#: arms ``mock.kinematics.arm`` names and the error protocols of ``mock.kinematics.errors``
+KINEMATIC_ARMS = ("ur5e", "vs060")
+KINEMATIC_ERRORS = ("paper", "all", "none")
+
+
+def check_kinematics(data: Any, src: str, default_seed: int) -> dict[str, Any] | None:
+    """``mock.kinematics`` (None when absent): {arm: ur5e|vs060, errors: paper|all|none
+    (default paper), seed: int (default the mock's seed)}, checked and completed; a
+    ConfigError names the key."""
+    if data is None:
+        return None
+    if not isinstance(data, Mapping):
+        raise err(src, "mock.kinematics", f"expected a mapping {{arm, errors, seed}}, got "
+                  f"{show(data)}")
+    extra = sorted(str(k) for k in data if k not in ("arm", "errors", "seed"))
+    if extra:
+        raise err(src, f"mock.kinematics.{extra[0]}", "unknown key (expected arm, errors, "
+                  "seed)")
+    arm = data.get("arm")
+    if arm not in KINEMATIC_ARMS:
+        raise err(src, "mock.kinematics.arm", f"expected one of {', '.join(KINEMATIC_ARMS)}, "
+                  f"got {show(arm)}")
+    errors = data.get("errors", "paper")
+    if errors not in KINEMATIC_ERRORS:
+        raise err(src, "mock.kinematics.errors", "expected one of "
+                  f"{', '.join(KINEMATIC_ERRORS)}, got {show(errors)}")
+    seed = data.get("seed", default_seed)
+    if type(seed) is not int:
+        raise err(src, "mock.kinematics.seed", f"expected an integer, got {show(seed)}")
+    in_range(src, "mock.kinematics.seed", seed, 0, INT_BOUND - 1)
+    return {"arm": arm, "errors": errors, "seed": seed}
