@@ -1,0 +1,205 @@
+"""The kinematics file (tmscal.exports.kinfile): the calibrated ArmModel survives the YAML and
+JSON round trips; every bad document is one CalibrationError naming the file and the key;
+hypothesis: any document gives a model or that one error, never another exception."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fuzz import fuzz_settings
+from tmscal.calib.selfcal.model import UR5E, VS060, perturb
+from tmscal.errors import CalibrationError
+from tmscal.exports.kinfile import (
+    kinematics_doc,
+    kinematics_yaml,
+    load_arm,
+    parse_kinematics,
+    read_kinematics,
+)
+
+SRC = "kin.yaml"
+
+
+def _arm(seed=3, base=UR5E):
+    """A model off the nominal in every parameter: DH, base tilt and position, sensor
+    mounting, tool, bias."""
+    rng = np.random.default_rng(seed)
+    p = perturb(base, rng).vector()
+    n = 4 * base.n_joints
+    p[n:n + 12] += rng.uniform(-0.1, 0.1, 12) * np.tile([1, 1, 1, 100, 100, 100], 2)
+    p[n + 12:] += rng.uniform(-2, 2, 10)
+    return base.with_vector(p)
+
+
+def _same(a, b):
+    np.testing.assert_allclose(a.vector(), b.vector(), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(a.dh, b.dh, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(a.joint_limits_rad, b.joint_limits_rad, rtol=1e-12)
+    np.testing.assert_array_equal(a.base, b.base)
+    np.testing.assert_array_equal(a.flange_from_sensor, b.flange_from_sensor)
+    assert a.name == b.name
+
+
+@pytest.mark.parametrize("base", [UR5E, VS060])
+@pytest.mark.parametrize("how", ["yaml", "json"])
+def test_round_trip(tmp_path, base, how):
+    arm = _arm(base=base)
+    ident = {"parameters": ["theta0_2", "alpha_3", "mg"], "estimate": [0.01, 0.02, 14.0],
+             "std": [1e-4, 2e-4, 0.1], "nominal": [0.0, 0.0, 14.7],
+             "covariance": np.diag([1e-8, 4e-8, 0.01]), "iterations": np.int64(4)}
+    f = tmp_path / f"k.{how}"
+    if how == "yaml":
+        f.write_text(kinematics_yaml(arm, identification=ident,
+                                     session={"path": "s.jsonl", "sha256": "ab"}))
+    else:
+        f.write_text(json.dumps(kinematics_doc(arm, identification=ident)))
+    kf = read_kinematics(f)
+    _same(kf.model, arm)
+    assert kf.identified == ["theta0_2", "alpha_3", "mg"]
+    np.testing.assert_allclose(kf.std, [1e-4, 2e-4, 0.1])
+    np.testing.assert_allclose(kf.covariance, np.diag([1e-8, 4e-8, 0.01]))
+    assert kf.path == f
+    _same(load_arm(f), arm)
+    if how == "yaml":
+        assert kf.session == {"path": "s.jsonl", "sha256": "ab"}
+
+
+def test_file_is_in_edge_units():
+    """Degrees and mm in the file (docs/conventions.md), radians in the model."""
+    doc = kinematics_doc(UR5E)
+    assert doc["joints"][0]["alpha_deg"] == pytest.approx(90.0)
+    assert doc["joints"][1]["a_mm"] == pytest.approx(-425.0)
+    assert doc["joints"][0]["max_deg"] == pytest.approx(360.0)
+    assert doc["tool"]["mass_kg"] == pytest.approx(UR5E.tool_mass_kg)
+
+
+def _doc():
+    return yaml.safe_load(kinematics_yaml(_arm()))
+
+
+def _set(doc, key, value):
+    d = doc
+    parts = key.replace("]", "").replace("[", ".").split(".")
+    for p in parts[:-1]:
+        d = d[int(p)] if p.isdigit() else d[p]
+    last = parts[-1]
+    if value is _DEL:
+        del d[int(last) if last.isdigit() else last]
+    else:
+        d[int(last) if last.isdigit() else last] = value
+    return doc
+
+
+_DEL = object()
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("format", "tmscal-calibration", "tmscal-kinematics"),
+    ("version", 2, "version 1"),
+    ("arm", "", "arm"),
+    ("joints", [], "1 to 12 joints"),
+    ("joints[2].d_mm", "12", "expected a number"),
+    ("joints[2].d_mm", 1e9, "outside"),
+    ("joints[1].alpha_deg", _DEL, "missing"),
+    ("joints[1].offset", 1.0, "unknown key"),
+    ("joints[4].min_deg", 400.0, "not above min_deg"),
+    ("base", [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1]], "base"),
+    ("flange_from_sensor", [[1, 0, 0]], "4×4"),
+    ("tool.mass_kg", -1.0, "outside"),
+    ("tool.cog_mm", [0, 0], "3 numbers"),
+    ("bias.torque_nm", [0, 0, math.inf], "finite"),
+    ("bias.force", [0, 0, 0], "unknown key"),
+    ("extra", 1, "unknown key"),
+    ("identification", {"parameters": ["theta0_9"]}, "not a parameter"),
+    ("identification", {"parameters": ["mg"], "std": [-1.0]}, "negative"),
+    ("identification", {"parameters": ["mg", "cog_x"], "covariance": [[1, 2], [0, 1]]},
+     "symmetric"),
+])
+def test_bad_document_names_the_key(key, value, words):
+    doc = _set(_doc(), key, value)
+    with pytest.raises(CalibrationError) as e:
+        parse_kinematics(doc, SRC)
+    msg = str(e.value)
+    assert msg.startswith(SRC) and words in msg and "\n" not in msg
+    top = key.split(".")[0].split("[")[0]
+    if top not in ("format", "version", "base", "flange_from_sensor"):
+        assert f"'{top}" in msg
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(CalibrationError, match="not a regular file"):
+        read_kinematics(tmp_path / "missing.yaml")
+    f = tmp_path / "bin.yaml"
+    f.write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(CalibrationError, match="UTF-8"):
+        read_kinematics(f)
+    f.write_text("a: &a [*a]\n")
+    with pytest.raises(CalibrationError, match=str(f)):
+        read_kinematics(f)
+    f.write_text("joints: [\n")
+    with pytest.raises(CalibrationError, match="invalid YAML"):
+        read_kinematics(f)
+
+
+# --- properties -------------------------------------------------------------------------------
+
+def check(doc):
+    try:
+        return parse_kinematics(doc, SRC)
+    except CalibrationError as e:
+        assert str(e).startswith(SRC) and "\n" not in str(e)
+        return None
+
+
+finite = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
+json_leaf = (st.none() | st.booleans() | st.integers(-10**20, 10**20) | finite
+             | st.floats() | st.text(max_size=8))
+trees = st.recursive(json_leaf, lambda c: st.lists(c, max_size=5)
+                     | st.dictionaries(st.text(max_size=6), c, max_size=5), max_leaves=40)
+
+
+@given(trees)
+@fuzz_settings(200)
+def test_any_document_is_a_model_or_one_error(doc):
+    check(doc)
+
+
+KEYS = ["format", "version", "arm", "joints", "base", "flange_from_sensor", "tool", "bias",
+        "identification", "session", "joints[0]", "joints[5].a_mm", "joints[3].max_deg",
+        "tool.cog_mm", "bias.force_n", "tool.mass_kg"]
+BASE_DOC = _doc()
+
+
+@given(st.sampled_from(KEYS), trees)
+@fuzz_settings(300)
+def test_one_key_replaced_by_anything(key, value):
+    kf = check(_set(copy.deepcopy(BASE_DOC), key, value))
+    if kf is not None:  # whatever was accepted is a valid model
+        assert np.isfinite(kf.model.vector()).all()
+        R = kf.model.base[:3, :3]
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-4)
+
+
+@given(st.lists(st.tuples(finite, finite, finite, finite), min_size=1, max_size=12),
+       st.floats(0, 100), st.lists(finite, min_size=3, max_size=3))
+@fuzz_settings(100)
+def test_valid_models_round_trip(rows, mass, cog):
+    """Any DH table within the file's bounds (angles reduced to ±180°) reads back."""
+    dh = np.array([[math.radians(t % 360 - 180), d / 10, a / 10, math.radians(al % 360 - 180)]
+                   for t, d, a, al in rows])
+    lim = np.tile([-math.pi, math.pi], (len(dh), 1))
+    from tmscal.calib.selfcal.model import ArmModel
+    arm = ArmModel(name="x", dh=dh, tool_mass_kg=mass, tool_cog_mm=np.array(cog) / 10,
+                   joint_limits_rad=lim)
+    kf = parse_kinematics(yaml.safe_load(kinematics_yaml(arm)), SRC)
+    np.testing.assert_allclose(kf.model.dh, arm.dh, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(kf.model.tool_mass_kg, arm.tool_mass_kg, rtol=1e-15)
+    np.testing.assert_allclose(kf.model.tool_cog_mm, arm.tool_cog_mm, rtol=1e-15)
