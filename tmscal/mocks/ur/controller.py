@@ -30,6 +30,7 @@ from ...geometry import (
 )
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
+from ..wrench import URWrenchOutputs
 from .motion import Motion
 from .rtde import rtde_type, zero_value
 
@@ -138,6 +139,9 @@ class URController:
         self.out_int = [0] * N_REGISTERS
         self.out_double = [0.0] * N_REGISTERS
         self.external_force_torque = [0.0] * 6
+        #: ft_raw_wrench and actual_TCP_force (``tmscal.mocks.wrench.URWrenchOutputs``;
+        #: None: both read zero)
+        self.wrench: URWrenchOutputs | None = None
         self.safety_mode = SAFETY_NORMAL
         self.robot_mode = int(robot_mode)
         self.remote_control = bool(remote_control)
@@ -232,6 +236,9 @@ class URController:
             "runtime_state": lambda now: self.runtime_state,
             "robot_status_bits": lambda now: self._robot_status_bits(),
             "external_force_torque": lambda now: self.external_force_torque,
+            "ft_raw_wrench": lambda now: [0.0] * 6 if self.wrench is None else self.wrench.raw(),
+            "actual_TCP_force": lambda now: [0.0] * 6 if self.wrench is None
+            else self.wrench.tcp(self._flange_now(now)),
         }
         if name in table:
             return table[name]
