@@ -265,16 +265,19 @@ _MAX_POOL = 100_000
 
 def check_adaptive(a: Any, src: str) -> Any:
     """The ``adaptive`` section (an ``AdaptiveConfig``): target_mm in (0, 100] mm, confidence
-    in (0, 1), 1 ≤ bootstrap ≤ max_poses ≤ pool, 1 ≤ region ≤ pool ≤ 100,000; else a
-    ConfigError naming the key. Returns ``a``."""
+    in (0, 1), 3 ≤ bootstrap ≤ max_poses ≤ pool (3 poses: the fewest that fix X, Y and Z),
+    1 ≤ region ≤ pool ≤ 100,000; else a ConfigError naming the key. Returns ``a``."""
     positive(src, "adaptive.target_mm", a.target_mm, at_most=100.0)
     if not 0 < a.confidence < 1:
         raise err(src, "adaptive.confidence", f"must be in (0, 1), got {a.confidence}")
     in_range(src, "adaptive.pool", a.pool, 1, _MAX_POOL)
-    in_range(src, "adaptive.max_poses", a.max_poses, 1, a.pool)
+    from .calib.adaptive import minimum_poses  # the fewest poses that fix X, Y and Z
+
+    least = minimum_poses(2)
+    in_range(src, "adaptive.max_poses", a.max_poses, least, a.pool)
     in_range(src, "adaptive.region", a.region, 1, a.pool)
     if a.bootstrap is not None:
-        in_range(src, "adaptive.bootstrap", a.bootstrap, 1, a.max_poses)
+        in_range(src, "adaptive.bootstrap", a.bootstrap, least, a.max_poses)
     return a
 
 
