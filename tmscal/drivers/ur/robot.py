@@ -145,6 +145,7 @@ class URRobot(Robot):
         self._stuck = False     # a control call was abandoned: the library may be wedged
         self._moving = threading.Event()   # an asynchronous moveL is being waited for
         self._halt = threading.Event()     # stop() asked the waiting move to send stopL
+        self._wrench_sensors: dict[str, Any] = {}   # kind → open URWrench (wrench())
 
     # --- lifecycle ----------------------------------------------------------------------------
 
@@ -187,6 +188,9 @@ class URRobot(Robot):
         log.info("ur %s: connected (%s)", self.host, self._identity)
 
     def _close(self) -> None:
+        for sensor in self._wrench_sensors.values():
+            sensor.close()
+        self._wrench_sensors.clear()
         for what, iface in (("control", self._ctl), ("receive", self._rx)):
             if iface is None:
                 continue
@@ -284,6 +288,24 @@ class URRobot(Robot):
             raise ProtocolError(f"ur {self.host}: getActualQ returned {v!r}, expected 6 "
                                 "finite values", device=self.name)
         return np.array(v, dtype=np.float64)
+
+    def wrench(self, kind: str = "raw", n: int = 1) -> np.ndarray:
+        """The wrist force-torque sensor's wrench (6,) [Fx, Fy, Fz N, Tx, Ty, Tz N·m], the
+        mean of ``n`` consecutive RTDE packages, converted nothing. ``kind`` "raw":
+        ``ft_raw_wrench`` (getFtRawWrench; PolyScope ≥ 5.9), FLANGE frame, not payload
+        compensated, not zeroed; "tcp": ``actual_TCP_force`` (getActualTCPForce), BASE frame,
+        payload compensated. Read through a ``URWrench`` on its own RTDE connection, opened on
+        first use and closed with the robot (``tmscal.drivers.ur.wrench`` says why)."""
+        if not self._opened:
+            raise DeviceError(f"{self.name}: wrench() on a robot that is not open")
+        from .wrench import URWrench
+
+        sensor = self._wrench_sensors.get(kind)
+        if sensor is None:
+            sensor = URWrench(self.host, kind, frequency_hz=self.frequency_hz,
+                              timeout_s=self.timeout_s).open()
+            self._wrench_sensors[kind] = sensor
+        return sensor.read(n).mean(axis=0)
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
         self._check_connected("move_to")
