@@ -9,7 +9,7 @@ from importlib.metadata import EntryPoint
 import pytest
 
 from tmscal.drivers import registry
-from tmscal.drivers.base import ConfigError, Robot, Tracker, driver_class
+from tmscal.drivers.base import ConfigError, ForceTorque, Robot, Tracker, driver_class
 from tmscal.drivers.registry import DriverSpec
 from tmscal.errors import MissingExtraError
 
@@ -20,7 +20,7 @@ BUILTIN = [s.name for s in registry.BUILTIN]
 def test_registered_driver_fills_its_contract(name):
     spec = registry.get_spec(name)
     cls = driver_class(name)
-    assert issubclass(cls, Robot if spec.kind == "robot" else Tracker)
+    assert issubclass(cls, {"robot": Robot, "tracker": Tracker, "ft": ForceTorque}[spec.kind])
     assert not inspect.isabstract(cls), f"{cls.__name__} leaves hooks unimplemented"
     assert cls.name == name
 
@@ -119,7 +119,7 @@ def test_spec_is_checked():
 
 def test_unknown_driver_lists_the_known_ones():
     with pytest.raises(ConfigError,
-                       match=r"unknown driver 'kuka'; known drivers: denso, franka, ndi, ur"):
+                       match=r"unknown driver 'kuka'; known drivers: ati, denso, franka, ndi, ur, ur_wrench"):
         driver_class("kuka")
 
 

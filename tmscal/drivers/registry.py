@@ -1,7 +1,8 @@
 """The one driver registry: driver name → ``DriverSpec`` (what kind of device it is, which
 class drives it, which mock serves it, its default port and its pip extra).
 
-The config parser asks it which names are valid for ``robot.driver`` and ``tracker.driver``;
+The config parser asks it which names are valid for ``robot.driver``, ``tracker.driver`` and
+``ft.driver`` (force-torque sensors);
 ``acquisition.devices`` builds drivers from it and ``mocks.rig`` builds mocks from it, so none
 of them names a brand. Classes are given as ``"module:Class"`` strings and imported only when
 used, so a driver whose optional extra is missing costs nothing until a config names it, and
@@ -36,7 +37,7 @@ __all__ = ["DriverSpec", "BUILTIN", "ENTRY_POINT_GROUP", "KINDS", "register", "g
 #: the entry-point group third-party drivers register in
 ENTRY_POINT_GROUP = "tmscal.drivers"
 #: the device kinds a driver can be
-KINDS = ("robot", "tracker")
+KINDS = ("robot", "tracker", "ft")
 
 
 def _import(target: str, what: str, extra: str | None) -> Any:
@@ -57,13 +58,14 @@ def _import(target: str, what: str, extra: str | None) -> Any:
 class DriverSpec:
     """How tmscal drives and mocks one device family.
 
-    ``name`` is what ``robot.driver`` / ``tracker.driver`` says in a config; ``kind`` is
-    "robot" or "tracker"; ``cls`` the driver class as ``"module:Class"`` (a ``Robot`` or
-    ``Tracker`` subclass whose ``name`` equals ``name``). ``mock`` is the protocol-level mock
-    class (``"module:Class"``, or None), ``mock_faults`` the dataclass built from the config's
-    ``mock.<kind>.faults`` and ``mock_volume`` (trackers) the one built from
-    ``mock.tracker.volume``. ``default_port`` is the TCP port the driver and mock take when
-    the config gives none (None: the driver takes no ``port``, e.g. UR's fixed RTDE ports).
+    ``name`` is what ``robot.driver`` / ``tracker.driver`` / ``ft.driver`` says in a config;
+    ``kind`` is "robot", "tracker" or "ft"; ``cls`` the driver class as ``"module:Class"`` (a
+    ``Robot``, ``Tracker`` or ``ForceTorque`` subclass whose ``name`` equals ``name``).
+    ``mock`` is the protocol-level mock class (``"module:Class"``, or None), ``mock_faults``
+    the dataclass built from the config's ``mock.<kind>.faults`` and ``mock_volume``
+    (trackers) the one built from ``mock.tracker.volume``. ``default_port`` is the port (TCP;
+    UDP for ``ati``) the driver and mock take when the config gives none (None: the driver
+    takes no ``port``, e.g. UR's fixed RTDE ports).
     ``extra`` is the pip extra the driver needs and ``requires`` the modules that extra
     provides (checked when the driver is loaded). ``options``, when given, are the only
     ``<kind>.options`` names the driver accepts (None: whatever its constructor accepts).
@@ -127,6 +129,13 @@ BUILTIN: tuple[DriverSpec, ...] = (
                mock="tmscal.mocks.franka:FrankaMock",
                mock_faults="tmscal.mocks.franka:FrankaFaults", extra="franka",
                requires=("franky",)),
+    DriverSpec("ati", "ft", "tmscal.drivers.ati.sensor:ATINetFT",
+               mock="tmscal.mocks.ati:ATINetFTMock", mock_faults="tmscal.mocks.ati:ATIFaults",
+               default_port=49152),
+    # the UR's built-in sensor: the UR mock serves it (ft_raw_wrench, actual_TCP_force)
+    DriverSpec("ur_wrench", "ft", "tmscal.drivers.ur.wrench:URWrench",
+               mock="tmscal.mocks.ur:URMock", mock_faults="tmscal.mocks.ur:URFaults",
+               extra="ur", requires=("rtde_receive",)),
 )
 
 #: name → spec, in registration order (built-ins first, then entry points)
@@ -180,7 +189,7 @@ def _load_entry_points(entry_points: Callable[..., Iterable[Any]] | None = None)
 
 def driver_names(kind: str | None = None) -> list[str]:
     """Every registered driver name (entry points included), in registration order; only
-    those of ``kind`` ("robot" or "tracker") when given."""
+    those of ``kind`` ("robot", "tracker" or "ft") when given."""
     _load_entry_points()
     return [n for n, s in SPECS.items() if kind is None or s.kind == kind]
 
