@@ -262,14 +262,22 @@ class DensoRobot(Robot):
                                 device=self.name)
         return T
 
+    #: joints of the arm: ``joint_positions`` keeps the first this many CurJnt values (an
+    #: RC8 sends eight, J7 and J8 being optional extra axes)
+    arm_axes = 6
+
     def joint_positions(self) -> np.ndarray:
-        """The joint angles now (rad), from CurJnt (degrees on the wire, converted here). A
-        reply that is not 1 to 32 finite numbers raises ``ProtocolError``; trailing axes the
-        controller pads with (an 8-axis array for a 6-axis arm) are kept as they come."""
+        """The arm's joint angles now (rad; the first ``arm_axes``), from CurJnt (degrees on
+        the wire, converted here). A reply that is not ``arm_axes`` to 32 finite numbers
+        raises ``ProtocolError`` naming CurJnt."""
         if not self._opened:
             raise DeviceError(f"{self.name}: joint_positions() on a robot that is not open")
         assert self._robot is not None
-        return np.radians(np.array(self.client.cur_jnt(self._robot), dtype=np.float64))
+        v = self.client.cur_jnt(self._robot)
+        if len(v) < self.arm_axes:
+            raise ProtocolError(f"{self.name}: CurJnt returned {len(v)} joint angles, "
+                                f"expected at least {self.arm_axes}", device=self.name)
+        return np.radians(np.array(v[:self.arm_axes], dtype=np.float64))
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
         """Blocking MOVE L to base_from_flange ``pose`` (4×4 mm) at ``speed_mm_s``."""
