@@ -74,9 +74,10 @@ def _rank_cond(R: np.ndarray) -> tuple[int, float]:
     return r, float(s[0] / s[r - 1])
 
 
-def _confounders(Js: np.ndarray, j: int, kept: list[int], names: Sequence[str]) -> str:
-    """The kept parameters whose columns combine into column j (least squares on the kept)."""
-    coef, *_ = np.linalg.lstsq(Js[:, kept], Js[:, j], rcond=None)
+def _confounders(R: np.ndarray, j: int, kept: list[int], names: Sequence[str]) -> str:
+    """The kept parameters whose columns combine into column j (least squares on the kept;
+    R has the singular values and column relations of the scaled Jacobian)."""
+    coef, *_ = np.linalg.lstsq(R[:, kept], R[:, j], rcond=None)
     big = np.abs(coef) > 1e-6 * max(np.abs(coef).max(), 1e-300)
     return ", ".join(names[kept[i]] for i in np.flatnonzero(big))
 
@@ -97,9 +98,7 @@ def identifiable(J: Any, names: Sequence[str]) -> Identifiability:
     zero = [j for j in range(len(names)) if norms[j] <= ZERO_COLUMN_RTOL * top]
     removed = [(names[j], ZERO_REASON) for j in zero]
     cols = [j for j in range(len(names)) if j not in zero]
-    Js = np.zeros_like(J)
-    Js[:, cols] = J[:, cols] / norms[cols]
-    R = scipy.linalg.qr(Js[:, cols], mode="r")[0][:len(cols)] if cols else np.zeros((0, 0))
+    qr_rank, qr_kept, R = _qr_check(J[:, cols] / norms[cols], [names[j] for j in cols])
     local = list(range(len(cols)))                       # indices into cols / R's columns
     rank, cond = _rank_cond(R)
     dependent: list[int] = []
@@ -112,24 +111,26 @@ def identifiable(J: Any, names: Sequence[str]) -> Identifiability:
                 best = (c, pos)
         if best is None:                                  # cannot happen for exact rank
             raise ValueError("no column can be removed without losing rank")
-        dependent.append(cols[local.pop(best[1])])
+        dependent.append(local.pop(best[1]))
         cond = best[0]
     kept = [cols[i] for i in local]
-    removed += [(names[j], f"dependent (confounded with {_confounders(Js, j, kept, names)})")
-                for j in dependent]
-    qr_rank, qr_kept = _qr_check(Js[:, cols], [names[j] for j in cols])
+    cnames = [names[j] for j in cols]
+    removed += [(names[cols[i]], "dependent (confounded with "
+                 f"{_confounders(R, i, local, cnames)})") for i in dependent]
     return Identifiability(names=names, kept=[names[j] for j in sorted(kept)], removed=removed,
                            rank=rank, cond=cond, qr_rank=qr_rank, qr_kept=qr_kept)
 
 
-def _qr_check(Js: np.ndarray, names: list[str]) -> tuple[int, list[str]]:
-    """(rank, first-rank pivots) of QR with column pivoting on unit-norm columns."""
+def _qr_check(Js: np.ndarray, names: list[str]) -> tuple[int, list[str], np.ndarray]:
+    """(rank, first-rank pivots, R) of QR with column pivoting on unit-norm columns Js; R
+    (columns back in Js's order) has Js's singular values and column relations (Js = Q R)."""
     if Js.shape[1] == 0:
-        return 0, []
+        return 0, [], np.zeros((0, 0))
     R, piv = scipy.linalg.qr(Js, mode="r", pivoting=True)
+    R = R[:Js.shape[1]]
     d = np.abs(np.diag(R))
     r = int(np.sum(d > RANK_RTOL * d[0]))
-    return r, [names[i] for i in piv[:r]]
+    return r, [names[i] for i in piv[:r]], R[:, np.argsort(piv)]
 
 
 @dataclass
