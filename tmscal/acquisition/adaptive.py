@@ -63,6 +63,7 @@ from .run import (
     _pose_with_reconnect,
     _save_pose,
     _valid_or_skipped,
+    open_new_run,
     resume_command,
 )
 from .settings import SamplingSettings as _Settings
@@ -217,18 +218,7 @@ def _decide(s: _State, pool: np.ndarray, p0: np.ndarray, settings: AdaptiveSetti
 
 def _new_run(cfg: RigConfig, out: Path, dev: _Devices, settings: AdaptiveSettings,
              samples: int | None) -> tuple[PlanSpec, np.ndarray, Any, _Settings]:
-    if out.exists():
-        raise SessionError(f"{out}: already exists; use --resume to continue it, or choose "
-                           "another file")
-    dev.open(envelope_for(cfg, None))  # speed caps and the box, until P0 is known
-    assert dev.robot is not None
-    p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
-          else np.asarray(cfg.plan.start, dtype=float))
-    spec = PlanSpec.from_config(cfg.plan, p0, settings.pool)
-    pool = spec.poses()
-    envelope = envelope_for(cfg, p0)
-    check_plan(pool, envelope)
-    dev.robot.envelope = envelope
+    spec, pool, envelope = open_new_run(cfg, out, dev, settings.pool)
     st = _settings(cfg, None, samples)
     _by_need(st, settings)
     return spec, pool, envelope, st

@@ -196,6 +196,27 @@ def _check_resume(cfg: RigConfig, session: Any, spec: PlanSpec, plan: np.ndarray
                 "was edited or belongs to another run; refusing to resume")
 
 
+def open_new_run(cfg: RigConfig, out: Path, dev: _Devices, n: int | None
+                 ) -> tuple[PlanSpec, np.ndarray, Envelope]:
+    """Start a new run into ``out`` (SessionError if it exists): open the devices with the
+    config's caps and box, take P0 from the robot (or ``plan.start``), build the plan of ``n``
+    poses (None: the config's) and check all of it against the envelope around P0 before
+    anything moves; the robot then carries that envelope. Poses base_from_flange, mm."""
+    if out.exists():
+        raise SessionError(f"{out}: already exists; use --resume to continue it, or "
+                           "choose another file")
+    dev.open(envelope_for(cfg, None))  # speed caps and the box, until P0 is known
+    assert dev.robot is not None
+    p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
+          else np.asarray(cfg.plan.start, dtype=float))
+    spec = PlanSpec.from_config(cfg.plan, p0, n)
+    plan = spec.poses()
+    envelope = envelope_for(cfg, p0)
+    check_plan(plan, envelope)
+    dev.robot.envelope = envelope
+    return spec, plan, envelope
+
+
 def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
                      poses: int | None, samples: int | None
                      ) -> tuple[SessionWriter | None, PlanSpec, np.ndarray, Envelope,
@@ -226,18 +247,7 @@ def _start_or_resume(cfg: RigConfig, out: Path, dev: _Devices, resume: bool,
         if summary:
             settings.notes.append(f"{out}: {summary} (their poses are acquired again)")
     else:
-        if out.exists():
-            raise SessionError(f"{out}: already exists; use --resume to continue it, or "
-                               "choose another file")
-        dev.open(envelope_for(cfg, None))  # speed caps and the box, until P0 is known
-        assert dev.robot is not None
-        p0 = (dev.robot.flange_pose() if isinstance(cfg.plan.start, str)
-              else np.asarray(cfg.plan.start, dtype=float))
-        spec = PlanSpec.from_config(cfg.plan, p0, poses)
-        plan = spec.poses()
-        envelope = envelope_for(cfg, p0)
-        check_plan(plan, envelope)
-        dev.robot.envelope = envelope
+        spec, plan, envelope = open_new_run(cfg, out, dev, poses)
         settings = _settings(cfg, None, samples)
     assert dev.robot is not None
     here = dev.robot.flange_pose()
