@@ -1,8 +1,10 @@
-"""The simulated rig: ground truth X, Y, Z, robot motion, tool geometry and noise models.
+"""The simulated rig: ground truth X, Y, Z, robot motion (optionally a serial arm with hidden
+kinematic errors, ``arm``), tool geometry and noise models.
 
 Used by ``tmscal simulate`` and served by every mock device.
 """
 
+from .arm import ArmPair, Unreachable, make_arm
 from .rig import (
     TMS_RIG_P0,
     TOOL_8700340_MM,
@@ -11,9 +13,9 @@ from .rig import (
     SimRig,
     Truth,
     facing_start,
-    simulate,
     tms_rig_truth,
 )
+from .study import simulate
 
-__all__ = ["Noise", "Settle", "SimRig", "Truth", "simulate", "facing_start", "tms_rig_truth",
-           "TMS_RIG_P0", "TOOL_8700340_MM"]
+__all__ = ["ArmPair", "Unreachable", "make_arm", "Noise", "Settle", "SimRig", "Truth",
+           "simulate", "facing_start", "tms_rig_truth", "TMS_RIG_P0", "TOOL_8700340_MM"]

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..calib.selfcal.model import ArmModel, forward
 from ..geometry import (
     absolute_orientation,
     compose,
@@ -56,6 +57,7 @@ from ..geometry import (
     random_rotation,
     rotvec_from_matrix,
 )
+from .arm import ArmPair, Unreachable, inverse
 
 #: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
 #: 56, 89, 62 mm). Sphere centres in the tool frame, mm; the origin is the centroid. The
@@ -295,7 +297,10 @@ class SimRig:
     where the flange comes to rest (with the robot's positioning error; ``true_flange()``
     adds the motion under way and the settling oscillation) and ``commanded`` the last
     commanded one (what the robot reports). ``settle``: the settling model (None: none);
-    ``time_s``: the time base in seconds (None: ``time.monotonic``).
+    ``time_s``: the time base in seconds (None: ``time.monotonic``). ``arm``: a serial arm
+    (:class:`~tmscal.sim.arm.ArmPair`, None: none): the robot then moves in joint space,
+    reports the nominal model's flange pose and really puts the flange where the true model
+    says (``tmscal.sim.arm``); without one, behaviour and random draws are as before.
     """
 
     truth: Truth
@@ -305,6 +310,7 @@ class SimRig:
     start: np.ndarray | None = None
     settle: Settle | None = None
     time_s: Callable[[], float] | None = None
+    arm: ArmPair | None = None
 
     def __post_init__(self) -> None:
         self._lock = threading.RLock()
@@ -315,6 +321,15 @@ class SimRig:
         p0 = np.eye(4) if self.start is None else np.asarray(self.start, dtype=float)
         self.commanded = p0.copy()
         self.flange = p0.copy()
+        self._q: np.ndarray | None = None
+        self._reach_cache: tuple[bytes, np.ndarray] | None = None
+        if self.arm is not None:
+            q = inverse(self.arm.nominal, p0, np.array(self.arm.home_q))
+            if q is None:
+                raise Unreachable(f"the start pose {np.round(p0[:3, 3], 1).tolist()} mm is out "
+                                  f"of the {self.arm.nominal.name} arm's reach")
+            self._q = q
+            self.flange = forward(self.arm.true, q)
         #: every commanded base_from_flange (4×4 mm) passed to move_flange, oldest first
         #: (bounded: the last 100,000), so tests can see what a robot mock was told
         self.moves: deque[np.ndarray] = deque(maxlen=100_000)
@@ -332,15 +347,64 @@ class SimRig:
         return list(self.tools or {})
 
     # --- robot side ---
+    @property
+    def arm_nominal(self) -> ArmModel | None:
+        """The controller's kinematic model (None: the rig has no arm)."""
+        return None if self.arm is None else self.arm.nominal
+
+    @property
+    def arm_true(self) -> ArmModel | None:
+        """The arm's true kinematic model, hidden errors included (None: no arm)."""
+        return None if self.arm is None else self.arm.true
+
+    def joints(self) -> np.ndarray | None:
+        """The joint angles now (rad; None when the rig has no arm): where the last
+        ``move_flange`` put them (a move under way is reported at its start)."""
+        with self._lock:
+            return None if self._q is None else self._q.copy()
+
+    def reach(self, base_from_flange: np.ndarray) -> np.ndarray | None:
+        """The joint angles (rad) that put the flange at ``base_from_flange`` (4×4 mm) on
+        the NOMINAL model, from the current joints (then from the arm's home), or None when
+        the arm cannot reach it. Without an arm: an empty array (every pose is reachable)."""
+        if self.arm is None:
+            return np.zeros(0)
+        cmd = np.asarray(base_from_flange, dtype=np.float64)
+        key = cmd.tobytes()
+        with self._lock:
+            if self._reach_cache is not None and self._reach_cache[0] == key:
+                return self._reach_cache[1].copy()
+            assert self._q is not None
+            q = inverse(self.arm.nominal, cmd, self._q)
+            if q is None:
+                q = inverse(self.arm.nominal, cmd, np.array(self.arm.home_q))
+            if q is not None:
+                self._reach_cache = (key, q.copy())
+            return q
+
     def move_flange(self, base_from_flange: np.ndarray) -> None:
         """Put the flange at the commanded pose (4×4 mm, base frame), with the robot's
-        positioning error applied to the true pose."""
+        positioning error applied to the true pose. With an arm, the joints go to the
+        nominal inverse kinematics of the pose and the flange to the TRUE arm's forward
+        kinematics of them; a pose out of reach raises :class:`Unreachable` and nothing
+        moves (a robot mock checks ``reach`` before it starts a move)."""
         cmd = np.asarray(base_from_flange, dtype=np.float64)
         with self._lock:
+            q = None
+            if self.arm is not None:
+                q = self.reach(cmd)
+                if q is None:
+                    raise Unreachable(f"pose {np.round(cmd[:3, 3], 1).tolist()} mm is out of "
+                                      f"the {self.arm.nominal.name} arm's reach")
             d = _perturbation(self.rng, self.noise.robot_rot_sigma_deg,
                               self.noise.robot_trans_sigma_mm)
             self.commanded = cmd.copy()
-            self.flange = cmd @ d
+            if q is None:
+                self.flange = cmd @ d
+            else:
+                assert self.arm is not None
+                self._q = q
+                self.flange = forward(self.arm.true, q) @ d
             self.moves.append(cmd.copy())
             self._path = None
             if self.settle is not None:
@@ -378,14 +442,16 @@ class SimRig:
             return out
 
     def reported_flange(self) -> np.ndarray:
-        """What the controller reports: base_from_flange 4×4 mm (commanded pose, plus read
-        jitter if configured)."""
+        """What the controller reports: base_from_flange 4×4 mm (the commanded pose; with an
+        arm, the nominal model's forward kinematics of the joints, which is the commanded
+        pose to within the IK tolerance), plus read jitter if configured."""
         with self._lock:
+            rep = (self.commanded if self._q is None or self.arm is None
+                   else forward(self.arm.nominal, self._q))
             if self.noise.robot_read_rot_sigma_deg or self.noise.robot_read_trans_sigma_mm:
-                return self.commanded @ _perturbation(self.rng,
-                                                      self.noise.robot_read_rot_sigma_deg,
-                                                      self.noise.robot_read_trans_sigma_mm)
-            return self.commanded.copy()
+                return rep @ _perturbation(self.rng, self.noise.robot_read_rot_sigma_deg,
+                                           self.noise.robot_read_trans_sigma_mm)
+            return rep.copy()
 
     # --- tracker side ---
     def true_body(self, body: str) -> np.ndarray:
@@ -423,36 +489,3 @@ def facing_start(truth: Truth, distance_mm: float = 1500.0) -> np.ndarray:
     the measurement volume."""
     target = make_pose(np.eye(3), [0.0, 0.0, -distance_mm])
     return compose(truth.Z, target, invert(truth.X))
-
-
-def simulate(n: int, rng: np.random.Generator, plan: str = "eq14", noise: Noise | None = None,
-             truth: Truth | None = None, samples: int = 1, with_probe: bool = True,
-             radius_mm: float | None = None, rotation_deg: float = 10.0
-             ) -> tuple[Truth, dict[str, np.ndarray]]:
-    """The simulation of Wang et al. (2018): a truth (random unless given), n poses by ``plan``
-    ("random": fully random robot poses; "eq14": Eq. 14 around a P0 facing the tracker), and noisy
-    observations, ``samples`` of them averaged per pose (chordal mean).
-
-    Returns (truth, {"A", "commanded", "marker", ["probe"]}) with (n, 4, 4) mm arrays.
-    """
-    from ..geometry import pose_mean
-    from ..poses import eq14_poses, random_poses
-
-    truth = truth or Truth.random(rng, with_probe=with_probe)
-    if plan == "random":
-        P = random_poses(n, rng, r_mm=500.0 if radius_mm is None else radius_mm)
-    elif plan == "eq14":
-        P = eq14_poses(facing_start(truth), n, rng, r_mm=100.0 if radius_mm is None
-                       else radius_mm, d_deg=rotation_deg)
-    else:
-        raise ValueError(f"unknown plan {plan!r}; expected 'random' or 'eq14'")
-    rig = SimRig(truth, noise=noise or Noise(), rng=rng)
-    out: dict[str, np.ndarray] = {"commanded": P, "A": np.empty_like(P)}
-    for b in rig.bodies:
-        out[b] = np.empty_like(P)
-    for i, cmd in enumerate(P):
-        rig.move_flange(cmd)
-        out["A"][i] = rig.reported_flange()
-        for b in rig.bodies:
-            out[b][i] = rig.observe(b) if samples == 1 else pose_mean(rig.observe(b, samples))
-    return truth, out

@@ -1,0 +1,179 @@
+"""A serial arm inside the sim rig: the robot's nominal kinematic model (what its controller
+believes) and its true one (the nominal plus hidden parameter errors), for the mock robots of
+issue 15's kinematic self-calibration (docs/selfcal.md, "On the rig").
+
+A mock robot with an arm moves in joint space, as a real one does: a commanded flange pose
+(base_from_flange, 4×4 mm) becomes joint angles q (rad) by inverse kinematics on the NOMINAL
+model (:func:`inverse`, damped least squares on :func:`tmscal.calib.selfcal.model.forward`);
+the flange really goes to forward(true, q), and the controller reports forward(nominal, q),
+which is the commanded pose to within the IK tolerance. The tracker therefore sees the true
+arm's error and the controller never does: the robot's absolute error, which a hand/eye
+calibration otherwise absorbs into X, Y and Z as best it can.
+
+Hidden errors (:func:`make_arm`), of the size Joubair et al. (2016) simulate, uniform ±2 mm on
+lengths and ±1° on angles (:func:`tmscal.calib.selfcal.model.perturb`):
+
+* ``"paper"``: on the parameters the gravity wrench identifies only (their protocol: the
+  others keep their nominal values), as :func:`tmscal.calib.selfcal.identify.identifiable`
+  finds them on the nominal model's Jacobian over random configurations within the limits;
+* ``"all"``: on every geometric parameter (each joint's θ0, d, a, α, the base's and the
+  sensor mounting's orientation and position), the honest case: link lengths and the base
+  position are not identifiable from the wrench and stay in error after self-calibration;
+* ``"none"``: true = nominal (the arm moves in joint space, without kinematic error).
+
+Where the arm stands: the rig's robot base frame (the frame of A) is the arm model's world, and
+the controller reports the flange in it. The UR5e stands at its origin; the shipped mock P0
+(flange at (500, 0, 400) mm, tool pointing down) is then at :data:`REACH_SHARE` of its
+shoulder-to-wrist reach. The VS-060 is smaller (605 mm shoulder to wrist), so its mock base
+stands at (150, 0, 0) mm, nearer P0, which puts P0 at a similar share of its reach.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..calib.selfcal.model import NOMINAL, ArmModel, forward, jacobian, perturb
+from ..geometry import make_pose, rotvec_from_matrix
+
+__all__ = ["ArmPair", "Unreachable", "inverse", "make_arm", "ARM_BASES", "HOME_Q",
+           "IK_TOL_MM", "IK_TOL_RAD"]
+
+#: where each arm's base stands in the rig's base frame (4×4 mm; module docstring)
+ARM_BASES: dict[str, np.ndarray] = {
+    "ur5e": np.eye(4),
+    "vs060": make_pose(np.eye(3), [150.0, 0.0, 0.0]),
+}
+#: a joint configuration (rad) near the mock P0 with the tool pointing down, elbow up: the
+#: seed of the first inverse kinematics
+HOME_Q: dict[str, tuple[float, ...]] = {
+    "ur5e": (math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0),
+    "vs060": (0.0, 0.5, 1.5, 0.0, 1.14, 0.0),
+}
+#: inverse kinematics converges when the flange is this close to the target (mm, rad)
+IK_TOL_MM = 1e-7
+IK_TOL_RAD = 1e-9
+#: rows of the IK's error: mm and rad weighed as mm and rad × this length (mm)
+_ROT_WEIGHT_MM = 100.0
+#: the largest joint step of one IK iteration (rad): stays on the seed's branch
+_MAX_STEP_RAD = 0.3
+#: random configurations that decide which parameters the wrench identifies ("paper")
+_IDENT_CONFIGS = 60
+
+
+class Unreachable(ValueError):
+    """A commanded pose the arm cannot reach (no inverse kinematics within the joint
+    limits); a mock controller refuses the move, as a real one refuses an unreachable
+    target."""
+
+
+@dataclass(frozen=True)
+class ArmPair:
+    """The arm of a sim rig: ``nominal`` (the controller's model) and ``true`` (the arm's
+    real parameters), both :class:`~tmscal.calib.selfcal.model.ArmModel` whose world is the
+    rig's robot base frame; ``home_q`` (rad) seeds the first inverse kinematics;
+    ``errors`` names the protocol that made ``true`` ("paper", "all", "none", or "custom")
+    and ``perturbed`` the parameter names that carry errors."""
+
+    nominal: ArmModel
+    true: ArmModel
+    home_q: tuple[float, ...]
+    errors: str = "custom"
+    perturbed: tuple[str, ...] = ()
+
+
+def _pose_error(target: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(…, 6): position error (mm) and rotation error (rad × ``_ROT_WEIGHT_MM``), base
+    frame, from T (…, 4, 4) to ``target`` (4×4)."""
+    dp = target[:3, 3] - T[..., :3, 3]
+    dr = rotvec_from_matrix(target[:3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2))
+    return np.concatenate([dp, dr * _ROT_WEIGHT_MM], axis=-1)
+
+
+def _jacobian(model: ArmModel, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """(6, n) d(pose error)/dq by central differences (one vectorised forward call)."""
+    n = len(q)
+    Q = q + h * np.concatenate([np.eye(n), -np.eye(n)])
+    T = forward(model, Q)
+    ref = T[0]
+    # the error of each probe relative to a common reference, so differences are tangent
+    e = -_pose_error(ref, T)
+    return (e[:n] - e[n:]).T / (2 * h)
+
+
+def inverse(model: ArmModel, target: np.ndarray, q0: np.ndarray,
+            max_iter: int = 100) -> np.ndarray | None:
+    """Joint angles q (rad) with forward(model, q) = ``target`` (base_from_flange 4×4 mm)
+    within ``IK_TOL_MM`` / ``IK_TOL_RAD``, inside the joint limits, by damped least squares
+    (Levenberg–Marquardt) from ``q0``; None when it does not converge (out of reach, or
+    only across a limit)."""
+    target = np.asarray(target, dtype=np.float64)
+    lo, hi = model.joint_limits_rad[:, 0], model.joint_limits_rad[:, 1]
+    q = np.clip(np.asarray(q0, dtype=np.float64), lo, hi)
+    e = _pose_error(target, forward(model, q))
+    cost = float(e @ e)
+    lam = 1e-3
+    for _ in range(max_iter):
+        if (np.linalg.norm(e[:3]) <= IK_TOL_MM
+                and np.linalg.norm(e[3:]) <= IK_TOL_RAD * _ROT_WEIGHT_MM):
+            return q
+        J = _jacobian(model, q)
+        H = J.T @ J
+        dq = np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-9 * np.eye(len(q))),
+                             J.T @ e)
+        big = np.abs(dq).max()
+        if big > _MAX_STEP_RAD:
+            dq *= _MAX_STEP_RAD / big
+        q_new = np.clip(q + dq, lo, hi)
+        e_new = _pose_error(target, forward(model, q_new))
+        c_new = float(e_new @ e_new)
+        if c_new < cost:
+            q, e, cost, lam = q_new, e_new, c_new, max(lam * 0.2, 1e-12)
+        else:
+            lam *= 10.0
+            if lam > 1e8:
+                return None
+    return None
+
+
+@functools.lru_cache(maxsize=4)
+def _identifiable_names(arm: str) -> tuple[str, ...]:
+    """Names of the nominal ``arm``'s parameters the gravity wrench identifies, from the
+    Jacobian over ``_IDENT_CONFIGS`` random configurations within the joint limits (a fixed
+    draw: the answer does not depend on the mock's seed)."""
+    from ..calib.selfcal.identify import identifiable
+    model = NOMINAL[arm]
+    rng = np.random.default_rng(12345)
+    lim = model.joint_limits_rad
+    q = rng.uniform(lim[:, 0], lim[:, 1], (_IDENT_CONFIGS, model.n_joints))
+    return tuple(identifiable(jacobian(model, q), model.parameter_names()).kept)
+
+
+def _geometric_names(model: ArmModel) -> list[str]:
+    """Every joint's θ0, d, a, α and the base's and sensor mounting's rpy and xyz."""
+    return [n for n in model.parameter_names()
+            if n.split("_")[0] in ("theta0", "d", "a", "alpha", "base", "sensor")]
+
+
+def make_arm(arm: str, errors: str, seed: int) -> ArmPair:
+    """The arm of a mock rig: the nominal ``arm`` ("ur5e" or "vs060") standing at
+    ``ARM_BASES[arm]``, and its true model with the hidden ``errors`` ("paper", "all" or
+    "none"; module docstring) drawn from ``np.random.default_rng(seed)``."""
+    if arm not in NOMINAL:
+        raise ValueError(f"unknown arm {arm!r}; expected one of {', '.join(NOMINAL)}")
+    nominal = replace(NOMINAL[arm], base=ARM_BASES[arm].copy())
+    if errors == "none":
+        names: list[str] = []
+    elif errors == "all":
+        names = _geometric_names(nominal)
+    elif errors == "paper":
+        geometric = set(_geometric_names(nominal))
+        names = [n for n in _identifiable_names(arm) if n in geometric]
+    else:
+        raise ValueError(f"unknown errors {errors!r}; expected 'paper', 'all' or 'none'")
+    true = (perturb(nominal, np.random.default_rng(seed), names) if names else nominal)
+    return ArmPair(nominal=nominal, true=true, home_q=HOME_Q[arm], errors=errors,
+                   perturbed=tuple(names))
