@@ -22,7 +22,18 @@ import numpy as np
 from ..config import RigConfig, construct
 from ..drivers.registry import DriverSpec, get_spec
 from ..errors import ConfigError
-from ..sim import TMS_RIG_P0, Noise, Settle, SimRig, Truth, facing_start, tms_rig_truth
+from ..sim import (
+    TMS_RIG_P0,
+    ArmPair,
+    Noise,
+    Settle,
+    SimRig,
+    Truth,
+    Unreachable,
+    facing_start,
+    make_arm,
+    tms_rig_truth,
+)
 from .clock import FAST, REAL_TIME, Clock
 from .net import loopback_family
 
@@ -34,7 +45,8 @@ __all__ = ["MockRig", "MockProcess", "build_sim_rig", "start_mock_rig", "spawn_m
 def build_sim_rig(cfg: RigConfig) -> SimRig:
     """The sim rig of a config's ``mock`` section: truth ("tms" built-in rig, "random", or
     explicit X/Y/Z), noise (``sim.Noise`` fields), settling (``sim.Settle`` fields; absent:
-    none), seed; the flange starts at P0."""
+    none), seed, and the arm of ``mock.kinematics`` (absent: none; the start pose out of
+    its reach is a ConfigError); the flange starts at P0."""
     m = cfg.mock
     if m is None:
         raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig")
@@ -53,13 +65,28 @@ def build_sim_rig(cfg: RigConfig) -> SimRig:
     bodies = list(cfg.tracker.tools) if cfg.tracker else None
     settle = (None if m.settle is None
               else construct(Settle, f"{cfg.path}: key 'mock.settle'", **m.settle))
-    rig = SimRig(truth, noise=noise, rng=rng, start=start, settle=settle)
+    try:
+        rig = SimRig(truth, noise=noise, rng=rng, start=start, settle=settle, arm=_arm(cfg))
+    except Unreachable as e:
+        raise ConfigError(f"{cfg.path}: key 'mock.kinematics': {e} (plan.start)") from None
     if bodies is not None:
         unknown = [b for b in bodies if b not in rig.bodies]
         if unknown:
             raise ConfigError(f"{cfg.path}: key 'tracker.tools.{unknown[0]}': the mock rig "
                               f"has bodies {rig.bodies} only")
     return rig
+
+
+def _arm(cfg: RigConfig) -> ArmPair | None:
+    """The serial arm of ``mock.kinematics`` (None when absent: no arm, as before)."""
+    assert cfg.mock is not None
+    k = cfg.mock.kinematics
+    if k is None:
+        return None
+    try:
+        return make_arm(k["arm"], k["errors"], k["seed"])
+    except ValueError as e:
+        raise ConfigError(f"{cfg.path}: key 'mock.kinematics': {e}") from None
 
 
 class MockRig:

@@ -45,6 +45,7 @@ from ...drivers.denso.variant import (
 )
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ...motion import Trapezoid
+from ...sim.arm import Unreachable
 from ...sim.rig import SimRig, straight_path
 from ..clock import Clock
 from . import args
@@ -148,7 +149,7 @@ class DensoController:
         self._robot_commands: dict[str, Callable[[Session, Variant], Variant]] = {
             "takearm": self._take_arm, "givearm": self._give_arm, "motor": self._motor,
             "extspeed": self._ext_speed, "curpos": lambda s, p: self._cur_pos(),
-            "curjnt": lambda s, p: Variant(VT_R8 | VT_ARRAY, [0.0] * 8),
+            "curjnt": lambda s, p: self._cur_jnt(),
         }
 
     def _count(self, key: str, at: int | None = None, rate: float = 0.0) -> tuple[int, bool]:
@@ -279,7 +280,10 @@ class DensoController:
                 self.motion.halted = True
             self.coast = None  # an arm still settling stops where it is (no kinematics)
             if self.path is not None:   # a real-time move stops on its path
-                self.rig.move_flange(self.path(self.clock.now()))
+                try:
+                    self.rig.move_flange(self.path(self.clock.now()))
+                except Unreachable as e:
+                    log.error("DENSO mock: %s; the arm stays where it was", e)
                 self.path = None
 
     def _on_robot_move(self, sess: Session, serial: int, a: list[Variant]) -> Any:
@@ -312,7 +316,7 @@ class DensoController:
         self._release(sess, a[0], "variable")
 
     def _var_value(self, name: str) -> Variant:
-        fixed = {"@CURRENT_ANGLE": Variant(VT_R8 | VT_ARRAY, [0.0] * 8),
+        fixed = {"@CURRENT_ANGLE": self._cur_jnt(),
                  "@VERSION": Variant(VT_BSTR, "tmscal DENSO b-CAP mock 1.0"),
                  "@MODE": Variant(VT_I4, 3)}
         if name == "@CURRENT_POSITION":
@@ -372,6 +376,13 @@ class DensoController:
             self.ext_speed_log = [*self.ext_speed_log[-999:], (speed, accel, decel)]
         return Variant(VT_EMPTY)
 
+    def _cur_jnt(self) -> Variant:
+        """The CurJnt reply: R8 array of eight joint angles (deg): the rig's joints when it
+        has an arm (``mock.kinematics``; J7, J8 0), else zeros (no kinematics)."""
+        q = self.rig.joints()
+        deg = [] if q is None else [math.degrees(float(v)) for v in q]
+        return Variant(VT_R8 | VT_ARRAY, (deg + [0.0] * 8)[:max(8, len(deg))])
+
     def _cur_pos(self) -> Variant:
         """The CurPos reply: R8 array [x, y, z (mm), rx, ry, rz (deg), fig], or the
         configured fault."""
@@ -419,6 +430,9 @@ class DensoController:
         target = matrix_from_denso_p(p[:6])
         if not np.isfinite(target).all():
             raise Refusal(E_INVALIDARG, f"pose {p} gives a non-finite target")
+        if self.rig.reach(target) is None:   # an arm (mock.kinematics) that cannot get there
+            raise Refusal(E_INVALIDARG, f"pose {p}: no inverse kinematics solution within "
+                          "the joint limits (out of reach)")
         duration = self._duration(target, pct, accel, decel)
         self.move_accel, self.move_decel = accel, decel
         if p[6] >= 0:

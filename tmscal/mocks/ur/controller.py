@@ -28,6 +28,7 @@ from ...geometry import (
     pose_from_rotvec,
     rotvec_pose_from_matrix,
 )
+from ...sim.arm import Unreachable
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
 from ..wrench import URWrenchOutputs
@@ -55,7 +56,8 @@ REALTIME_CMDS = frozenset({24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69,
 MOVE_CMDS = {CMD_MOVEJ: "moveJ", CMD_MOVEJ_IK: "moveJ_IK", CMD_MOVEL: "moveL",
              CMD_MOVEL_FK: "moveL_FK"}
 
-#: Placeholder joint angles (rad) reported as actual_q / target_q: the mock has no kinematics.
+#: Placeholder joint angles (rad) reported as actual_q / target_q by a mock without an arm
+#: (no ``mock.kinematics``); with one, they are the rig's joints.
 HOME_Q = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
 
 #: Number of input/output int and double registers.
@@ -227,8 +229,8 @@ class URController:
             "target_TCP_pose": self._target_tcp_vector,
             "actual_TCP_speed": self._tcp_speed,
             "target_TCP_speed": self._tcp_speed,
-            "actual_q": lambda now: self.target_q,
-            "target_q": lambda now: self.target_q,
+            "actual_q": lambda now: self._joints(),
+            "target_q": lambda now: self._joints(),
             "robot_mode": lambda now: self.robot_mode,
             "safety_mode": lambda now: self.safety_mode,
             "safety_status": lambda now: self.safety_mode,
@@ -261,6 +263,12 @@ class URController:
         arrays = {("input", "int"): self.in_int, ("input", "double"): self.in_double,
                   ("output", "int"): self.out_int, ("output", "double"): self.out_double}
         return arrays[(m.group(1), m.group(2))], int(m.group(3))
+
+    def _joints(self) -> list[float]:
+        """actual_q / target_q (rad): the rig's joints when it has an arm (``mock.kinematics``),
+        else the last joint target (placeholders: no kinematics)."""
+        q = self.rig.joints()
+        return self.target_q if q is None else [float(v) for v in q]
 
     def _tcp_vector(self, now: float) -> list[float]:
         return list(rotvec_pose_from_matrix(self._flange_now(now)))
@@ -338,8 +346,12 @@ class URController:
         self._stop_program(f"runtime error: {why}")
 
     def _halt(self, m: Motion, fraction: float) -> None:
-        """Put the flange where motion ``m`` is at ``fraction`` and end the motion."""
-        self.rig.move_flange(m.pose_at(fraction))
+        """Put the flange where motion ``m`` is at ``fraction`` and end the motion (an arm
+        that cannot reach a point of the path stays where it was)."""
+        try:
+            self.rig.move_flange(m.pose_at(fraction))
+        except Unreachable as e:
+            log.error("UR mock: %s; the arm stays where it was", e)
         self._motion = None
 
     def _abort_motion(self, now: float | None = None) -> None:
@@ -505,6 +517,10 @@ class URController:
             return
         if not math.isfinite(m.modelled_s):
             self._runtime_error(f"{what}: duration not finite ({m.modelled_s} s)")
+            return
+        if self.rig.reach(target) is None:   # an arm (mock.kinematics) that cannot get there
+            self._runtime_error(f"{what}: no inverse kinematics solution for the target "
+                                "within the joint limits (out of reach)")
             return
         self._abort_motion(now)
         if not resumed and self.faults.protective_stop_at_move == self.move_count:
