@@ -309,11 +309,10 @@ def jacobian(model: ArmModel, q: Any) -> np.ndarray:
 
 def perturb(model: ArmModel, rng: np.random.Generator, names: list[str] | None = None,
             length_mm: float = 2.0, angle_deg: float = 1.0) -> ArmModel:
-    """A copy of ``model`` with uniform errors: ±``length_mm`` on every named parameter in mm,
-    ±``angle_deg`` on every named parameter in rad (all of them when ``names`` is None);
-    weight, centre of gravity and bias only where named and then ±``length_mm`` on the
-    centre of gravity and nothing on weight and bias. The size Joubair et al. 2016 simulate
-    is ±2 mm / ±1°."""
+    """A copy of ``model`` with uniform errors on the named parameters (all of them when
+    ``names`` is None): ±``length_mm`` on those in mm (link lengths, base and sensor
+    positions, centre of gravity), ±``angle_deg`` on those in rad; the weight and the bias
+    (N, N·m) are never changed. Joubair et al. 2016 simulate ±2 mm / ±1°."""
     all_names = model.parameter_names()
     chosen = set(all_names if names is None else names)
     unknown = chosen - set(all_names)
