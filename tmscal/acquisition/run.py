@@ -118,7 +118,7 @@ def _record(i: int, P: np.ndarray, s: PoseSample, t: float) -> PoseRecord:
     samples = {_LETTER.get(k, k): v for k, v in s.samples.items()}
     return PoseRecord(index=i, A=s.A, B=s.bodies.get("marker"), C=s.bodies.get("probe"),
                       commanded=P, time=t, samples=samples, spread=s.spread,
-                      skipped=s.problem)
+                      skipped=s.problem, joints_rad=s.joints)
 
 
 _POSE_TOL_MM = 1e-6

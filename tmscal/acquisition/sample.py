@@ -79,7 +79,8 @@ class PoseSample:
     reason when the pose is unusable. ``settling_s`` and ``sampling_s`` are the seconds
     (monotonic clock) spent settling and sampling; ``still`` is True when the stillness test
     passed before sampling (False with ``settle="fixed"``, with ``settle_s`` 0, and for a
-    pose that never became still)."""
+    pose that never became still). ``joints``: the robot's joint angles (rad), read once
+    after sampling, when its driver reports them (else None)."""
 
     A: np.ndarray
     bodies: dict[str, np.ndarray | None]
@@ -94,6 +95,16 @@ class PoseSample:
     settling_s: float = 0.0
     sampling_s: float = 0.0
     still: bool = False
+    joints: np.ndarray | None = None
+
+
+def read_joints(robot: Robot) -> np.ndarray | None:
+    """The robot's joint angles (rad) from ``Robot.joint_positions``, or None when its driver
+    does not report them (NotImplementedError)."""
+    try:
+        return np.asarray(robot.joint_positions(), dtype=np.float64)
+    except NotImplementedError:
+        return None
 
 
 def spread_of(poses: np.ndarray, mean: np.ndarray) -> dict[str, float]:
@@ -310,7 +321,8 @@ def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float 
     spread evenly over the n frames (by need: over the first ``min_samples``); the robot holds
     still, and every read is a round trip on some controllers. The read budget is bounded
     (``max_frames_factor``·n reads per distinct frame budget and a wall-time limit from the
-    frame rate). Each body keeps the frames in which it is usable; a body usable in fewer
+    frame rate). The joint angles are read once, after sampling (``read_joints``). Each
+    body keeps the frames in which it is usable; a body usable in fewer
     than ``min_share`` of the frames, or a pose never still, makes the sample a problem
     (named). ``on_phase`` hears "settling", then "sampling". ``clock`` (monotonic seconds)
     times the phases and bounds the stillness wait."""
@@ -347,4 +359,5 @@ def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float 
     return PoseSample(A=A, bodies=means, samples=samples, spread=spread, share=share,
                       frames=len(frames), first_frame=frames[0], last_frame=frames[-1],
                       problem="; ".join(problems) or None, flags=flags,
-                      settling_s=t1 - t0, sampling_s=clock() - t1, still=settled.still)
+                      settling_s=t1 - t0, sampling_s=clock() - t1, still=settled.still,
+                      joints=read_joints(robot))
