@@ -13,10 +13,13 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
                max_speed_mm_s, max_accel_mm_s2}
     run:      {retries, reconnect_wait_s, warn_skip_share, stop_skip_share, skip_window}
     adaptive: {target_mm, confidence, max_poses, bootstrap, pool, region}
+    ft:       {driver: ati|ur_wrench, host (or "robot"), port, counts_per_force,
+               counts_per_torque, samples, options: {...}}
     mock:     {clock: fast|real, seed, truth: tms|random|{X, Y, Z}, noise: {...},
                settle: {amplitude_mm, tau_s, freq_hz, rotation_deg},
                kinematics: {arm: ur5e|vs060, errors: paper|all|none, seed},
-               tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...}}
+               tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...},
+               ft: {noise_n, noise_nm, faults: {...}, rate_hz, payload_kg, payload_cog_mm}}
 
 Lengths are mm, angles degrees (``_deg``), speeds mm/s, times seconds. Relative file paths
 (ROM files) are resolved against the config file's folder.
@@ -64,7 +67,9 @@ from .config_checks import (
     INT_BOUND,
     build,
     check_adaptive,
+    check_ft,
     check_kinematics,
+    check_mock_ft,
     check_sampling,
     check_tree,
     construct,
@@ -77,7 +82,7 @@ from .config_checks import (
 from .config_paths import log_wire_path, rom_path, tracker_port_problem
 from .errors import ConfigError
 
-__all__ = ["RigConfig", "RobotConfig", "TrackerConfig", "PlanConfig", "SamplingConfig",
+__all__ = ["RigConfig", "RobotConfig", "TrackerConfig", "FTConfig", "PlanConfig", "SamplingConfig",
            "SafetyConfig", "RunConfig", "MockConfig", "AdaptiveConfig", "load_config",
            "parse_config", "pose_from_config", "construct", "tracker_port_problem",
            "ROBOT_RESERVED_OPTIONS", "TRACKER_RESERVED_OPTIONS", "SAFETY_KEYS"]
@@ -213,6 +218,26 @@ class MockConfig:
     tracker: dict[str, Any] = field(default_factory=dict)
     robot: dict[str, Any] = field(default_factory=dict)
     kinematics: dict[str, Any] | None = None
+    ft: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class FTConfig:
+    """A force-torque sensor (kinematic self-calibration, docs/selfcal.md): ``driver`` (a
+    registered "ft" driver: ``ati`` the ATI Net F/T, ``ur_wrench`` the UR e-Series' built-in
+    sensor), ``host`` (its address; "robot" or None: the robot's, for a sensor in the arm),
+    ``port`` (None: the driver's default, UDP 49152 for the Net F/T), the sensor
+    calibration's ``counts_per_force`` (counts per N) and ``counts_per_torque`` (counts per
+    N·m; the Net F/T needs both, there is no default), ``samples`` averaged per reading, and
+    driver ``options`` (docs/devices.md)."""
+
+    driver: str
+    host: str | None = None
+    port: int | None = None
+    counts_per_force: float | None = None
+    counts_per_torque: float | None = None
+    samples: int = 100
+    options: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -245,6 +270,7 @@ class RigConfig:
     mock: MockConfig | None
     raw: dict[str, Any]
     adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
+    ft: FTConfig | None = None
 
     @property
     def bodies(self) -> list[str]:
@@ -253,7 +279,7 @@ class RigConfig:
 
 
 _SECTIONS = {"robot", "tracker", "plan", "sampling", "safety", "run", "mock", "adaptive",
-             "name", "description"}
+             "ft", "name", "description"}
 
 
 def pose_from_config(value: Any, src: str, key: str) -> np.ndarray:
@@ -452,6 +478,7 @@ def _parse_mock(data: Any, src: str) -> MockConfig | None:
     if mock.settle is not None:
         from .sim.rig import Settle
         construct(Settle, f"{src}: key 'mock.settle'", **mock.settle)
+    check_mock_ft(mock.ft, src)
     for dev in ("tracker", "robot"):
         faults = getattr(mock, dev).get("faults")
         if faults is not None and not isinstance(faults, Mapping):
@@ -502,6 +529,11 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None,
     run = _parse_run(data.get("run"), src)
     mock = _parse_mock(data.get("mock"), src)
     adaptive = check_adaptive(build(AdaptiveConfig, data.get("adaptive"), src, "adaptive"), src)
+    ft = None
+    if data.get("ft") is not None:
+        ft = build(FTConfig, data["ft"], src, "ft")
+        _check_driver(src, "ft", ft.driver)
+        check_ft(ft, src)
     _check_robot_caps(robot, safety, src)
     try:  # the resolved config goes into the session header as JSON
         json.dumps(data, allow_nan=False)
@@ -512,7 +544,8 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None,
                     "robot FLANGE only, not the coil hanging below it. List points of the coil "
                     "(flange frame, mm) so the box bounds them too.", src)
     return RigConfig(path=None, robot=robot, tracker=tracker, plan=plan, sampling=sampling,
-                     safety=safety, run=run, mock=mock, raw=dict(data), adaptive=adaptive)
+                     safety=safety, run=run, mock=mock, raw=dict(data), adaptive=adaptive,
+                     ft=ft)
 
 
 def load_config(path: str | os.PathLike[str], *, check_files: bool = True) -> RigConfig:

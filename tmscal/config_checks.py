@@ -24,7 +24,8 @@ from .errors import ConfigError
 __all__ = ["err", "show", "join", "check_tree", "build", "number", "coerce", "xyz", "positive",
            "in_range", "key_lines", "with_line", "construct", "MAX_DEPTH", "MAX_VALUES",
            "INT_BOUND", "check_adaptive", "check_sampling", "SETTLE_MODES",
-           "check_kinematics", "KINEMATIC_ARMS", "KINEMATIC_ERRORS"]
+           "check_kinematics", "KINEMATIC_ARMS", "KINEMATIC_ERRORS", "check_ft",
+           "check_mock_ft", "FT_RESERVED_OPTIONS", "MOCK_FT_KEYS"]
 
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
@@ -340,3 +341,45 @@ def check_kinematics(data: Any, src: str, default_seed: int) -> dict[str, Any] |
         raise err(src, "mock.kinematics.seed", f"expected an integer, got {show(seed)}")
     in_range(src, "mock.kinematics.seed", seed, 0, INT_BOUND - 1)
     return {"arm": arm, "errors": errors, "seed": seed}
+
+
+#: ft.options keys that have their own key in the ft section
+FT_RESERVED_OPTIONS = ("host", "port", "counts_per_force", "counts_per_torque", "samples")
+#: what ``mock.ft`` may set: the sensor's noise (σ per force channel N, per torque channel
+#: N·m), its faults, the ATI mock's record rate (Hz), the UR controller's payload
+MOCK_FT_KEYS = ("noise_n", "noise_nm", "faults", "rate_hz", "payload_kg", "payload_cog_mm")
+
+
+def check_ft(ft: Any, src: str) -> Any:
+    """The ``ft`` section (an ``FTConfig``, its driver already checked): port in 0…65535,
+    counts per N and per N·m > 0 and plausible when given, 1 ≤ samples ≤ 1,000,000, no
+    option that has its own key; else a ConfigError naming the key. Returns ``ft``."""
+    if ft.host is not None and not ft.host:
+        raise err(src, "ft.host", "must not be empty (an address, or 'robot' for a sensor "
+                  "in the robot arm)")
+    if ft.port is not None:
+        in_range(src, "ft.port", ft.port, 0, 65535)
+    for key in ("counts_per_force", "counts_per_torque"):
+        v = getattr(ft, key)
+        if v is not None:
+            positive(src, f"ft.{key}", v, at_most=1e12)
+    in_range(src, "ft.samples", ft.samples, 1, 1_000_000)
+    for k in ft.options:
+        if k in FT_RESERVED_OPTIONS:
+            raise err(src, f"ft.options.{k}", f"'{k}' cannot be set through options; set "
+                      f"ft.{k} instead")
+    return ft
+
+
+def check_mock_ft(data: Any, src: str) -> None:
+    """``mock.ft``: a mapping of ``MOCK_FT_KEYS`` (values are checked when the mock is built);
+    ``faults`` a mapping."""
+    if not isinstance(data, Mapping):
+        raise err(src, "mock.ft", f"expected a mapping, got {show(data)}")
+    extra = sorted(str(k) for k in data if k not in MOCK_FT_KEYS)
+    if extra:
+        raise err(src, f"mock.ft.{extra[0]}", f"unknown key (expected one of "
+                  f"{', '.join(MOCK_FT_KEYS)})")
+    if data.get("faults") is not None and not isinstance(data["faults"], Mapping):
+        raise err(src, "mock.ft.faults", f"expected a mapping of fault settings, got "
+                  f"{show(data['faults'])}")
