@@ -20,11 +20,12 @@ from ..config import (
     construct,
     tracker_port_problem,
 )
+from ..config_checks import FT_RESERVED_OPTIONS
 from ..config_paths import check_rom_exists
-from ..drivers.base import ConfigError, Envelope, Robot, SafetyError, Tracker
+from ..drivers.base import ConfigError, Envelope, ForceTorque, Robot, SafetyError, Tracker
 from ..drivers.registry import get_spec
 
-__all__ = ["envelope_for", "make_robot", "make_tracker"]
+__all__ = ["envelope_for", "make_robot", "make_tracker", "make_ft"]
 
 
 def envelope_for(cfg: RigConfig, p0: np.ndarray | None) -> Envelope:
@@ -124,6 +125,52 @@ def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
     if t.log_wire is not None:  # only drivers that record the wire take it
         kw["log_wire"] = t.log_wire
     return construct(spec.load(), f"{cfg.path}: key 'tracker.options'", **kw)
+
+
+def make_ft(cfg: RigConfig, host: str | None = None, port: int | None = None) -> ForceTorque:
+    """The configured force-torque sensor driver (not yet opened). ``host``/``port`` override
+    the config's. ``ft.host`` "robot" (or none given) is the robot's address, for a driver
+    that reads a sensor in the arm (``on_robot``, e.g. ``ur_wrench``); any other driver needs
+    its own address. The calibration's counts per unit go to a driver that takes them; one
+    that requires them (the Net F/T) without them in the config is a ConfigError naming the
+    key, before anything opens."""
+    import inspect
+
+    if cfg.ft is None:
+        raise ConfigError(f"{cfg.path}: key 'ft': this command needs a force-torque sensor "
+                          "section (ft: {driver, host, ...}; docs/devices.md)")
+    f = cfg.ft
+    spec = get_spec(f.driver, "ft")
+    cls = spec.load()
+    for k in f.options:
+        if k in FT_RESERVED_OPTIONS:
+            raise ConfigError(f"{cfg.path}: key 'ft.options.{k}': '{k}' cannot be set through "
+                              f"options; set ft.{k} instead")
+    _check_spec_options(cfg, "ft", f.options, spec.options)
+    where = host or f.host
+    if where in (None, "robot"):
+        if not getattr(cls, "on_robot", False):
+            raise ConfigError(f"{cfg.path}: key 'ft.host': driver {f.driver!r} needs the "
+                              "sensor's own address ('robot' is for a sensor in the arm)")
+        if cfg.robot is None:
+            raise ConfigError(f"{cfg.path}: key 'ft.host': {where or 'no host'!s} means the "
+                              "robot's address, but the config has no robot section")
+        where = cfg.robot.host
+    kw: dict[str, Any] = dict(f.options)
+    kw["host"] = where
+    params = inspect.signature(cls).parameters
+    for key in ("counts_per_force", "counts_per_torque"):
+        value = getattr(f, key)
+        if value is not None:
+            kw[key] = value
+        elif key in params and params[key].default is inspect.Parameter.empty:
+            raise ConfigError(f"{cfg.path}: key 'ft.{key}': driver {f.driver!r} needs the "
+                              "sensor calibration's counts per unit (its web page or "
+                              "netftapi2.xml: cfgcpf per N, cfgcpt per N·m); there is no "
+                              "default")
+    if spec.default_port is not None:
+        kw["port"] = port or f.port or spec.default_port
+    return construct(cls, f"{cfg.path}: key 'ft.options'", **kw)
 
 
 def _check_spec_options(cfg: RigConfig, kind: str, options: dict[str, Any],
