@@ -206,16 +206,24 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "the stored ones, coil placement against the truth when the session has "
                    "one, the calibration's provenance. No fitting; the daily check before a "
                    "TMS session.")
+@click.option("--kinematics", "kin_file", type=INPUT_FILE, default=None, metavar="KIN",
+              help="Recompute every robot pose A from the joint angles recorded in the "
+                   "session with the arm's calibrated kinematics (a file of tmscal selfcal "
+                   "identify -o) instead of taking the controller's reported pose: the "
+                   "robot's kinematic error no longer reaches X, Y, Z (docs/selfcal.md). "
+                   "Every pose used needs joint angles.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_pose: int | None,
           train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
-          output: Path | None, plot: Path | None, calib_file: Path | None, force: bool,
-          strict: bool) -> None:
+          output: Path | None, plot: Path | None, calib_file: Path | None,
+          kin_file: Path | None, force: bool, strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
     docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses.
-    With --calib, check a stored calibration on the session instead (no fitting)."""
+    With --calib, check a stored calibration on the session instead (no fitting). With
+    --kinematics, the robot poses come from the recorded joints and the arm's calibrated
+    kinematics."""
     from ..report.evaluate import pose_residuals, solve_session
     from ..report.text import calibration_yaml, format_result, plot_residuals
     from ..session import sha256_of
@@ -223,11 +231,12 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     if calib_file is not None:
         _check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
                       fitting=bool(options or handheld_pose is not None or train is not None
-                                   or in_sample or orthonormal or method.lower() != "qr36"))
+                                   or in_sample or orthonormal or method.lower() != "qr36"),
+                      kin_file=kin_file)
         return
     opts = _parse_options(options)
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)
-    session = _read_session(session_file, strict)
+    session = _with_kinematics(_read_session(session_file, strict), kin_file)
     if handheld_pose is not None:
         opts.update(_handheld_options(session, handheld_pose))
     cal, res = solve_session(session, method=method.lower(), train=train,
@@ -244,14 +253,27 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
               outliers=res.outliers)
     pred = _adaptive_prediction(session)
     if as_json:
-        _print_json(res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]})
+        out = res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]}
+        _print_json(out if kin_file is None else {**out, "kinematics": str(kin_file)})
     else:
+        if kin_file is not None:
+            click.echo(f"robot poses A recomputed from the recorded joints with {kin_file}\n")
         click.echo(format_result(res))
         if pred is not None:
             click.echo("\n" + pred[1])
         for f in (output, plot):
             if f is not None:
                 click.echo(f"\nwrote {f}")
+
+
+def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
+    """The session with A recomputed from its joints by the arm model of ``kin_file``
+    (``report.evaluate.with_kinematics``), or as it is without one."""
+    if kin_file is None:
+        return session
+    from ..exports.kinfile import load_arm
+    from ..report.evaluate import with_kinematics
+    return with_kinematics(session, load_arm(kin_file), str(kin_file))
 
 
 def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
@@ -273,7 +295,8 @@ def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
 
 
 def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bool,
-                  output: Path | None, plot: Path | None, fitting: bool) -> None:
+                  output: Path | None, plot: Path | None, fitting: bool,
+                  kin_file: Path | None = None) -> None:
     """``solve SESSION --calib CALIB``: the stored calibration on the session, no fitting."""
     from ..exports.calibfile import read_calibration
     from ..exports.check import check_calibration, format_check
@@ -286,7 +309,7 @@ def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: b
             raise click.BadParameter(f"{opt} solves or writes a calibration; --calib only "
                                      "checks a stored one (leave it out)", param_hint="--calib")
     cf = read_calibration(calib_file)
-    session = _read_session(session_file, strict)
+    session = _with_kinematics(_read_session(session_file, strict), kin_file)
     res = check_calibration(session, cf, sha256_of(session_file))
     if as_json:
         _print_json(res)

@@ -19,7 +19,8 @@ from ..session import Session
 from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
 
-__all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals"]
+__all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals",
+           "with_kinematics"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -109,6 +110,36 @@ class SolveResult:
             if getattr(self, k) is not None:
                 out[k] = _plain(getattr(self, k))
         return out
+
+
+def with_kinematics(session: Session, model: Any, source: str = "the kinematics") -> Session:
+    """A copy of ``session`` whose robot poses are recomputed from the recorded joints:
+    A = forward(``model``, joints_rad) (base_from_flange 4×4 mm; ``model`` an
+    ``ArmModel``, e.g. identified by ``tmscal selfcal identify``) for every usable pose,
+    so that the robot's kinematic error corrected by self-calibration no longer reaches X,
+    Y, Z (docs/selfcal.md). Skipped poses are kept as they are. Raises CalibrationError
+    naming the first usable pose without joint angles, or with another number of joints
+    than the model (``source`` names the model in the message)."""
+    from dataclasses import replace
+
+    from ..calib.selfcal.model import forward
+
+    n = model.n_joints
+    poses = []
+    for p in session.poses:
+        if p.skipped is None and p.A is not None:
+            if p.joints_rad is None:
+                raise CalibrationError(
+                    f"{session.path or 'session'}: pose {p.index} has no joint angles "
+                    f"('joints_rad'); --kinematics recomputes A from them, so every pose "
+                    "must have them (record with a robot driver that reports joints)")
+            if len(p.joints_rad) != n:
+                raise CalibrationError(
+                    f"{session.path or 'session'}: pose {p.index} has "
+                    f"{len(p.joints_rad)} joint angles; {source} ({model.name}) has {n} joints")
+            p = replace(p, A=forward(model, np.asarray(p.joints_rad, dtype=np.float64)))
+        poses.append(p)
+    return replace(session, poses=poses)
 
 
 def solve_session(session: Session, method: str = "qr36", train: int | None = None,
