@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import math
 import socket
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.rigs import wait_until
+from tests.rigs import NOISE_FREE_MOCK, wait_until, write_config
+from tmscal.acquisition.devices import make_ft
+from tmscal.config import load_config
 from tmscal.drivers.ati import codec
 from tmscal.drivers.ati.sensor import ATINetFT
 from tmscal.errors import ConnectionLost, DeviceError, DeviceTimeout
@@ -17,6 +20,7 @@ from tmscal.geometry import make_pose, rot_x
 from tmscal.mocks.ati import ATIFaults, ATINetFTMock
 from tmscal.mocks.clock import FAST, REAL_TIME
 from tmscal.mocks.net import NotLoopbackError
+from tmscal.mocks.rig import start_mock_rig
 from tmscal.mocks.wrench import gravity_wrench_source
 from tmscal.sim.rig import Noise, SimRig, tms_rig_truth
 
@@ -179,3 +183,57 @@ def test_mock_binds_loopback_udp() -> None:
     with ATINetFTMock(lambda: W, clock=FAST) as mock:
         host, port = mock.getsockname()
     assert host == "127.0.0.1" and port > 0
+
+
+def _ft_config(tmp_path: Path, **mock: object) -> Path:
+    return write_config(tmp_path, "mock-denso-polaris.yaml",
+                        ft={"driver": "ati", "host": "127.0.0.1", "port": 0,
+                            "counts_per_force": 1e6, "counts_per_torque": 1e6, "samples": 5},
+                        mock={"noise": NOISE_FREE_MOCK, **mock})
+
+
+def test_mock_rig_serves_the_gravity_wrench_of_the_rig(tmp_path: Path) -> None:
+    """``tmscal mock``'s rig with an ``ft`` section: the Net F/T mock serves the load at the
+    rig's flange, read through make_ft (by hand: f = Rᵀ(0, 0, −m g), τ = c × f)."""
+    cfg = load_config(_ft_config(tmp_path))
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        port = int(mr.endpoints["ft"].rsplit(":", 1)[1])
+        with make_ft(cfg, port=port) as ft:
+            w = ft.read(cfg.ft.samples).mean(axis=0)   # type: ignore[union-attr]
+        R = mr.rig.true_flange()[:3, :3]
+    f = R.T @ [0.0, 0.0, -1.5 * 9.80665]
+    tau = np.cross([0.0, 0.0, 0.060], f)
+    np.testing.assert_allclose(w, np.concatenate([f, tau]), atol=2e-6)
+
+
+def test_mock_rig_with_an_arm_serves_the_true_arms_wrench(tmp_path: Path) -> None:
+    """With ``mock.kinematics`` the wrench is the TRUE arm's at the rig's joints, which
+    differs from what the controller's nominal arm predicts by the hidden errors."""
+    from tmscal.calib.selfcal.model import wrench
+
+    cfg = load_config(_ft_config(tmp_path, kinematics={"arm": "ur5e", "errors": "paper"}))
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        port = int(mr.endpoints["ft"].rsplit(":", 1)[1])
+        with make_ft(cfg, port=port) as ft:
+            w = ft.read(3).mean(axis=0)
+        q = mr.rig.joints()
+        true, nominal = mr.rig.arm_true, mr.rig.arm_nominal
+    assert q is not None and true is not None and nominal is not None
+    np.testing.assert_allclose(w, wrench(true, q[None])[0], atol=2e-6)
+    assert np.abs(w - wrench(nominal, q[None])[0]).max() > 1e-3
+
+
+def test_mock_rig_refuses_a_public_ft_host(tmp_path: Path) -> None:
+    p = write_config(tmp_path, "mock-denso-polaris.yaml",
+                     ft={"driver": "ati", "host": "0.0.0.0", "counts_per_force": 1e6,
+                         "counts_per_torque": 1e6})
+    with pytest.raises(NotLoopbackError, match="key 'ft.host'"):
+        start_mock_rig(load_config(p), tracker_transport="pty")
+
+
+def test_mock_ft_faults_reach_the_mock(tmp_path: Path) -> None:
+    cfg = load_config(_ft_config(tmp_path, ft={"faults": {"bad_status_from": 1}}))
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        port = int(mr.endpoints["ft"].rsplit(":", 1)[1])
+        with make_ft(cfg, port=port) as ft, pytest.raises(DeviceError, match="error summary"):
+            ft.read(2)

@@ -119,3 +119,28 @@ def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) 
 
 if __name__ == "__main__":
     child_main(_child)
+
+
+def test_config_ft_ur_wrench_served_by_the_ur_mock(tmp_path: Any) -> None:
+    """A config with ``ft: {driver: ur_wrench, host: robot}``: ``tmscal mock`` (a child
+    process) serves the rig's gravity wrench through the UR mock; make_ft reads it at the
+    robot's address. The rig's P0 turns the flange, so by hand: raw = Rᵀ(0, 0, −m g) and
+    c × that, R the flange's rotation at P0 (the mock reports P0 as the flange pose)."""
+    from tests.rigs import NOISE_FREE_MOCK, write_config
+    from tmscal.acquisition.devices import make_ft
+    from tmscal.config import load_config
+    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.sim.rig import TMS_RIG_P0
+
+    path = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.155"},
+                        ft={"driver": "ur_wrench", "host": "robot", "samples": 20},
+                        mock={"noise": NOISE_FREE_MOCK, "ft": {"noise_n": 0.0}})
+    cfg = load_config(path)
+    with spawn_mock_rig(path) as proc:
+        assert proc.endpoints["ft"] == proc.endpoints["robot"]
+        with make_ft(cfg) as ft:
+            assert ft.identity()["host"] == "127.0.0.155"
+            w = ft.read(20).mean(axis=0)
+    f = TMS_RIG_P0[:3, :3].T @ [0.0, 0.0, -MG]
+    np.testing.assert_allclose(w, np.concatenate([f, np.cross([0.0, 0.0, 0.060], f)]),
+                               atol=1e-9)

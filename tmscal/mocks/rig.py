@@ -135,12 +135,15 @@ def _check_endpoints(cfg: RigConfig, tracker_transport: str,
         where = (f"{cfg.path}: key 'robot.host' ({host})" if robot_host is None
                  else f"robot host override ({host})")
         loopback_family(host, where)
+    if cfg.ft is not None and cfg.ft.host not in (None, "robot"):
+        loopback_family(cfg.ft.host, f"{cfg.path}: key 'ft.host' ({cfg.ft.host})")
     return url
 
 
 def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
                    robot_host: str | None = None, robot_port: int | None = None) -> MockRig:
-    """Start the mock tracker and robot of ``cfg`` around one sim rig.
+    """Start the mock tracker, robot and force-torque sensor (``ft``) of ``cfg`` around one
+    sim rig.
 
     ``tracker_transport``: "pty" (a new /dev/pts), "tcp" (an ephemeral loopback port),
     or "config" (TCP on the port of a ``socket://`` tracker.port, else a pty).
@@ -172,10 +175,56 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
             rm = _robot_mock(cfg, mr.rig, clock, robot_host, robot_port)
             mr.devices.append(rm)
             mr.endpoints["robot"] = rm.start()
+        if cfg.ft is not None:
+            _ft_mock(cfg, mr, clock)
     except BaseException:
         mr.close()
         raise
     return mr
+
+
+def _ft_mock(cfg: RigConfig, mr: MockRig, clock: Clock) -> None:
+    """Serve the force-torque sensor of ``cfg.ft`` from the same rig: its gravity wrench
+    (``mocks.wrench.gravity_wrench_source``: the true arm's, when the rig has one) plus the
+    noise of ``mock.ft``. A driver whose mock is the robot's (``ur_wrench``: the UR's
+    built-in sensor) is served by the running robot mock (``ft_raw_wrench`` and
+    ``actual_TCP_force``); any other gets its own mock (the Net F/T on UDP at ``ft.host``,
+    ``ft.port`` or the driver's default), started here. Endpoint ``"ft"``."""
+    from .wrench import URWrenchOutputs, gravity_wrench_source
+
+    assert cfg.ft is not None and cfg.mock is not None
+    spec = get_spec(cfg.ft.driver, "ft")
+    opts = dict(cfg.mock.ft)
+    where = f"{cfg.path}: key 'mock.ft'"
+    source = gravity_wrench_source(mr.rig)
+    robot_spec = get_spec(cfg.robot.driver, "robot") if cfg.robot is not None else None
+    if robot_spec is not None and spec.mock == robot_spec.mock:
+        _not_overriding(cfg, "mock.ft", opts, {"seed": None})
+        mr.devices[-1].wrench = construct(URWrenchOutputs, where, source, seed=cfg.mock.seed,
+                                          **opts)
+        mr.endpoints["ft"] = mr.endpoints["robot"]
+        return
+    if spec.mock is not None and any(spec.mock == s.mock for s in _robot_specs()):
+        raise ConfigError(f"{cfg.path}: key 'ft.driver': {cfg.ft.driver!r} is served by its "
+                          "robot's mock; the config needs that robot in its robot section")
+    f = cfg.ft
+    kw: dict[str, Any] = dict(
+        source=source, host=f.host if f.host not in (None, "robot") else "127.0.0.1",
+        port=f.port if f.port is not None else spec.default_port, clock=clock,
+        faults=_faults(cfg, spec, opts.pop("faults", {})), seed=cfg.mock.seed)
+    for key in ("counts_per_force", "counts_per_torque"):
+        if getattr(f, key) is not None:
+            kw[key] = getattr(f, key)
+    _not_overriding(cfg, "mock.ft", opts, kw)
+    fm = construct(spec.load_mock(), where, **kw, **opts)
+    mr.devices.append(fm)
+    mr.endpoints["ft"] = fm.start()
+
+
+def _robot_specs() -> list[DriverSpec]:
+    from ..drivers.registry import driver_names
+
+    return [get_spec(n, "robot") for n in driver_names("robot")]
 
 
 def _faults(cfg: RigConfig, spec: DriverSpec, data: Any) -> Any:
