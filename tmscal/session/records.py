@@ -300,7 +300,10 @@ class PoseRecord:
         for k in ("joints_rad", "wrench", "wrench_spread"):
             v = getattr(self, k)
             if v is not None:
-                d[k] = np.asarray(v, dtype=np.float64).tolist()
+                try:
+                    d[k] = np.asarray(v, dtype=np.float64).tolist()
+                except (TypeError, ValueError, OverflowError) as e:
+                    raise ValueError(f"field '{k}': not a list of numbers ({e})") from None
         return d
 
 
