@@ -38,6 +38,24 @@ def test_inverse_round_trip_on_the_nominal_model(arm: str) -> None:
         assert np.abs(back[:3, :3] - T[:3, :3]).max() < 1e-8
 
 
+def test_rig_reaches_configurations_spread_over_the_joint_space() -> None:
+    """A self-calibration plan sends flange poses of joint configurations anywhere within the
+    limits (tmscal selfcal acquire); from the rig's P0 joints the mock reaches at least 90 %
+    of 30 such poses (seeded), each within the IK tolerance."""
+    rig = _arm_rig("ur5e", "none")
+    lim = rig.arm_nominal.joint_limits_rad
+    rng = np.random.default_rng(21)
+    ok = 0
+    for q in rng.uniform(lim[:, 0], lim[:, 1], (30, 6)):
+        T = forward(rig.arm_nominal, q)
+        got = rig.reach(T)
+        if got is not None:
+            ok += 1
+            back = forward(rig.arm_nominal, got)
+            assert np.linalg.norm(back[:3, 3] - T[:3, 3]) < 10 * IK_TOL_MM
+    assert ok >= 27
+
+
 def test_out_of_reach_is_none() -> None:
     pair = make_arm("ur5e", "none", 0)
     far = make_pose(np.diag([1.0, -1.0, -1.0]), [3000.0, 0.0, 400.0])

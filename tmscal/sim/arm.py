@@ -39,7 +39,7 @@ import numpy as np
 from ..calib.selfcal.model import NOMINAL, ArmModel, forward, jacobian, perturb
 from ..geometry import make_pose, rotvec_from_matrix
 
-__all__ = ["ArmPair", "Unreachable", "inverse", "make_arm", "ARM_BASES", "HOME_Q",
+__all__ = ["ArmPair", "Unreachable", "inverse", "reach", "make_arm", "ARM_BASES", "HOME_Q",
            "IK_TOL_MM", "IK_TOL_RAD"]
 
 #: where each arm's base stands in the rig's base frame (4×4 mm; module docstring)
@@ -60,6 +60,8 @@ IK_TOL_RAD = 1e-9
 _ROT_WEIGHT_MM = 100.0
 #: the largest joint step of one IK iteration (rad): stays on the seed's branch
 _MAX_STEP_RAD = 0.3
+#: fixed configurations :func:`reach` tries after the current joints and the home
+_EXTRA_SEEDS = 12
 #: random configurations that decide which parameters the wrench identifies ("paper")
 _IDENT_CONFIGS = 60
 
@@ -136,6 +138,27 @@ def inverse(model: ArmModel, target: np.ndarray, q0: np.ndarray,
             lam *= 10.0
             if lam > 1e8:
                 return None
+    return None
+
+
+def reach(model: ArmModel, target: np.ndarray, q_now: np.ndarray | None,
+          home_q: tuple[float, ...]) -> np.ndarray | None:
+    """:func:`inverse` of ``target`` (4×4 mm) from the current joints ``q_now`` (rad; the
+    nearest solution, as a controller's move keeps its configuration), then from the arm's
+    home, then from ``_EXTRA_SEEDS`` fixed configurations spread over the joint ranges (a
+    target far from both, e.g. a self-calibration pose); None when none converges."""
+    span = float(np.abs(model.dh[:, 1:3]).sum())   # no flange is farther from the base
+    if np.linalg.norm(np.asarray(target)[:3, 3] - model.base[:3, 3]) > span:
+        return None
+    seeds = ([] if q_now is None else [np.asarray(q_now, dtype=np.float64)]) \
+        + [np.array(home_q, dtype=np.float64)]
+    lim = model.joint_limits_rad
+    seeds += list(np.random.default_rng(1).uniform(lim[:, 0], lim[:, 1],
+                                                   (_EXTRA_SEEDS, model.n_joints)))
+    for q0 in seeds:
+        q = inverse(model, target, q0)
+        if q is not None:
+            return q
     return None
 
 

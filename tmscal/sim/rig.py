@@ -57,7 +57,7 @@ from ..geometry import (
     random_rotation,
     rotvec_from_matrix,
 )
-from .arm import ArmPair, Unreachable, inverse
+from .arm import ArmPair, Unreachable, reach
 
 #: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
 #: 56, 89, 62 mm). Sphere centres in the tool frame, mm; the origin is the centroid. The
@@ -324,7 +324,7 @@ class SimRig:
         self._q: np.ndarray | None = None
         self._reach_cache: tuple[bytes, np.ndarray] | None = None
         if self.arm is not None:
-            q = inverse(self.arm.nominal, p0, np.array(self.arm.home_q))
+            q = reach(self.arm.nominal, p0, None, self.arm.home_q)
             if q is None:
                 raise Unreachable(f"the start pose {np.round(p0[:3, 3], 1).tolist()} mm is out "
                                   f"of the {self.arm.nominal.name} arm's reach")
@@ -365,8 +365,9 @@ class SimRig:
 
     def reach(self, base_from_flange: np.ndarray) -> np.ndarray | None:
         """The joint angles (rad) that put the flange at ``base_from_flange`` (4×4 mm) on
-        the NOMINAL model, from the current joints (then from the arm's home), or None when
-        the arm cannot reach it. Without an arm: an empty array (every pose is reachable)."""
+        the NOMINAL model (``tmscal.sim.arm.reach``: from the current joints first), or None
+        when the arm cannot reach it. Without an arm: an empty array (every pose is
+        reachable)."""
         if self.arm is None:
             return np.zeros(0)
         cmd = np.asarray(base_from_flange, dtype=np.float64)
@@ -374,10 +375,7 @@ class SimRig:
         with self._lock:
             if self._reach_cache is not None and self._reach_cache[0] == key:
                 return self._reach_cache[1].copy()
-            assert self._q is not None
-            q = inverse(self.arm.nominal, cmd, self._q)
-            if q is None:
-                q = inverse(self.arm.nominal, cmd, np.array(self.arm.home_q))
+            q = reach(self.arm.nominal, cmd, self._q, self.arm.home_q)
             if q is not None:
                 self._reach_cache = (key, q.copy())
             return q
