@@ -1,11 +1,13 @@
 """A protocol-level ATI Net F/T: RDT over UDP on a loopback address (``tmscal.drivers.ati``
 speaks to it unchanged).
 
-Each start request (``START_REALTIME`` / ``START_BUFFERED`` with a sample count; 0 streams
-until ``STOP``) starts a stream to the requesting address, ``rdt_sequence`` 1, 2, … as the
-real sensor numbers it; ``ft_sequence`` counts the mock's samples over its life. On the
-real-time clock records go out at ``rate_hz``; on the fast clock a stream of k records is sent
-at once (a stream without a count sends ``FAST_STREAM_CAP`` records, then waits for STOP).
+Each start request (``START_REALTIME`` with a sample count; 0 streams until ``STOP``) starts
+a stream to the requesting address, ``rdt_sequence`` 1, 2, … as the real sensor numbers it.
+``START_BUFFERED`` and ``START_MULTI_UNIT`` are answered the same way, one record per
+datagram (the real sensor's several records per datagram are not modelled). ``ft_sequence``
+counts the mock's samples over its life. On the real-time clock records go out at
+``rate_hz``; on the fast clock a stream of k records is sent at once (a stream without a
+count sends ``FAST_STREAM_CAP`` records, then waits for STOP).
 ``SET_SOFTWARE_BIAS`` subtracts the current reading from later ones; ``STOP`` ends the stream.
 Requests that do not parse are logged and ignored, as the sensor ignores them.
 
