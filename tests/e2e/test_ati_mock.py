@@ -237,3 +237,18 @@ def test_mock_ft_faults_reach_the_mock(tmp_path: Path) -> None:
         port = int(mr.endpoints["ft"].rsplit(":", 1)[1])
         with make_ft(cfg, port=port) as ft, pytest.raises(DeviceError, match="error summary"):
             ft.read(2)
+
+
+def test_mock_ignores_hostile_datagrams_and_serves_on() -> None:
+    """Empty, short, long, bad-header, unknown-command and random datagrams are ignored (as
+    the sensor ignores them); a request after them is served."""
+    junk = [b"", b"\x12\x34\x00\x02\x00\x00\x00", bytes(9), bytes.fromhex("43210002 00000001"),
+            bytes.fromhex("12340005 00000001"), np.random.default_rng(1).bytes(1000)]
+    with ATINetFTMock(lambda: W, clock=FAST) as mock:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for j in junk:
+                s.sendto(j, ("127.0.0.1", mock.port))
+        with _sensor(mock) as ft:
+            w = ft.read(2)
+        assert all(cmd in codec.COMMANDS for cmd, _ in mock.requests)
+    np.testing.assert_allclose(w, np.tile(W, (2, 1)), atol=1e-6)
