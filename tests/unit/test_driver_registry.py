@@ -118,8 +118,8 @@ def test_spec_is_checked():
 
 
 def test_unknown_driver_lists_the_known_ones():
-    with pytest.raises(ConfigError,
-                       match=r"unknown driver 'kuka'; known drivers: ati, denso, franka, ndi, ur, ur_wrench"):
+    with pytest.raises(ConfigError, match=r"unknown driver 'kuka'; known drivers: ati, denso, "
+                                          r"franka, ndi, ur, ur_wrench"):
         driver_class("kuka")
 
 
