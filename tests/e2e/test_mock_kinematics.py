@@ -13,7 +13,6 @@ import pytest
 from click.testing import CliRunner
 
 from tmscal.acquisition.run import acquire
-from tmscal.calib.selfcal.model import forward
 from tmscal.cli import main
 from tmscal.config import load_config
 from tmscal.drivers.base import Envelope
@@ -50,14 +49,14 @@ def test_joints_reach_the_session_and_true_kinematics_correct_a(tmp_path, mock_c
     for p in s.poses:
         assert p.joints_rad is not None and len(p.joints_rad) == 6
         # the controller reported the nominal model's flange for the joints it reported
-        A_nominal = forward(rig.arm_nominal, p.joints_rad)
+        A_nominal = rig.arm.reported(np.array(p.joints_rad))
         assert np.linalg.norm(A_nominal[:3, 3] - p.A[:3, 3]) < 1e-3, p.index
         # … which is the commanded pose (IK), not where the true arm put the flange
         assert np.linalg.norm(p.A[:3, 3] - p.commanded[:3, 3]) < 1e-3
     q = np.array([p.joints_rad for p in s.poses])
     assert np.ptp(q, axis=0).max() > 0.05   # the joints moved with the plan
-    gap = np.linalg.norm(forward(rig.arm_true, q)[:, :3, 3] - forward(rig.arm_nominal, q)[:, :3, 3],
-                         axis=1)
+    gap = np.array([np.linalg.norm(rig.arm.actual(qi)[:3, 3] - rig.arm.reported(qi)[:3, 3])
+                    for qi in q])
     assert gap.min() > 0.1   # the hidden errors are there to correct (mm)
     kin_file = tmp_path / "true.yaml"
     kin_file.write_text(kinematics_yaml(rig.arm_true))
@@ -106,8 +105,8 @@ def test_ur_unreachable_target_is_refused_and_nothing_moves(mock_config):
         with robot:
             q0 = robot.joint_positions()
             here = robot.flange_pose()
-            np.testing.assert_allclose(forward(build_sim_rig(load_config(cfg_path)).arm_nominal,
-                                               q0), here, atol=1e-6)
+            np.testing.assert_allclose(build_sim_rig(load_config(cfg_path)).arm.reported(q0),
+                                       here, atol=1e-6)
             with pytest.raises(DeviceError):
                 robot.move_to(make_pose(here[:3, :3], [2500.0, 0.0, 400.0]))
         with URRobot(mp.endpoints["robot"], envelope=Envelope()) as again:

@@ -47,11 +47,11 @@ def test_rig_reaches_configurations_spread_over_the_joint_space() -> None:
     rng = np.random.default_rng(21)
     ok = 0
     for q in rng.uniform(lim[:, 0], lim[:, 1], (30, 6)):
-        T = forward(rig.arm_nominal, q)
+        T = rig.arm.reported(q)
         got = rig.reach(T)
         if got is not None:
             ok += 1
-            back = forward(rig.arm_nominal, got)
+            back = rig.arm.reported(got)
             assert np.linalg.norm(back[:3, 3] - T[:3, 3]) < 10 * IK_TOL_MM
     assert ok >= 27
 
@@ -69,9 +69,10 @@ def _arm_rig(arm: str = "ur5e", errors: str = "paper", seed: int = 5) -> SimRig:
 
 @pytest.mark.parametrize("arm", ["ur5e", "vs060"])
 def test_controller_reports_nominal_tracker_sees_true(arm: str) -> None:
-    """After each move the reported flange is the command (IK tolerance); the tracker's
-    marker pose is Z⁻¹ · forward(true, q) · X, so tracker and controller differ by exactly
-    forward(true, q) vs forward(nominal, q) — a few mm with the paper's hidden errors."""
+    """After each move the reported flange is the command (IK tolerance) and the nominal
+    DH chain at the reported joints, placed by the mount; the tracker's marker pose is
+    Z⁻¹ · mount · (DH chain of the TRUE model) · X, so tracker and controller differ by
+    exactly the two models' chains at the same joints — a few mm with the paper's errors."""
     rig = _arm_rig(arm)
     X, Z = rig.truth.X, rig.truth.Z
     P = eq14_poses(TMS_RIG_P0, 15, np.random.default_rng(2), r_mm=100.0, d_deg=10.0)
@@ -82,10 +83,12 @@ def test_controller_reports_nominal_tracker_sees_true(arm: str) -> None:
         assert q is not None and q.shape == (6,)
         rep = rig.reported_flange()
         assert np.linalg.norm(rep[:3, 3] - cmd[:3, 3]) < 1e-6
-        np.testing.assert_allclose(rep, forward(rig.arm_nominal, q), atol=1e-9)
+        M = rig.arm.mount
+        chain_nominal = invert(rig.arm_nominal.base) @ forward(rig.arm_nominal, q)
+        chain_true = invert(rig.arm_true.base) @ forward(rig.arm_true, q)
+        np.testing.assert_allclose(rep, M @ chain_nominal, atol=1e-9)
         seen = rig.observe("marker")
-        np.testing.assert_allclose(seen, invert(Z) @ forward(rig.arm_true, q) @ X,
-                                   atol=1e-9)
+        np.testing.assert_allclose(seen, invert(Z) @ M @ chain_true @ X, atol=1e-9)
         # what a hand/eye calibration sees as the robot's error
         A_seen = Z @ seen @ invert(X)
         gaps.append(np.linalg.norm(A_seen[:3, 3] - rep[:3, 3]))
@@ -129,12 +132,12 @@ def test_error_protocols() -> None:
                                   paper.true.vector())
 
 
-def test_vs060_base_places_p0_inside_the_reach() -> None:
+def test_vs060_mount_places_p0_inside_the_reach() -> None:
     """The VS-060 stands nearer P0 than the rig origin; its wrist centre at P0 is well
     inside the shoulder-to-wrist reach (upper arm + forearm)."""
     pair = make_arm("vs060", "none", 0)
     dh = NOMINAL["vs060"].dh
-    shoulder = pair.nominal.base[:3, 3] + [0.0, 0.0, dh[0, 1]]
+    shoulder = pair.mount[:3, 3] + [0.0, 0.0, dh[0, 1]]
     wrist = (TMS_RIG_P0 @ [0.0, 0.0, -dh[5, 1], 1.0])[:3]
     reach = abs(dh[1, 2]) + np.hypot(dh[3, 1], dh[2, 2])
     assert np.linalg.norm(wrist - shoulder) < 0.75 * reach

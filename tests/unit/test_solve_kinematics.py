@@ -6,6 +6,7 @@ tracker sees the true one. Poses 4×4 mm, joints rad."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from tmscal.calib.selfcal.model import forward
 from tmscal.cli import main
 from tmscal.errors import CalibrationError
 from tmscal.exports.kinfile import kinematics_yaml
-from tmscal.geometry import pose_mean
+from tmscal.geometry import make_pose, pose_mean, rot_x
 from tmscal.poses import eq14_poses
 from tmscal.report.evaluate import with_kinematics
 from tmscal.session import PoseRecord, make_header, read_session, write_session
@@ -70,8 +71,9 @@ def test_true_kinematics_lower_the_truth_errors(tmp_path, errors) -> None:
 
 
 def test_nominal_kinematics_change_nothing_beyond_ik_tolerance(tmp_path) -> None:
-    """forward(nominal, q) is what the controller reported (the IK tolerance apart), so the
-    recomputed A equal the recorded ones."""
+    """The nominal DH chain at the recorded joints is what the controller reported (the
+    IK tolerance apart), so the recomputed A equal the recorded ones; with a tilted base in
+    the model, A stays in the robot's frame (base⁻¹ · forward)."""
     s = tmp_path / "s.jsonl"
     rig = _session(s, "paper", n=8)
     sess = read_session(s)
@@ -80,6 +82,9 @@ def test_nominal_kinematics_change_nothing_beyond_ik_tolerance(tmp_path) -> None
         np.testing.assert_allclose(q.A, p.A, atol=1e-6)
         np.testing.assert_array_equal(q.B, p.B)
         np.testing.assert_allclose(q.A, forward(rig.arm_nominal, p.joints_rad), atol=1e-12)
+    tilted = replace(rig.arm_nominal, base=make_pose(rot_x(0.02), [5.0, -3.0, 1.0]))
+    for p, q in zip(sess.poses, with_kinematics(sess, tilted).poses, strict=True):
+        np.testing.assert_allclose(q.A, p.A, atol=1e-6)
 
 
 def test_session_without_joints_is_refused_naming_the_first_pose(tmp_path) -> None:

@@ -114,8 +114,9 @@ class SolveResult:
 
 def with_kinematics(session: Session, model: Any, source: str = "the kinematics") -> Session:
     """A copy of ``session`` whose robot poses are recomputed from the recorded joints:
-    A = forward(``model``, joints_rad) (base_from_flange 4×4 mm; ``model`` an
-    ``ArmModel``, e.g. identified by ``tmscal selfcal identify``) for every usable pose,
+    A = base⁻¹ · forward(``model``, joints_rad), the flange in the robot's base frame
+    (base_from_flange 4×4 mm; ``model`` an ``ArmModel``, e.g. identified by ``tmscal
+    selfcal identify``, whose ``base`` is world ← robot base) for every usable pose,
     so that the robot's kinematic error corrected by self-calibration no longer reaches X,
     Y, Z (docs/selfcal.md). Skipped poses are kept as they are. Raises CalibrationError
     naming the first usable pose without joint angles, or with another number of joints
@@ -125,6 +126,7 @@ def with_kinematics(session: Session, model: Any, source: str = "the kinematics"
     from ..calib.selfcal.model import forward
 
     n = model.n_joints
+    base_inv = np.linalg.inv(np.asarray(model.base, dtype=np.float64))
     poses = []
     for p in session.poses:
         if p.skipped is None and p.A is not None:
@@ -137,7 +139,8 @@ def with_kinematics(session: Session, model: Any, source: str = "the kinematics"
                 raise CalibrationError(
                     f"{session.path or 'session'}: pose {p.index} has "
                     f"{len(p.joints_rad)} joint angles; {source} ({model.name}) has {n} joints")
-            p = replace(p, A=forward(model, np.asarray(p.joints_rad, dtype=np.float64)))
+            A = base_inv @ forward(model, np.asarray(p.joints_rad, dtype=np.float64))
+            p = replace(p, A=A)
         poses.append(p)
     return replace(session, poses=poses)
 

@@ -5,8 +5,9 @@ issue 15's kinematic self-calibration (docs/selfcal.md, "On the rig").
 A mock robot with an arm moves in joint space, as a real one does: a commanded flange pose
 (base_from_flange, 4×4 mm) becomes joint angles q (rad) by inverse kinematics on the NOMINAL
 model (:func:`inverse`, damped least squares on :func:`tmscal.calib.selfcal.model.forward`);
-the flange really goes to forward(true, q), and the controller reports forward(nominal, q),
-which is the commanded pose to within the IK tolerance. The tracker therefore sees the true
+the flange really goes where the TRUE model puts those joints (:meth:`ArmPair.actual`), and
+the controller reports the nominal model's flange (:meth:`ArmPair.reported`), which is the
+commanded pose to within the IK tolerance. The tracker therefore sees the true
 arm's error and the controller never does: the robot's absolute error, which a hand/eye
 calibration otherwise absorbs into X, Y and Z as best it can.
 
@@ -17,33 +18,41 @@ lengths and ±1° on angles (:func:`tmscal.calib.selfcal.model.perturb`):
   others keep their nominal values), as :func:`tmscal.calib.selfcal.identify.identifiable`
   finds them on the nominal model's Jacobian over random configurations within the limits;
 * ``"all"``: on every geometric parameter (each joint's θ0, d, a, α, the base's and the
-  sensor mounting's orientation and position), the honest case: link lengths and the base
-  position are not identifiable from the wrench and stay in error after self-calibration;
+  sensor mounting's orientation and position), the honest case: link lengths are not
+  identifiable from the wrench and stay in error after self-calibration (the base position
+  and yaw change neither the flange in the robot's frame nor the wrench: they are drawn
+  and have no effect);
 * ``"none"``: true = nominal (the arm moves in joint space, without kinematic error).
 
-Where the arm stands: the rig's robot base frame (the frame of A) is the arm model's world, and
-the controller reports the flange in it. The UR5e stands at its origin; the shipped mock P0
-(flange at (500, 0, 400) mm, tool pointing down) is then at :data:`REACH_SHARE` of its
-shoulder-to-wrist reach. The VS-060 is smaller (605 mm shoulder to wrist), so its mock base
-stands at (150, 0, 0) mm, nearer P0, which puts P0 at a similar share of its reach.
+Frames: an ArmModel's ``base`` is world ← robot base (world z up: a tilted mounting changes
+the gravity the wrist sensor reads, not the flange pose in the robot's own frame), so a
+controller computes base_from_flange = base⁻¹ · forward(model, q), the DH chain, as
+``tmscal selfcal acquire`` and ``tmscal solve --kinematics`` do. The frame the mock controller
+reports in, the rig's robot base frame (the frame of A and Z), is ``mount`` · robot base:
+identity for the UR5e; for the VS-060, whose 605 mm shoulder-to-wrist reach leaves the shipped
+mock P0 (flange at (500, 0, 400) mm, tool down) near its edge, the robot base stands at
+(150, 0, 0) mm in the rig's frame, like a DENSO work coordinate system, which puts P0 and the
+Eq. 14 poses around it well inside the reach (:data:`ARM_MOUNTS`). The mount is exact and part
+of the controller's setup, not a hidden error.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..calib.selfcal.model import NOMINAL, ArmModel, forward, jacobian, perturb
-from ..geometry import make_pose, rotvec_from_matrix
+from ..geometry import invert, make_pose, rotvec_from_matrix
 
-__all__ = ["ArmPair", "Unreachable", "inverse", "reach", "make_arm", "ARM_BASES", "HOME_Q",
+__all__ = ["ArmPair", "Unreachable", "inverse", "reach", "make_arm", "ARM_MOUNTS", "HOME_Q",
            "IK_TOL_MM", "IK_TOL_RAD"]
 
-#: where each arm's base stands in the rig's base frame (4×4 mm; module docstring)
-ARM_BASES: dict[str, np.ndarray] = {
+#: rig frame ← robot base for each arm, 4×4 mm: where the mock controller's reporting frame
+#: puts the arm (module docstring)
+ARM_MOUNTS: dict[str, np.ndarray] = {
     "ur5e": np.eye(4),
     "vs060": make_pose(np.eye(3), [150.0, 0.0, 0.0]),
 }
@@ -75,16 +84,36 @@ class Unreachable(ValueError):
 @dataclass(frozen=True)
 class ArmPair:
     """The arm of a sim rig: ``nominal`` (the controller's model) and ``true`` (the arm's
-    real parameters), both :class:`~tmscal.calib.selfcal.model.ArmModel` whose world is the
-    rig's robot base frame; ``home_q`` (rad) seeds the first inverse kinematics;
-    ``errors`` names the protocol that made ``true`` ("paper", "all", "none", or "custom")
-    and ``perturbed`` the parameter names that carry errors."""
+    real parameters), both :class:`~tmscal.calib.selfcal.model.ArmModel`; ``mount`` (4×4
+    mm, rig frame ← robot base, exact; module docstring); ``home_q`` (rad) seeds the first
+    inverse kinematics; ``errors`` names the protocol that made ``true`` ("paper", "all",
+    "none", or "custom") and ``perturbed`` the parameter names that carry errors."""
 
     nominal: ArmModel
     true: ArmModel
     home_q: tuple[float, ...]
     errors: str = "custom"
     perturbed: tuple[str, ...] = ()
+    mount: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def flange(self, model: ArmModel, q: np.ndarray) -> np.ndarray:
+        """base_from_flange (4×4 mm, the rig's frame) of ``model`` at joints ``q`` (rad):
+        mount · base⁻¹ · forward(model, q)."""
+        return self.mount @ invert(model.base) @ forward(model, q)
+
+    def reported(self, q: np.ndarray) -> np.ndarray:
+        """What the controller reports at joints ``q``: the NOMINAL flange (4×4 mm)."""
+        return self.flange(self.nominal, q)
+
+    def actual(self, q: np.ndarray) -> np.ndarray:
+        """Where the flange really is at joints ``q``: the TRUE flange (4×4 mm)."""
+        return self.flange(self.true, q)
+
+    def solve(self, cmd: np.ndarray, q_now: np.ndarray | None) -> np.ndarray | None:
+        """Joints (rad) at which the controller reports ``cmd`` (4×4 mm, rig frame):
+        :func:`reach` on the nominal model from ``q_now``; None when out of reach."""
+        target = self.nominal.base @ invert(self.mount) @ np.asarray(cmd, dtype=np.float64)
+        return reach(self.nominal, target, q_now, self.home_q)
 
 
 def _pose_error(target: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -182,12 +211,12 @@ def _geometric_names(model: ArmModel) -> list[str]:
 
 
 def make_arm(arm: str, errors: str, seed: int) -> ArmPair:
-    """The arm of a mock rig: the nominal ``arm`` ("ur5e" or "vs060") standing at
-    ``ARM_BASES[arm]``, and its true model with the hidden ``errors`` ("paper", "all" or
+    """The arm of a mock rig: the nominal ``arm`` ("ur5e" or "vs060"), mounted at
+    ``ARM_MOUNTS[arm]``, and its true model with the hidden ``errors`` ("paper", "all" or
     "none"; module docstring) drawn from ``np.random.default_rng(seed)``."""
     if arm not in NOMINAL:
         raise ValueError(f"unknown arm {arm!r}; expected one of {', '.join(NOMINAL)}")
-    nominal = replace(NOMINAL[arm], base=ARM_BASES[arm].copy())
+    nominal = NOMINAL[arm]
     if errors == "none":
         names: list[str] = []
     elif errors == "all":
@@ -199,4 +228,4 @@ def make_arm(arm: str, errors: str, seed: int) -> ArmPair:
         raise ValueError(f"unknown errors {errors!r}; expected 'paper', 'all' or 'none'")
     true = (perturb(nominal, np.random.default_rng(seed), names) if names else nominal)
     return ArmPair(nominal=nominal, true=true, home_q=HOME_Q[arm], errors=errors,
-                   perturbed=tuple(names))
+                   perturbed=tuple(names), mount=ARM_MOUNTS[arm].copy())

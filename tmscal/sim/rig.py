@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..calib.selfcal.model import ArmModel, forward
+from ..calib.selfcal.model import ArmModel
 from ..geometry import (
     absolute_orientation,
     compose,
@@ -57,7 +57,7 @@ from ..geometry import (
     random_rotation,
     rotvec_from_matrix,
 )
-from .arm import ArmPair, Unreachable, reach
+from .arm import ArmPair, Unreachable
 
 #: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
 #: 56, 89, 62 mm). Sphere centres in the tool frame, mm; the origin is the centroid. The
@@ -324,12 +324,12 @@ class SimRig:
         self._q: np.ndarray | None = None
         self._reach_cache: tuple[bytes, np.ndarray] | None = None
         if self.arm is not None:
-            q = reach(self.arm.nominal, p0, None, self.arm.home_q)
+            q = self.arm.solve(p0, None)
             if q is None:
                 raise Unreachable(f"the start pose {np.round(p0[:3, 3], 1).tolist()} mm is out "
                                   f"of the {self.arm.nominal.name} arm's reach")
             self._q = q
-            self.flange = forward(self.arm.true, q)
+            self.flange = self.arm.actual(q)
         #: every commanded base_from_flange (4×4 mm) passed to move_flange, oldest first
         #: (bounded: the last 100,000), so tests can see what a robot mock was told
         self.moves: deque[np.ndarray] = deque(maxlen=100_000)
@@ -364,9 +364,9 @@ class SimRig:
             return None if self._q is None else self._q.copy()
 
     def reach(self, base_from_flange: np.ndarray) -> np.ndarray | None:
-        """The joint angles (rad) that put the flange at ``base_from_flange`` (4×4 mm) on
-        the NOMINAL model (``tmscal.sim.arm.reach``: from the current joints first), or None
-        when the arm cannot reach it. Without an arm: an empty array (every pose is
+        """The joint angles (rad) at which the controller reports ``base_from_flange``
+        (4×4 mm), on the NOMINAL model (``ArmPair.solve``: from the current joints first), or
+        None when the arm cannot reach it. Without an arm: an empty array (every pose is
         reachable)."""
         if self.arm is None:
             return np.zeros(0)
@@ -375,7 +375,7 @@ class SimRig:
         with self._lock:
             if self._reach_cache is not None and self._reach_cache[0] == key:
                 return self._reach_cache[1].copy()
-            q = reach(self.arm.nominal, cmd, self._q, self.arm.home_q)
+            q = self.arm.solve(cmd, self._q)
             if q is not None:
                 self._reach_cache = (key, q.copy())
             return q
@@ -383,8 +383,8 @@ class SimRig:
     def move_flange(self, base_from_flange: np.ndarray) -> None:
         """Put the flange at the commanded pose (4×4 mm, base frame), with the robot's
         positioning error applied to the true pose. With an arm, the joints go to the
-        nominal inverse kinematics of the pose and the flange to the TRUE arm's forward
-        kinematics of them; a pose out of reach raises :class:`Unreachable` and nothing
+        nominal inverse kinematics of the pose and the flange to where the TRUE arm puts
+        them (``ArmPair.actual``); a pose out of reach raises :class:`Unreachable` and nothing
         moves (a robot mock checks ``reach`` before it starts a move)."""
         cmd = np.asarray(base_from_flange, dtype=np.float64)
         with self._lock:
@@ -402,7 +402,7 @@ class SimRig:
             else:
                 assert self.arm is not None
                 self._q = q
-                self.flange = forward(self.arm.true, q) @ d
+                self.flange = self.arm.actual(q) @ d
             self.moves.append(cmd.copy())
             self._path = None
             if self.settle is not None:
@@ -441,11 +441,11 @@ class SimRig:
 
     def reported_flange(self) -> np.ndarray:
         """What the controller reports: base_from_flange 4×4 mm (the commanded pose; with an
-        arm, the nominal model's forward kinematics of the joints, which is the commanded
-        pose to within the IK tolerance), plus read jitter if configured."""
+        arm, the nominal model's flange at the joints, ``ArmPair.reported``, which is the
+        commanded pose to within the IK tolerance), plus read jitter if configured."""
         with self._lock:
             rep = (self.commanded if self._q is None or self.arm is None
-                   else forward(self.arm.nominal, self._q))
+                   else self.arm.reported(self._q))
             if self.noise.robot_read_rot_sigma_deg or self.noise.robot_read_trans_sigma_mm:
                 return rep @ _perturbation(self.rng, self.noise.robot_read_rot_sigma_deg,
                                            self.noise.robot_read_trans_sigma_mm)
