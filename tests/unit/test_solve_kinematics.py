@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from tmscal.calib.selfcal.model import forward
 from tmscal.cli import main
-from tmscal.errors import CalibrationError
+from tmscal.errors import CalibrationError, SessionError
 from tmscal.exports.kinfile import kinematics_yaml
 from tmscal.geometry import make_pose, pose_mean, rot_x
 from tmscal.poses import eq14_poses
@@ -125,3 +125,21 @@ def test_bad_kinematics_file_is_one_line(tmp_path) -> None:
     code, out = _solve(str(s), "--kinematics", str(kin))
     assert code != 0 and "kin.yaml" in out and "Traceback" not in out
     assert len([ln for ln in out.splitlines() if ln.strip()]) == 1, out
+
+
+def test_session_joints_in_the_order_asked_or_the_first_pose_without(tmp_path) -> None:
+    s = tmp_path / "s.jsonl"
+    rig = _session(s, "none", n=4)
+    sess = read_session(s)
+    q = sess.joints([2, 0])
+    assert q.shape == (2, 6)
+    np.testing.assert_array_equal(q[0], sess.poses[2].joints_rad)
+    np.testing.assert_array_equal(q[1], sess.poses[0].joints_rad)
+    # the reported flange is the nominal chain at the recorded joints
+    np.testing.assert_allclose(rig.arm.reported(q[0]), sess.poses[2].A, atol=1e-6)
+    sess.poses[3].joints_rad = None
+    with pytest.raises(SessionError, match="pose 3 has no joint angles"):
+        sess.joints([0, 3, 1])
+    sess.poses[1].joints_rad = [0.0] * 5
+    with pytest.raises(SessionError, match="pose 1 has 5 joint angles, pose 0 has 6"):
+        sess.joints([0, 1])
