@@ -143,3 +143,22 @@ def test_session_joints_in_the_order_asked_or_the_first_pose_without(tmp_path) -
     sess.poses[1].joints_rad = [0.0] * 5
     with pytest.raises(SessionError, match="pose 1 has 5 joint angles, pose 0 has 6"):
         sess.joints([0, 1])
+
+
+def test_calib_check_on_recomputed_poses(tmp_path) -> None:
+    """A calibration solved with --kinematics checks well on the same poses recomputed the
+    same way (hold-out errors at the noise level) and badly on the controller's poses (the
+    hidden errors are back in A)."""
+    s = tmp_path / "s.jsonl"
+    rig = _session(s, "paper", n=30)
+    kin = tmp_path / "kin.yaml"
+    kin.write_text(kinematics_yaml(rig.arm_true))
+    cal = tmp_path / "calib.yaml"
+    code, out = _solve(str(s), "--kinematics", str(kin), "-o", str(cal))
+    assert code == 0, out
+    code, with_kin = _solve(str(s), "--calib", str(cal), "--kinematics", str(kin), "--json")
+    assert code == 0, with_kin
+    code, without = _solve(str(s), "--calib", str(cal), "--json")
+    assert code == 0, without
+    e_t = [json.loads(o)["errors"]["e_t_mm"] for o in (with_kin, without)]
+    assert e_t[0] < 0.5 and e_t[1] > 10 * e_t[0], e_t
