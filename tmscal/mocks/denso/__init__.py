@@ -25,9 +25,9 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
   default 100) × ExtSpeed (percent) × ``max_linear_speed_mm_s``; acceleration = ACCEL /
   DECEL (percent) × ExtSpeed accel / decel (percent; default speed² / 100 as on the RC8) ×
   ``max_linear_accel_mm_s2``, the profile running at their harmonic mean (docs/devices.md).
-  Every percentage must be finite and in [0.01, 100] (else E_INVALIDARG). The mock has no
-  kinematics: CurJnt returns zeros. A halted real-time motion stops on its path (the
-  blocking move then answers E_FAIL).
+  Every percentage must be finite and in [0.01, 100] (else E_INVALIDARG). Without
+  ``mock.kinematics`` CurJnt returns zeros; with it, the rig's joints (docs/selfcal.md). A
+  halted real-time motion stops on its path (the blocking move then answers E_FAIL).
 * While a motion runs, any request on its connection, Robot_Halt included, gets E_BUSY_PROC
   (0x809100AA), as from DENSO's reference b-CAP server; Robot_Halt from any other connection
   stops the arm. With NEXT the move answers at once but the connection stays busy until the

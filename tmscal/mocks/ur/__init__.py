@@ -28,7 +28,8 @@ trapezoidal profile of :mod:`tmscal.motion` at movel's v and a (rotation: 4·v r
 rad/s², docs/devices.md) and the flange follows the path; on the fast clock it is immediate
 (its modelled duration is still recorded in ``last_motion_s``). ``actual_TCP_pose`` is
 ``rotvec_pose_from_matrix(rig.reported_flange())``: the mock's TCP offset is zero, so TCP =
-flange. Joint values are fixed placeholders (the mock has no kinematics).
+flange. Without ``mock.kinematics`` joint values are placeholders; with it, the rig's joints
+(docs/selfcal.md).
 
 Because ur_rtde's ports are fixed, each mock binds its own loopback address (127.0.0.2,
 127.0.0.3, …), so several mocks (and tests) can run side by side.
