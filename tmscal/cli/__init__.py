@@ -258,4 +258,4 @@ def main(verbose: int) -> None:
 
 
 
-from . import compare, export, offline, report, rig, selfcal, stream  # noqa: E402,F401  (registers the commands)
+from . import compare, export, offline, report, rig, selfcal, selfcal_rig, stream  # noqa: E402,F401,E501  (registers the commands)

@@ -1,0 +1,273 @@
+"""``tmscal selfcal acquire`` and ``tmscal selfcal identify``: the rig side of the kinematic
+self-calibration (docs/selfcal.md, "Running it"), registered on the ``selfcal`` group of
+:mod:`tmscal.cli.selfcal`. Thin: the loop is :mod:`tmscal.acquisition.selfcal`, the numerics
+:mod:`tmscal.calib.selfcal`, the kinematics file :mod:`tmscal.exports.kinfile`."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from . import (
+    EXIT_INTERRUPTED,
+    FORCE_HELP,
+    INPUT_FILE,
+    STRICT_HELP,
+    _fail,
+    _Finite,
+    _read_session,
+    _same_file,
+    _write_atomic,
+    check_outputs,
+    handle_errors,
+)
+from .selfcal import selfcal
+
+CHANNELS = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+CHANNEL_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
+#: the smallest channel σ identify uses (N, N·m): a noise-free sensor (a mock without noise)
+#: would otherwise give infinite weights
+MIN_SIGMA = 1e-6
+
+
+def _arm_name(arm: str | None, cfg: Any) -> str | None:
+    """--arm, else the arm of the config's mock kinematics (a mock rig), else None."""
+    if arm is not None:
+        return arm
+    kin = getattr(getattr(cfg, "mock", None), "kinematics", None)
+    return kin.get("arm") if isinstance(kin, dict) else None
+
+
+@selfcal.command("acquire")
+@click.argument("config", type=INPUT_FILE)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Session file (JSON Lines) to write or, with --resume, to continue.")
+@click.option("--resume", is_flag=True,
+              help="Continue an interrupted session: the plan is in its header; the "
+                   "configurations already recorded are skipped.")
+@click.option("--arm", default=None,
+              help="The arm's nominal model: ur5e or vs060 (default: the config's "
+                   "mock.kinematics.arm on a mock rig; required at a real one).")
+@click.option("--k", "k", type=click.IntRange(1, 10000), default=60, show_default=True,
+              help="Configurations to visit, chosen by DETMAX (maximal det JᵀJ, i.e. O1).")
+@click.option("--pool", type=click.IntRange(1, 100000), default=5000, show_default=True,
+              help="Candidate configurations drawn around the arm's joints; those whose "
+                   "flange pose leaves the safety envelope are dropped.")
+@click.option("--span-deg", type=_Finite(0, 180, lo_open=True), default=90.0,
+              show_default=True,
+              help="Candidates turn the wrist joints up to ± this (deg) from where they are "
+                   "now, the other joints up to a third of it.")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
+              help="Seed of the candidates and of DETMAX.")
+@click.option("--samples", type=click.IntRange(1, 100000), default=None,
+              help="Force-torque readings averaged per configuration (default: ft.samples).")
+@click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@click.option("--ft-host", default=None, metavar="HOST[:PORT]",
+              help="Force-torque sensor address (overrides ft.host and ft.port).")
+@handle_errors
+def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, pool: int,
+            span_deg: float, seed: int, samples: int | None, robot_host: str | None,
+            ft_host: str | None) -> None:
+    """Move the robot through configurations chosen for self-calibration and record, at each,
+    the joint angles and the averaged wrist force-torque reading (a session; docs/selfcal.md).
+
+    The candidates are checked against the config's safety envelope before anything moves;
+    every move is a Cartesian flange pose (the nominal model's) sent through the same checked
+    move as `tmscal acquire`. Each configuration: move, wait sampling.settle_s, read the
+    joints, average the F/T readings, append one fsynced line. Ctrl-C finishes the
+    configuration in flight and leaves a resumable session; device faults are retried with a
+    reconnect. Then: tmscal selfcal identify SESSION -o KIN.yaml."""
+    from ..acquisition.run import AcquisitionStopped
+    from ..acquisition.selfcal import acquire_selfcal, resume_command
+    from ..config import load_config
+    from .live import AcquireProgress, stderr_to_log
+    from .rig import _split_endpoint, _StopFlag
+
+    if _same_file(output, config):
+        raise click.BadParameter(f"{output} is the config file; it is never written over",
+                                 param_hint="--output")
+    cfg = load_config(config, check_files=False)  # no tracker needed
+    name = _arm_name(arm, cfg)
+    if name is None and not resume:
+        raise click.BadParameter("name the arm's nominal model (ur5e or vs060)",
+                                 param_hint="--arm")
+    try:
+        ft_addr = _split_endpoint(ft_host) if ft_host else (None, None)
+    except ValueError:
+        raise click.BadParameter(f"{ft_host!r}: expected HOST or HOST:PORT",
+                                 param_hint="--ft-host") from None
+    stop = _StopFlag()
+    stop.install()
+    try:
+        with stderr_to_log(), AcquireProgress(sys.stderr, label="configuration") as bar:
+            res = acquire_selfcal(cfg, output, arm=name, k=k, pool=pool, seed=seed,
+                                  span_deg=span_deg, resume=resume, samples=samples,
+                                  robot_host=robot_host, ft_host=ft_addr[0],
+                                  ft_port=ft_addr[1], on_plan=_echo_plan,
+                                  on_start=bar.start,
+                                  on_pose=bar.pose, on_phase=bar.phase, should_stop=stop)
+    except AcquisitionStopped as e:
+        _fail(f"acquisition stopped: {e}")
+        return
+    state = "stopped early (resumable)" if res.stopped else "complete"
+    click.echo(f"session {output}: {state}; {res.recorded} of {res.total} configurations "
+               f"recorded, {res.new_poses} new in {res.elapsed_s:.1f} s; device faults "
+               f"recovered: {res.faults}")
+    if res.stopped:
+        click.echo("resume with: " + resume_command(config, output, robot_host, ft_host))
+        sys.exit(EXIT_INTERRUPTED)
+    click.echo(f"next: tmscal selfcal identify {output} -o {output.with_suffix('.kin.yaml')}")
+
+
+def _echo_plan(plan: Any) -> None:
+    click.echo(f"plan: {len(plan.q)} configurations of arm {plan.arm}, chosen from "
+               f"{plan.inside} of {plan.pool} candidates inside the safety envelope (wrist "
+               f"±{plan.span_deg:g}°), for {len(plan.identifiable)} identifiable parameters; "
+               f"O1 {plan.o1:.3g}")
+    sys.stdout.flush()
+
+
+# --- identify ---------------------------------------------------------------------------------
+
+def _session_data(session: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """(q (m, n) rad, wrench (m, 6), σ of each averaged wrench (m, 6), indices) of the poses
+    with joints and a wrench, ordered by index; the σ of a mean is its spread / √samples."""
+    from ..errors import SessionError
+
+    use = sorted((p for p in session.poses if p.skipped is None and p.wrench is not None
+                  and p.joints_rad is not None), key=lambda p: p.index)
+    if not use:
+        raise SessionError(f"{session.path}: no pose has both joint angles and a wrench "
+                           "(record one with tmscal selfcal acquire)")
+    idx = [p.index for p in use]
+    q = session.joints(idx)
+    w = np.array([p.wrench for p in use], dtype=float)
+    sem = np.array([np.asarray(p.wrench_spread if p.wrench_spread is not None else [np.nan] * 6)
+                    / math.sqrt(max(int(p.samples.get("wrench", 1)), 1)) for p in use])
+    return q, w, sem, idx
+
+
+def _sigma(option: tuple[float, float] | None, sem: np.ndarray) -> tuple[np.ndarray, str]:
+    """The channel noise (6,) N, N·m of the averaged wrenches and where it came from."""
+    if option is not None:
+        return np.array([option[0]] * 3 + [option[1]] * 3), "--sigma"
+    if np.isnan(sem).all():
+        raise click.BadParameter("the session records no wrench spreads; give the channel "
+                                 "noise", param_hint="--sigma")
+    s = np.sqrt(np.nanmean(sem ** 2, axis=0))
+    return np.maximum(s, MIN_SIGMA), "the recorded spreads (SD / √samples, RMS over poses)"
+
+
+def _shown(value: float, unit: str) -> tuple[float, str]:
+    """A parameter value in edge units: rad → deg."""
+    return (math.degrees(value), "deg") if unit == "rad" else (value, unit)
+
+
+def _print_fit(model0: Any, fit: Any, ident: Any, sigma: np.ndarray, scale: float) -> None:
+    names, units = model0.parameter_names(), model0.parameter_units()
+    p0, p1 = model0.vector(), fit.model.vector()
+    click.echo(f"identifiable: {len(ident.kept)} of {len(names)} parameters (condition "
+               f"number {ident.cond:.3g}; QR pivoting rank {ident.qr_rank})")
+    for n, why in ident.removed:
+        click.echo(f"  not identified: {n}: {why}")
+    click.echo(f"  {'parameter':<14}{'nominal':>12}{'estimate':>12}{'± σ':>11}  unit")
+    for n, s in zip(fit.parameters, fit.std, strict=True):
+        i = names.index(n)
+        a, u = _shown(p0[i], units[i])
+        b, _ = _shown(p1[i], units[i])
+        e, _ = _shown(s * math.sqrt(scale), units[i])
+        click.echo(f"  {n:<14}{a:>12.5g}{b:>12.5g}{e:>11.2g}  {u}")
+    state = "converged" if fit.converged else "NOT converged (the iteration cap)"
+    click.echo(f"{fit.iterations} iterations, {state}; reduced χ² {fit.reduced_chi2:.3g}")
+    click.echo("residual RMS per channel (σ used): " + ", ".join(
+        f"{c} {r:.3g} ({s:.2g}) {u}" for c, r, s, u in zip(CHANNELS, fit.rms, sigma,
+                                                            CHANNEL_UNITS, strict=True)))
+
+
+@selfcal.command("identify")
+@click.argument("session_file", metavar="SESSION", type=INPUT_FILE)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Kinematics file (YAML) to write: the calibrated arm model, for "
+                   "tmscal solve --kinematics.")
+@click.option("--arm", default=None,
+              help="The nominal model to start from: ur5e or vs060 (default: the one the "
+                   "session was acquired with).")
+@click.option("--sigma", type=(_Finite(0, lo_open=True), _Finite(0, lo_open=True)),
+              default=None, metavar="FORCE_N TORQUE_NM",
+              help="Noise of the averaged wrench per force and torque channel (default: from "
+                   "the session's recorded spreads).")
+@click.option("--max-iter", type=click.IntRange(1, 1000), default=50, show_default=True,
+              help="Iteration cap of the Gauss–Newton / Levenberg–Marquardt fit.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
+@handle_errors
+def identify(session_file: Path, output: Path, arm: str | None,
+             sigma: tuple[float, float] | None, max_iter: int, force: bool,
+             strict: bool) -> None:
+    """Identify the arm's kinematic parameters from a self-calibration session (Joubair et
+    al. 2016): the parameters the gravity wrench identifies are fitted to the recorded
+    wrenches at the recorded joints, rows weighted by each channel's noise, columns scaled
+    (Hollerbach & Wampler 1996). Prints which parameters are identifiable (and why the others
+    are not), the estimates ± σ against the nominal values (angles in deg), the iterations and
+    the residual RMS per channel; writes the calibrated model to the kinematics file. The σ
+    are scaled by √(reduced χ²) when it exceeds 1 (the residuals are larger than the
+    stated noise)."""
+    from ..acquisition.selfcal import nominal_arm
+    from ..calib.selfcal.identify import identifiable
+    from ..calib.selfcal.identify import identify as fit_model
+    from ..calib.selfcal.model import jacobian
+    from ..errors import CalibrationError, SessionError
+    from ..exports.calibfile import provenance
+    from ..exports.kinfile import kinematics_yaml
+    from ..session import sha256_of
+
+    check_outputs({"--output": output}, [session_file], force)
+    session = _read_session(session_file, strict)
+    head = session.header.get("selfcal")
+    name = arm or (head.get("arm") if isinstance(head, dict) else None)
+    if name is None:
+        raise click.BadParameter(f"{session_file} does not name its arm; name the nominal "
+                                 "model (ur5e or vs060)", param_hint="--arm")
+    model0 = nominal_arm(name, "--arm" if arm else f"{session_file}: header 'selfcal.arm'")
+    q, w, sem, idx = _session_data(session)
+    if q.shape[1] != model0.n_joints:
+        raise SessionError(f"{session_file}: the poses have {q.shape[1]} joint angles; arm "
+                           f"{name} has {model0.n_joints}")
+    sig, source = _sigma(sigma, sem)
+    names = model0.parameter_names()
+    J = jacobian(model0, q) / np.tile(sig, len(q))[:, None]
+    ident = identifiable(J, names)
+    if 6 * len(q) <= len(ident.kept):
+        raise CalibrationError(f"{session_file}: {len(q)} configurations give {6 * len(q)} "
+                               f"equations for {len(ident.kept)} parameters; record more")
+    try:
+        fit = fit_model(model0, q, w, sig, ident, max_iter=max_iter)
+    except (ValueError, np.linalg.LinAlgError) as e:
+        raise CalibrationError(f"{session_file}: the identification failed ({e})") from None
+    scale = max(1.0, float(fit.reduced_chi2))
+    click.echo(f"{session_file}: {len(q)} configurations of arm {name}; channel σ from "
+               f"{source}: " + ", ".join(f"{c} {s:.2g} {u}" for c, s, u in
+                                         zip(CHANNELS, sig, CHANNEL_UNITS, strict=True)))
+    _print_fit(model0, fit, ident, sig, scale)
+    p0, p1 = model0.vector(), fit.model.vector()
+    pos = [names.index(n) for n in fit.parameters]
+    record = {"nominal_arm": name, "parameters": fit.parameters,
+              "estimate": p1[pos], "std": fit.std * math.sqrt(scale), "nominal": p0[pos],
+              "covariance": fit.covariance * scale, "covariance_scale": scale,
+              "not_identified": dict(ident.removed), "iterations": fit.iterations,
+              "converged": fit.converged, "reduced_chi2": float(fit.reduced_chi2),
+              "sigma": dict(zip(CHANNELS, sig.tolist(), strict=True)),
+              "residual_rms": dict(zip(CHANNELS, fit.rms.tolist(), strict=True)),
+              "configurations": len(q), "poses": idx}
+    text = kinematics_yaml(fit.model, identification=record,
+                           session={"path": str(session_file),
+                                    "sha256": sha256_of(session_file)},
+                           provenance=provenance(session.header))
+    _write_atomic(output, text)
+    click.echo(f"wrote {output} (the calibrated arm model; tmscal solve SESSION "
+               f"--kinematics {output})")
