@@ -462,6 +462,9 @@ def acquire_selfcal(cfg: RigConfig, output: str | Path, *, arm: str | None = Non
     (nothing moved), ConfigError, SessionError, or AcquisitionStopped (session intact,
     resumable; the message says how)."""
     out = Path(output)
+    if cfg.ft is None:
+        raise ConfigError(f"{cfg.path}: key 'ft': self-calibration needs a force-torque "
+                          "sensor section (ft: {driver, host, ...}; docs/configs.md)")
     t_start = time.monotonic()
     dev = _Devices(cfg, robot_host, robot_port, ft_host, ft_port)
     writer: SessionWriter | None = None
