@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/acquisition.py --robot ur
 	$(BIN)/python benchmarks/acquisition.py --robot denso
 	$(BIN)/python benchmarks/time_to_calibrate.py
+	$(BIN)/python benchmarks/selfcal.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info
