@@ -27,7 +27,6 @@ import math
 
 import numpy as np
 
-_LAST_EXCURSIONS = 0
 #: the observability indices, in order
 INDICES = ("O1", "O2", "O3", "O4", "O5")
 
@@ -281,8 +280,7 @@ def detmax(J_blocks: np.ndarray, k: int, start: np.ndarray | list[int] | None = 
     failures: set[frozenset[int]] = set()
     exhausted = {True: False, False: False}
     up = True
-    global _LAST_EXCURSIONS
-    for _LAST_EXCURSIONS in range(max_excursions):  # noqa: B007
+    for _ in range(max_excursions):
         if k == N or all(exhausted.values()):
             break
         d, path, cut = _excursion(best, k, up, failures, max_excursion)
