@@ -261,21 +261,16 @@ class _Devices:
         self.ft.open()
 
     def close(self, stop_robot: bool = False) -> None:
-        if self.ft is not None:
-            try:
-                self.ft.close()
-            except Exception:  # best effort on the way out
-                log.warning("closing the force-torque sensor failed", exc_info=True)
+        steps = [("closing the force-torque sensor", self.ft and self.ft.close)]
         if self.robot is not None:
-            if stop_robot:
-                try:
-                    self.robot.stop()
-                except Exception:
-                    log.warning("stopping the robot failed", exc_info=True)
+            steps += [("stopping the robot", stop_robot and self.robot.stop),
+                      ("closing the robot", self.robot.close)]
+        for what, step in steps:
             try:
-                self.robot.close()
-            except Exception:
-                log.warning("closing the robot failed", exc_info=True)
+                if step:
+                    step()
+            except Exception:  # best effort on the way out
+                log.warning("%s failed", what, exc_info=True)
 
     def joints(self) -> np.ndarray:
         assert self.robot is not None
@@ -307,14 +302,10 @@ def nominal_arm(arm: str, where: Any = "--arm") -> Any:
 
 
 def _ft_samples(cfg: RigConfig, header: dict[str, Any] | None, samples: int | None) -> int:
-    if samples is not None:
-        return samples
-    if header is not None and isinstance(header.get("sampling"), dict):
-        n = header["sampling"].get("samples")
-        if isinstance(n, int) and not isinstance(n, bool) and n >= 1:
-            return n
-    ft = getattr(cfg, "ft", None)
-    return int(getattr(ft, "samples", 100) or 100)
+    """--samples, else the resumed session's, else the config's ``ft.samples``."""
+    n = ((header or {}).get("sampling") or {}).get("samples") if samples is None else samples
+    ok = isinstance(n, int) and not isinstance(n, bool) and n >= 1
+    return int(n) if ok else int(cfg.ft.samples if cfg.ft is not None else 100)
 
 
 def _check_resume(cfg: RigConfig, session: Any, plan: SelfcalPlan) -> None:

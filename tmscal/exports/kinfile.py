@@ -90,6 +90,9 @@ class KinematicsFile:
 
 
 def _bad(src: str, key: str, msg: str) -> CalibrationError:
+    """One line naming the file and the key, whatever the key holds."""
+    if not key.isprintable():
+        key = key.encode("unicode_escape").decode("ascii")
     return CalibrationError(f"{src}: key '{key}': {msg}")
 
 
