@@ -27,6 +27,9 @@ import math
 
 import numpy as np
 
+#: a design whose column-scaled information matrix has eigenvalues below this fraction of its
+#: largest leaves a parameter combination unobserved (its J a condition number above ~1e6)
+RANK_RTOL = 1e-12
 #: the observability indices, in order
 INDICES = ("O1", "O2", "O3", "O4", "O5")
 
@@ -128,9 +131,18 @@ def information(J_blocks: np.ndarray, idx: np.ndarray | list[int]) -> np.ndarray
 
 
 def log_det(J_blocks: np.ndarray, idx: np.ndarray | list[int]) -> float:
-    """log det(JᵀJ) of the design ``idx``: the D-criterion DETMAX maximises (−inf when the
-    design leaves a parameter unobserved)."""
-    sign, ld = np.linalg.slogdet(information(J_blocks, idx))
+    """log det(JᵀJ) of the design ``idx``: the D-criterion DETMAX maximises. −inf when the
+    design leaves a parameter combination unobserved: numerically, when the smallest
+    eigenvalue of the column-scaled M (unit diagonal) is below ``RANK_RTOL`` of the largest
+    (round-off gives a rank-deficient M a tiny positive determinant otherwise)."""
+    M = information(J_blocks, idx)
+    d = np.sqrt(np.diagonal(M))
+    if np.any(d == 0):
+        return -math.inf
+    ev = np.linalg.eigvalsh(M / np.outer(d, d))
+    if ev[0] <= RANK_RTOL * ev[-1]:
+        return -math.inf
+    sign, ld = np.linalg.slogdet(M)
     return float(ld) if sign > 0 else -math.inf
 
 
