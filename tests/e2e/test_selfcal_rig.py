@@ -92,12 +92,17 @@ def test_acquire_identify_recovers_the_hidden_errors(tmp_path, mock_config):
 
 
 def test_ctrl_c_then_resume_completes_the_plan(tmp_path, mock_config):
-    """SIGINT during the run: exit 130 after the configuration in flight, the resume command
-    printed, a valid session; --resume records exactly the configurations left, the same
-    plan, each once."""
+    """--dry-run plans and writes nothing. SIGINT during the run: exit 130 after the
+    configuration in flight, the resume command printed, a valid session; --resume records
+    exactly the configurations left, the same plan, each once."""
     cfg = _config(mock_config, "127.0.0.182", sampling={"settle_s": 0.3})
     out = tmp_path / "sc.jsonl"
     with spawn_mock_rig(cfg, transport="tcp") as mp:
+        dry = _tmscal(*_acquire_args(cfg, out, mp.endpoints, "--k", 12, "--pool", 600,
+                                     "--dry-run"))
+        assert dry.returncode == 0, dry.stderr[-3000:]
+        assert "plan: 12 configurations" in dry.stdout and "nothing was moved" in dry.stdout
+        assert not out.exists()
         args = [sys.executable, "-m", "tmscal.cli",
                 *map(str, _acquire_args(cfg, out, mp.endpoints, "--k", 12, "--pool", 600))]
         proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

@@ -69,10 +69,13 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
 @click.option("--robot-host", default=None, help="Robot address (overrides the config).")
 @click.option("--ft-host", default=None, metavar="HOST[:PORT]",
               help="Force-torque sensor address (overrides ft.host and ft.port).")
+@click.option("--dry-run", is_flag=True,
+              help="Connect to the robot, make the plan and check it against the safety "
+                   "envelope; move nothing, write nothing.")
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, pool: int,
             span_deg: float, seed: int, samples: int | None, robot_host: str | None,
-            ft_host: str | None) -> None:
+            ft_host: str | None, dry_run: bool) -> None:
     """Move the robot through configurations chosen for self-calibration and record, at each,
     the joint angles and the averaged wrist force-torque reading (a session; docs/selfcal.md).
 
@@ -96,6 +99,9 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     if name is None and not resume:
         raise click.BadParameter("name the arm's nominal model (ur5e or vs060)",
                                  param_hint="--arm")
+    if dry_run:
+        _dry_run(cfg, name, k, pool, seed, span_deg, robot_host)
+        return
     try:
         ft_addr = _split_endpoint(ft_host) if ft_host else (None, None)
     except ValueError:
@@ -130,6 +136,28 @@ def _echo_plan(plan: Any) -> None:
                f"±{plan.span_deg:g}°), for {len(plan.identifiable)} identifiable parameters; "
                f"O1 {plan.o1:.3g}")
     sys.stdout.flush()
+
+
+def _dry_run(cfg: Any, arm: str | None, k: int, pool: int, seed: int, span_deg: float,
+             robot_host: str | None) -> None:
+    """The plan from where the arm is now, checked against the envelope; nothing moves."""
+    from ..acquisition.devices import envelope_for, make_robot
+    from ..acquisition.selfcal import nominal_arm, plan_selfcal
+    from ..errors import ConfigError
+
+    model = nominal_arm(arm or "")
+    with make_robot(cfg, envelope_for(cfg, None), robot_host) as rb:
+        try:
+            p0, q0 = rb.flange_pose(), np.asarray(rb.joint_positions(), dtype=float)
+        except NotImplementedError as e:
+            raise ConfigError(f"{cfg.path}: key 'robot.driver': {e}; self-calibration "
+                              "needs the joint angles") from None
+    plan = plan_selfcal(model, q0, p0, envelope_for(cfg, p0), k, pool, seed, span_deg)
+    _echo_plan(plan)
+    turn = np.degrees(np.abs(plan.q - q0).max(axis=0))
+    click.echo("  largest joint change from now (deg): "
+               + ", ".join(f"J{j + 1} {t:.0f}" for j, t in enumerate(turn)))
+    click.echo("  safety envelope: every pose inside; nothing was moved (dry run)")
 
 
 # --- identify ---------------------------------------------------------------------------------
