@@ -155,3 +155,13 @@ def test_study_reports_the_noise_floor_of_the_true_transforms(rig):
         e_t += np.linalg.norm(E[:, :3, 3], axis=1).mean()  # exact rigid: no projection needed
     assert st["noise_floor"]["e_t_mm"] == pytest.approx(e_t, rel=1e-6)
     assert "noise floor" in format_study(st)
+
+
+def test_a_session_without_tracker_poses_points_to_selfcal_identify(tmp_path):
+    from tmscal.errors import CalibrationError
+    from tmscal.report.evaluate import session_arrays
+    from tmscal.session import make_header, read_session, write_session
+
+    path = write_session(tmp_path / "sc.jsonl", make_header(["ft"]), [])
+    with pytest.raises(CalibrationError, match="no tracker poses.*selfcal identify"):
+        session_arrays(read_session(path), "qr36")

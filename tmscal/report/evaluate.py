@@ -29,6 +29,10 @@ def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarra
     sessions. Raises CalibrationError when qr36 is asked of marker-only data (other methods
     that need probe poses say so themselves when solved)."""
     need_probe = method == "qr36"
+    if "marker" not in session.bodies:
+        raise CalibrationError(f"{session.path}: no tracker poses to calibrate from (bodies: "
+                               f"{', '.join(session.bodies) or 'none'}): a self-calibration "
+                               "session is read by tmscal selfcal identify")
     if need_probe and "probe" not in session.bodies:
         raise CalibrationError(f"{session.path}: marker-only session (bodies: "
                                f"{', '.join(session.bodies)}); qr36 needs a probe — use "
