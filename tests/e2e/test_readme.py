@@ -66,6 +66,12 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def _patch(path: Path, old: str, new: str) -> None:
     text = path.read_text()
     assert text.count(old) == 1, f"{path.name}: expected one {old!r} to give a run-unique address"
@@ -80,6 +86,10 @@ def tour_folder(tmp_path: Path) -> Path:
     _patch(ur, "host: 127.0.0.2", f"host: 127.91.{os.getpid() % 250}.2")
     _patch(ur, "socket://127.0.0.1:8765", f"socket://127.0.0.1:{_free_port()}")
     _patch(configs / "mock-denso-polaris.yaml", "port: 5007", f"port: {_free_port()}")
+    ati = configs / "mock-ur-ati.yaml"
+    _patch(ati, "host: 127.0.0.180", f"host: 127.92.{os.getpid() % 250}.180")
+    _patch(ati, "socket://127.0.0.1:8768", f"socket://127.0.0.1:{_free_port()}")
+    _patch(ati, "port: 49152", f"port: {_free_udp_port()}")
     return tmp_path
 
 
@@ -132,7 +142,8 @@ def test_readme_tour_parses_to_every_command():
     stop (so a README edit that hides commands from the test fails here)."""
     commands = tour_commands(README.read_text(encoding="utf-8"))
     used = {c.split()[1] for c in commands if c.startswith("tmscal ")}
-    assert used >= {"simulate", "solve", "study", "mock", "track", "robot", "acquire", "demo"}
+    assert used >= {"simulate", "solve", "study", "mock", "track", "robot", "acquire", "demo",
+                    "compare", "export", "stream", "report", "selfcal"}
     assert any(c.startswith("tmscal mock") and c.endswith("&") for c in commands)
     assert "kill $!" in commands
 
