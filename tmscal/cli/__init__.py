@@ -1,8 +1,9 @@
 """The ``tmscal`` command line (click). Thin: parses, calls library functions, prints.
 
 The group, the shared argument types and the one rule for output files live here; the
-commands are in :mod:`tmscal.cli.offline` (simulate, solve, study) and :mod:`tmscal.cli.rig`
-(mock, track, robot, acquire, demo).
+commands are in :mod:`tmscal.cli.offline` (simulate, solve, study), :mod:`tmscal.cli.rig`
+(mock, track, robot, acquire, demo), and compare, export, report, stream, selfcal and
+selfcal_rig (the ``selfcal`` group), one module each.
 
 Every expected failure (bad input, device error, safety refusal) prints one line
 ``error: …`` naming the problem and exits non-zero; no tracebacks.
@@ -245,12 +246,19 @@ def main(verbose: int) -> None:
       tmscal study sim.jsonl --plot f.png  convergence: error against the pose count
       tmscal compare sim.jsonl             every method side by side (error, time)
       tmscal report sim.jsonl -o r.html    one HTML page for the lab notebook
+      tmscal export c.yaml --format itk    the calibration for Slicer, PLUS, ROS, InVesalius
+      tmscal selfcal simulate              force-torque self-calibration study
     \b
     At the rig (or against `tmscal mock CONFIG`):
       tmscal track CONFIG                  live tool poses: are the tools right?
       tmscal robot CONFIG                  robot identity and flange pose
-      tmscal acquire CONFIG -o s.jsonl     record a session (--dry-run first)
+      tmscal acquire CONFIG -o s.jsonl --adaptive
+                                           record a session until the predicted
+                                           coil error reaches 0.05 mm (--dry-run first)
+      tmscal solve s.jsonl --calib c.yaml  the daily check of a stored calibration
       tmscal stream CONFIG --calib c.yaml  the live coil pose to 3D Slicer (OpenIGTLink)
+      tmscal selfcal acquire CONFIG -o f.jsonl
+                                           joints + wrist wrench for self-calibration
     """
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
