@@ -387,29 +387,29 @@ def resume_command(config: str | Path | None, out: str | Path,
     return cmd
 
 
-def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: int,
-                         P: np.ndarray, st: _Settings, sleep: Callable[[float], None],
-                         now: Callable[[], float], state: Callable[[], str],
-                         on_phase: Callable[[int, str], None] | None = None
-                         ) -> tuple[PoseRecord, int]:
-    """One plan pose, reconnecting after device faults: at most ``run.retries`` reconnects
-    for this pose (the count is per fault, not per run). Returns the record and the number
-    of faults recovered. A robot fault, a failed reconnect or too many faults raise
-    AcquisitionStopped whose message ends with ``state()`` (what the session holds, how to
-    resume)."""
+def with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, what: str, i: int,
+                   step: Callable[[], PoseRecord], sleep: Callable[[float], None],
+                   state: Callable[[], str],
+                   on_phase: Callable[[int, str], None] | None = None
+                   ) -> tuple[PoseRecord, int]:
+    """Run ``step`` (one pose or configuration, ``what`` i), reconnecting after device
+    faults: at most ``run.retries`` reconnects for it (the count is per fault, not per run).
+    Returns the record and the number of faults recovered. A robot fault, a failed reconnect
+    or too many faults raise AcquisitionStopped whose message ends with ``state()`` (what the
+    session holds, how to resume)."""
     faults = 0
     while True:
         try:
-            return _one_pose(dev, i, P, st, sleep, now(), on_phase), faults
+            return step(), faults
         except RobotFault as e:
-            raise AcquisitionStopped(f"pose {i}: robot fault: {e}. {state()} (clear the "
+            raise AcquisitionStopped(f"{what} {i}: robot fault: {e}. {state()} (clear the "
                                      "fault at the robot first)") from e
         except DeviceError as e:
             faults += 1
             if faults > cfg.run.retries:
-                raise AcquisitionStopped(f"pose {i}: {e} (after {cfg.run.retries} "
+                raise AcquisitionStopped(f"{what} {i}: {e} (after {cfg.run.retries} "
                                          f"reconnects). {state()}") from e
-            log.warning("pose %d: %s; reconnecting (%d of %d)", i, e, faults,
+            log.warning("%s %d: %s; reconnecting (%d of %d)", what, i, e, faults,
                         cfg.run.retries)
             if on_phase:
                 on_phase(i, "reconnecting")
@@ -418,8 +418,19 @@ def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: i
             try:
                 dev.open(envelope)
             except DeviceError as e2:
-                raise AcquisitionStopped(f"pose {i}: reconnect failed ({e2}) after: {e}. "
+                raise AcquisitionStopped(f"{what} {i}: reconnect failed ({e2}) after: {e}. "
                                          f"{state()}") from e2
+
+
+def _pose_with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: int,
+                         P: np.ndarray, st: _Settings, sleep: Callable[[float], None],
+                         now: Callable[[], float], state: Callable[[], str],
+                         on_phase: Callable[[int, str], None] | None = None
+                         ) -> tuple[PoseRecord, int]:
+    """One plan pose i through :func:`with_reconnect` (``now()``: the session time, s)."""
+    return with_reconnect(dev, cfg, envelope, "pose", i,
+                          lambda: _one_pose(dev, i, P, st, sleep, now(), on_phase),
+                          sleep, state, on_phase)
 
 
 def _one_pose(dev: _Devices, i: int, P: np.ndarray, st: _Settings,

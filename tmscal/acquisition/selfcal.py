@@ -45,13 +45,17 @@ from typing import Any
 import numpy as np
 
 from ..config import RigConfig
-from ..drivers.base import ConfigError, DeviceError, Envelope, Robot, RobotFault, SafetyError
+from ..drivers.base import ConfigError, Envelope, Robot, SafetyError
 from ..errors import SessionError
 from ..geometry import check_pose, invert
 from ..session import PoseRecord, SessionWriter, make_header
 from .devices import envelope_for, make_robot
 from .plan import check_plan
-from .run import AcquireResult, AcquisitionStopped, _check_robot_where_run_stopped
+from .run import (
+    AcquireResult,
+    _check_robot_where_run_stopped,
+    with_reconnect,
+)
 
 log = logging.getLogger(__name__)
 
@@ -396,31 +400,11 @@ def _with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: int,
                     P: np.ndarray, st: _Settings, t: float, sleep: Callable[[float], None],
                     on_phase: Callable[[int, str], None] | None, state: Callable[[], str]
                     ) -> tuple[PoseRecord, int]:
-    """One configuration, reconnecting after device faults (at most ``run.retries`` for it);
-    a robot fault or too many faults raise AcquisitionStopped ending with ``state()``."""
-    faults = 0
-    while True:
-        try:
-            return _one(dev, i, P, st, t, sleep, on_phase), faults
-        except RobotFault as e:
-            raise AcquisitionStopped(f"configuration {i}: robot fault: {e}. {state()} "
-                                     "(clear the fault at the robot first)") from e
-        except DeviceError as e:
-            faults += 1
-            if faults > cfg.run.retries:
-                raise AcquisitionStopped(f"configuration {i}: {e} (after {cfg.run.retries} "
-                                         f"reconnects). {state()}") from e
-            log.warning("configuration %d: %s; reconnecting (%d of %d)", i, e, faults,
-                        cfg.run.retries)
-            if on_phase:
-                on_phase(i, "reconnecting")
-            dev.close(stop_robot=True)
-            sleep(cfg.run.reconnect_wait_s)
-            try:
-                dev.open(envelope)
-            except DeviceError as e2:
-                raise AcquisitionStopped(f"configuration {i}: reconnect failed ({e2}) after: "
-                                         f"{e}. {state()}") from e2
+    """One configuration through the acquisition loop's reconnect rule (``run.with_reconnect``:
+    at most ``run.retries`` reconnects for it; a robot fault stops)."""
+    return with_reconnect(dev, cfg, envelope, "configuration", i,
+                          lambda: _one(dev, i, P, st, t, sleep, on_phase), sleep, state,
+                          on_phase)
 
 
 def resume_command(config: str | Path | None, out: str | Path, robot_host: str | None = None,
