@@ -247,24 +247,29 @@ def _load_text(text: str, src: str) -> Any:
         raise CalibrationError(f"{src}: invalid YAML ({str(e)[:120]})") from None
 
 
+def read_text_file(p: Path, what: str) -> str:
+    """The UTF-8 text of regular file ``p`` of at most ``MAX_BYTES``; CalibrationError naming
+    the file otherwise (``what`` it should have been, e.g. "calibration file")."""
+    src = str(p)
+    try:
+        if not p.is_file():
+            raise CalibrationError(f"{src}: not a regular file")
+        if p.stat().st_size > MAX_BYTES:
+            raise CalibrationError(f"{src}: larger than {MAX_BYTES:,} bytes; not a {what}")
+        return p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise CalibrationError(f"{src}: cannot read ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise CalibrationError(f"{src}: not a UTF-8 text file") from None
+
+
 def read_calibration(path: str | Path) -> CalibrationFile:
     """Read a calibration file (YAML of ``tmscal solve -o`` or JSON of ``tmscal export
     --format json``): X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker,
     4×4 mm. Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
-    try:
-        if not p.is_file():
-            raise CalibrationError(f"{src}: not a regular file")
-        if p.stat().st_size > MAX_BYTES:
-            raise CalibrationError(f"{src}: larger than {MAX_BYTES:,} bytes; not a "
-                                   "calibration file")
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise CalibrationError(f"{src}: cannot read ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise CalibrationError(f"{src}: not a UTF-8 text file") from None
-    doc = _load_text(text, src)
+    doc = _load_text(read_text_file(p, "calibration file"), src)
     cal = parse_calibration(doc, src)
     cal.extra.setdefault("source", src)
     return CalibrationFile(calibration=cal, path=p, doc=doc)

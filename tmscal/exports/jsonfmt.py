@@ -13,26 +13,16 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any
 
 import numpy as np
 
 from .. import __version__
+from ..report.evaluate import plain
 from .calibfile import CalibrationFile
 
 __all__ = ["render"]
 
 
-def _plain(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_plain(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
 
 
 def render(cf: CalibrationFile) -> str:
@@ -43,4 +33,4 @@ def render(cf: CalibrationFile) -> str:
                    for k, v in used.items()}
     doc["exported"] = {"tmscal": __version__, "from": str(cf.path),
                        "sha256": hashlib.sha256(cf.path.read_bytes()).hexdigest()}
-    return json.dumps(_plain(doc), indent=1, allow_nan=False) + "\n"
+    return json.dumps(plain(doc), indent=1, allow_nan=False) + "\n"

@@ -45,7 +45,8 @@ import yaml
 
 from ..config_checks import check_tree
 from ..errors import CalibrationError, ConfigError
-from .calibfile import MAX_BYTES, _load_text, _matrix
+from ..report.evaluate import plain
+from .calibfile import _load_text, _matrix, read_text_file
 
 __all__ = ["FORMAT", "VERSION", "KinematicsFile", "kinematics_doc", "kinematics_yaml",
            "parse_kinematics", "read_kinematics", "load_arm"]
@@ -130,25 +131,14 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
         "bias": {"force_n": bias[:3].tolist(), "torque_nm": bias[3:].tolist()},
     }
     if identification is not None:
-        doc["identification"] = _plain(identification)
+        doc["identification"] = plain(identification)
     if session is not None:
-        doc["session"] = _plain(session)
+        doc["session"] = plain(session)
     if provenance is not None:
-        doc["provenance"] = _plain(provenance)
+        doc["provenance"] = plain(provenance)
     return doc
 
 
-def _plain(v: Any) -> Any:
-    """numpy values as plain Python (lists, floats, ints) for YAML."""
-    if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_plain(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
 
 
 def kinematics_yaml(model: Any, **kw: Any) -> str:
@@ -323,18 +313,7 @@ def read_kinematics(path: str | Path) -> KinematicsFile:
     Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
-    try:
-        if not p.is_file():
-            raise CalibrationError(f"{src}: not a regular file")
-        if p.stat().st_size > MAX_BYTES:
-            raise CalibrationError(f"{src}: larger than {MAX_BYTES:,} bytes; not a "
-                                   "kinematics file")
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise CalibrationError(f"{src}: cannot read ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise CalibrationError(f"{src}: not a UTF-8 text file") from None
-    kf = parse_kinematics(_load_text(text, src), src)
+    kf = parse_kinematics(_load_text(read_text_file(p, "kinematics file"), src), src)
     kf.path = p
     return kf
 

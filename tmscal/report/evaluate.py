@@ -20,7 +20,7 @@ from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
 
 __all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals",
-           "with_kinematics"]
+           "with_kinematics", "plain"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -41,14 +41,14 @@ def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarra
     return A, B, C
 
 
-def _plain(v: Any) -> Any:
+def plain(v: Any) -> Any:
     """Arrays and numpy scalars inside dicts and lists as plain JSON / YAML types."""
     if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
+        return {str(k): plain(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
+        return [plain(x) for x in v]
     if isinstance(v, np.ndarray):
-        return _plain(v.tolist())
+        return plain(v.tolist())
     if isinstance(v, np.generic):
         return v.item()
     return v
@@ -112,7 +112,7 @@ class SolveResult:
             out["truth"] = self.truth
         for k in ("uncertainty", "distortion", "options"):
             if getattr(self, k) is not None:
-                out[k] = _plain(getattr(self, k))
+                out[k] = plain(getattr(self, k))
         return out
 
 
@@ -200,7 +200,7 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         truth=_truth_errors(session, cal, C), errors_sd=sd, cv=cv,
         outliers=find_outliers(pose_residuals(session, cal)),
         uncertainty=cal.uncertainty, distortion=cal.distortion,
-        options={k: _plain(v) for k, v in options.items()} or None)
+        options={k: plain(v) for k, v in options.items()} or None)
     return cal, res
 
 
