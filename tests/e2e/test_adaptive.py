@@ -157,10 +157,13 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(mock_config, tmp_path):
 
 @pytest.mark.e2e
 def test_demo_adaptive_json_recovers_the_truth_within_the_prediction(mock_config):
-    """Seeded (mock.seed 7; target 0.07 mm to keep it short): the true coil-placement error
-    of the calibration the run stops with, against the mock rig's truth over the same region,
-    is at or below the predicted error at 95 % (an honest prediction fails this in about 1
-    run of 20; this seed is fixed)."""
+    """Seeded (mock.seed 7; target 0.07 mm to keep it short): the run stops at the target,
+    and the true coil-placement error of its calibration, against the mock rig's truth over
+    the same region, is within twice the predicted error at 95 %. (True ≤ predicted fails
+    in about 1 run of 20 for an honest prediction, and the poses chosen depend on measured
+    robot time, so one run cannot check the share; benchmarks/adaptive_coverage.py and
+    tests/unit/test_adaptive_math.py do, over many runs. Twice the 95 % quantile is far out
+    in the tail: an honest prediction essentially never exceeds it.)"""
     cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.131"})
     r = _cli("demo", "--config", str(cfg), "--adaptive", "--samples", "20", "--target-mm",
              "0.07", "--json")
@@ -170,7 +173,8 @@ def test_demo_adaptive_json_recovers_the_truth_within_the_prediction(mock_config
     assert set(res["robot_time_s"]) == {"moving", "settling", "sampling", "total"}
     assert res["robot_time_s"]["total"] == pytest.approx(
         sum(res["robot_time_s"][k] for k in ("moving", "settling", "sampling")))
-    assert 0 < res["true_coil_mm"] <= res["predicted_coil_mm"] <= 0.07
+    assert 0 < res["predicted_coil_mm"] <= 0.07
+    assert 0 < res["true_coil_mm"] <= 2 * res["predicted_coil_mm"]
     assert res["method"] == "qr36" and res["n_solve"] == res["poses_used"]
 
 

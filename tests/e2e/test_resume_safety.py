@@ -113,8 +113,10 @@ def test_retries_count_per_fault_not_per_run(tmp_path):
     with start_mock_rig(cfg, tracker_transport="pty") as mr:
         res = acquire(cfg, out, **endpoints_kwargs(mr.endpoints))
         dropped = mr.devices[-1].stats["dropped"]
-    assert dropped >= 2, "the fault seed must give more drops than run.retries"
-    assert res.faults == dropped and res.recorded == 24
+    # every drop during the run is one recovered fault; a drop may also land on the last
+    # request of close() (after the run), which is no fault of the run
+    assert res.faults > cfg.run.retries, "the fault seed must give more drops than run.retries"
+    assert dropped - 1 <= res.faults <= dropped and res.recorded == 24
     s = read_session(out)
     assert sorted(p.index for p in s.poses) == list(range(24))
     got = np.stack([p.commanded for p in sorted(s.poses, key=lambda p: p.index)])
