@@ -207,14 +207,16 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
 def _truth_errors(session: Session, cal: Calibration,
                   C: np.ndarray | None) -> dict[str, Any] | None:
     """Errors of X, Y, Z against a session's truth, and the coil placement error (mean and
-    max over every usable pose's probe pose as a target, mm); None without truth."""
+    max over every usable pose's probe pose as a target, mm); None without truth. The robot is
+    commanded as ``Calibration.placement`` says (targets undistorted when the calibration
+    found a tracker distortion), as ``tmscal compare`` does."""
     truth = session.truth
     if not truth:
         return None
     out: dict[str, Any] = dict(truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth))
     if C is not None and cal.Y is not None and "Y" in truth:
-        u = cal.used()
-        coil = coil_placement_errors(C, u["Y"], u["Z"], truth["Y"], truth["Z"])
+        C_cmd, Y_cmd, Z_cmd = cal.placement(C)
+        coil = coil_placement_errors(C, Y_cmd, Z_cmd, truth["Y"], truth["Z"], C_cmd=C_cmd)
         out["coil_placement_mm"] = float(coil.mean())
         out["coil_placement_max_mm"] = float(coil.max())
         out["coil_placement_n"] = int(len(coil))
