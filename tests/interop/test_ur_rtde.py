@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 if __name__ != "__main__":
@@ -196,13 +196,14 @@ def test_rtde_port_survives_arbitrary_bytes(bare_mock: URMock, data: bytes) -> N
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(lines=st.lists(st.text(alphabet=st.characters(blacklist_characters="\n\r\x00"),
                               max_size=40), min_size=1, max_size=4))
+@example(lines=["\ud800"])  # a lone surrogate: bytes that are not UTF-8
 def test_dashboard_answers_every_line(bare_mock: URMock, lines: list[str]) -> None:
     sent = [ln for ln in lines if ln.strip()]
     with socket.create_connection((bare_mock.host, 29999), timeout=2.0) as s:
         f = s.makefile("rb")
         assert f.readline().startswith(b"Connected: Universal Robots Dashboard Server")
         for ln in sent:
-            s.sendall(ln.encode() + b"\n")
+            s.sendall(ln.encode("utf-8", "surrogatepass") + b"\n")  # lone surrogates: bad UTF-8
             reply = f.readline()
             assert reply.endswith(b"\n")
             if ln.strip().lower() in ("quit", "shutdown"):
