@@ -21,8 +21,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -38,6 +36,7 @@ from ...errors import (
 from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
 from ...timing import Deadline
 from ..base import Envelope, Robot
+from .calls import RTDECalls
 from .states import (
     MODE_ACTION,
     ROBOT_MODE_RUNNING,
@@ -56,11 +55,8 @@ RECEIVE_VARIABLES = ["timestamp", "actual_TCP_pose", "robot_mode", "safety_mode"
 _SAFE_MODES = (1, 2)   # NORMAL, REDUCED: motion allowed
 _POLL_S = 0.005          # how often a wait looks at the worker or the receive stream (s)
 _FRESH_POLL_S = 0.0005   # how often a wait for new data looks at the timestamp (s)
-_LINK_GRACE_S = 0.5      # a receive link down this long during a call: the call is abandoned
 _DIAGNOSE_S = 1.0        # longest wait for the receive stream to show why a move failed (s)
 _SCRIPT_START_S = 5.0    # longest wait for a re-uploaded control script to run (ur_rtde's 5 s)
-#: ur_rtde error texts that name the robot's state, not the link (RobotFault, not retried)
-_ROBOT_STATE_TEXTS = ("remote control", "control script", "control program")
 
 
 def base_from_flange_from_tcp(tcp_pose: Any, flange_from_tcp: np.ndarray) -> np.ndarray:
@@ -76,7 +72,7 @@ def tcp_pose_from_base_from_flange(base_from_flange: np.ndarray,
     return [float(v) for v in rotvec_pose_from_matrix(base_from_flange @ flange_from_tcp)]
 
 
-class URRobot(Robot):
+class URRobot(RTDECalls, Robot):
     """A Universal Robots arm (CB3 / e-Series) through ``ur_rtde``.
 
     Parameters
@@ -372,101 +368,6 @@ class URRobot(Robot):
             log.warning("ur %s: stopL failed: %s", self.host, e)
 
     # --- helpers ------------------------------------------------------------------------------
-
-    @contextmanager
-    def _translated(self, what: str) -> Iterator[None]:
-        """The one place ur_rtde's errors become tmscal's: a ``RuntimeError`` raised inside
-        becomes ``ConnectionLost`` (the link is down, or the library says so),
-        ``DeviceTimeout`` (the library timed out) or ``DeviceError``, naming ``what``; a
-        ``DeviceError`` passes through unchanged (with its ``code``)."""
-        try:
-            yield
-        except RuntimeError as e:
-            text = str(e)
-            low = text.lower()
-            if any(k in low for k in _ROBOT_STATE_TEXTS):
-                # ur_rtde refused on the robot's state (remote control, script not running):
-                # not a link loss; say what the dashboard shows
-                try:
-                    self._dashboard_check(what)
-                except RobotFault as fault:
-                    raise fault from e
-                hint = (" press Play on the External Control program at the pendant"
-                        if not self.upload_script else " check the pendant for a popup")
-                raise RobotFault(f"ur {self.host}: {what} failed: {e};{hint}",
-                                 device=self.name, text=text) from e
-            if not self._connected() or "connect" in low:
-                cls: type[DeviceError] = ConnectionLost
-            elif "timeout" in low or "timed out" in low:
-                cls = DeviceTimeout
-            else:
-                cls = DeviceError
-            raise cls(f"ur {self.host}: {what} failed: {e}", device=self.name,
-                      text=text) from e
-
-    def _call(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
-        """``fn(*args)``, a ur_rtde call, with its errors translated (``_translated``)."""
-        with self._translated(what):
-            return fn(*args)
-
-    def _call_watched(self, what: str, fn: Callable[[], Any], timeout_s: float,
-                      watch: bool = True) -> Any:
-        """Run a (possibly blocking) ur_rtde call in a worker thread. Raise ``ConnectionLost``
-        when the receive link drops while it runs (``watch``), ``DeviceTimeout`` after
-        ``timeout_s``; the library's errors are translated (``_translated``)."""
-        box: dict[str, Any] = {}
-
-        def run() -> None:
-            try:
-                box["value"] = fn()
-            except BaseException as e:  # handed over to the caller's thread
-                box["error"] = e
-
-        worker = threading.Thread(target=run, name=f"ur-{what}", daemon=True)
-        worker.start()
-        self._watch(worker, what, Deadline(timeout_s), watch)
-        if "error" in box:
-            with self._translated(what):
-                raise box["error"]
-        return box.get("value")
-
-    def _watch(self, worker: threading.Thread, what: str, deadline: Deadline,
-               watch: bool) -> None:
-        """Wait for ``worker``; abandon it (``_stuck``) when the receive link has been down
-        for ``_LINK_GRACE_S`` (``watch``) or ``deadline`` expires."""
-        lost: Deadline | None = None
-        while worker.is_alive():
-            worker.join(_POLL_S)
-            if not worker.is_alive():
-                break
-            if watch and lost is None and not self._rx_connected():
-                lost = Deadline(_LINK_GRACE_S)
-            if lost is not None and lost.expired():
-                self._stuck = True
-                raise ConnectionLost(f"ur {self.host}: connection lost during {what}",
-                                     device=self.name)
-            if deadline.expired():
-                self._stuck = True
-                raise DeviceTimeout(f"ur {self.host}: {what} did not return within "
-                                    f"{deadline.timeout_s:.1f} s", device=self.name)
-
-    def _rx_connected(self) -> bool:
-        try:
-            return bool(self._rx is not None and self._rx.isConnected())
-        except RuntimeError:
-            return False
-
-    def _connected(self) -> bool:
-        try:
-            return bool(self._rx is not None and self._ctl is not None
-                        and self._rx.isConnected() and self._ctl.isConnected())
-        except RuntimeError:
-            return False
-
-    def _check_connected(self, what: str) -> None:
-        if not self._connected():
-            raise ConnectionLost(f"ur {self.host}: {what}: the RTDE connection is lost",
-                                 device=self.name)
 
     def _safety(self) -> tuple[int, str, bool, bool, int, int]:
         """(safety mode, its name, protective stop, emergency stop, runtime state, robot
