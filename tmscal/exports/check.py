@@ -13,10 +13,8 @@ from __future__ import annotations
 import textwrap
 from typing import Any
 
-import numpy as np
-
-from ..calib import coil_placement_errors, truth_errors
 from ..errors import CalibrationError
+from ..report.evaluate import truth_errors_of
 from ..session import Session
 from .calibfile import CalibrationFile
 
@@ -31,21 +29,6 @@ def _errors(err: dict[str, Any]) -> dict[str, Any]:
     for k in ("e_z_mm", "theta_z_deg"):
         if k in err:
             out[k] = float(err[k])
-    return out
-
-
-def _truth(session: Session, cf: CalibrationFile, C: np.ndarray | None) -> dict[str, Any] | None:
-    truth = session.truth
-    if not truth:
-        return None
-    cal = cf.calibration
-    out: dict[str, Any] = dict(truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth))
-    if C is not None and cal.Y is not None and "Y" in truth:
-        targets, Y, Z = cal.placement(C)
-        coil = coil_placement_errors(C, Y, Z, truth["Y"], truth["Z"], C_cmd=targets)
-        out["coil_placement_mm"] = float(coil.mean())
-        out["coil_placement_max_mm"] = float(coil.max())
-        out["coil_placement_n"] = int(len(coil))
     return out
 
 
@@ -85,7 +68,7 @@ def check_calibration(session: Session, cf: CalibrationFile,
         "same_session": bool(session_sha256 and stored.get("sha256") == session_sha256),
         "errors": _errors(cal.errors(A, B, C)),
         "outliers": find_outliers(pose_residuals(session, cal)),
-        "truth": _truth(session, cf, C),
+        "truth": truth_errors_of(session, cf.calibration, C),
     }
 
 

@@ -20,7 +20,7 @@ from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
 
 __all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals",
-           "with_kinematics", "plain"]
+           "with_kinematics", "plain", "truth_errors_of"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -197,14 +197,14 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         method=cal.method, applied=cal.applied, n_solve=int(n_solve), n_test=int(n_test),
         errors_on=errors_on, n_skipped=sum(p.skipped is not None for p in session.poses),
         X=cal.X, Y=cal.Y, Z=cal.Z, raw=raw, errors=errors, Z_probe=cal.Z_probe,
-        truth=_truth_errors(session, cal, C), errors_sd=sd, cv=cv,
+        truth=truth_errors_of(session, cal, C), errors_sd=sd, cv=cv,
         outliers=find_outliers(pose_residuals(session, cal)),
         uncertainty=cal.uncertainty, distortion=cal.distortion,
         options={k: plain(v) for k, v in options.items()} or None)
     return cal, res
 
 
-def _truth_errors(session: Session, cal: Calibration,
+def truth_errors_of(session: Session, cal: Calibration,
                   C: np.ndarray | None) -> dict[str, Any] | None:
     """Errors of X, Y, Z against a session's truth, and the coil placement error (mean and
     max over every usable pose's probe pose as a target, mm); None without truth. The robot is

@@ -37,10 +37,10 @@ from . import text
 from .evaluate import (
     SolveResult,
     _flat_errors,
-    _truth_errors,
     pose_residuals,
     solve_session,
     study_session,
+    truth_errors_of,
 )
 from .outliers import find_outliers
 from .plots import _pyplot, plot_residuals, plot_study
@@ -237,7 +237,7 @@ def _stored_result(session: Session, cal: Calibration, doc: dict[str, Any],
         errors_on="in-sample" if same else "held-out",
         n_skipped=sum(p.skipped is not None for p in session.poses), X=cal.X, Y=cal.Y,
         Z=cal.Z, raw=raw, errors=_flat_errors(cal.errors(A, B, C)), Z_probe=cal.Z_probe,
-        truth=_truth_errors(session, cal, C),
+        truth=truth_errors_of(session, cal, C),
         outliers=find_outliers(pose_residuals(session, cal)),
         uncertainty=cal.uncertainty, distortion=cal.distortion)
 
