@@ -52,9 +52,9 @@ from tmscal.exports.kinfile import load_arm
 from tmscal.geometry import invert
 from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
 from tmscal.poses import make_plan
-from tmscal.report.evaluate import with_kinematics
 from tmscal.session import read_session
 from tmscal.sim.arm import reach
+from tmscal.solving.solve import with_kinematics
 
 CONFIG = Path(__file__).resolve().parents[1] / "tmscal" / "data" / "configs" / "mock-ur-ati.yaml"
 ROBOT_HOST = "127.0.0.185"   # a loopback address of its own (ur_rtde's ports are fixed)

@@ -18,8 +18,8 @@ from tmscal.acquisition.run import AcquisitionStopped, acquire
 from tmscal.config import load_config
 from tmscal.errors import SafetyError
 from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
-from tmscal.report.evaluate import solve_session
 from tmscal.session import read_session
+from tmscal.solving.solve import solve_session
 
 from ..rigs import (  # noqa: F401 (write_config re-exported for older importers)
     endpoints_kwargs,

@@ -20,10 +20,10 @@ from hypothesis import strategies as st
 
 from tmscal.acquisition.adaptive import acquire_adaptive, settings_for
 from tmscal.acquisition.devices import envelope_for
-from tmscal.acquisition.plan import PlanSpec
 from tmscal.config import load_config
 from tmscal.errors import SafetyError
 from tmscal.mocks.rig import spawn_mock_rig, start_mock_rig
+from tmscal.poses import PlanSpec
 from tmscal.session import read_session
 
 from ..fuzz import fuzz_settings

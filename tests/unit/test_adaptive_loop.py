@@ -11,20 +11,20 @@ import numpy as np
 import pytest
 
 from tmscal.acquisition import adaptive as loop
-from tmscal.acquisition.plan import PlanSpec
 from tmscal.acquisition.settings import sampling_settings as _settings
 from tmscal.calib.adaptive import AdaptiveSettings, bootstrap_indices
 from tmscal.config import load_config
 from tmscal.errors import ConfigError, SessionError
 from tmscal.motion import move_duration
-from tmscal.report.evaluate import (
+from tmscal.poses import PlanSpec
+from tmscal.session import PoseRecord, Session, validate_record
+from tmscal.sim import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
+from tmscal.solving.predict import (
     adaptive_header,
     prediction_inputs,
     robot_time_of,
     settings_from_header,
 )
-from tmscal.session import PoseRecord, Session, validate_record
-from tmscal.sim import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
 
 from ..rigs import write_config
 

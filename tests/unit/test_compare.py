@@ -1,4 +1,4 @@
-"""``tmscal compare`` and ``tmscal.report.compare``: the fold protocol, the skip note on
+"""``tmscal compare`` and ``tmscal.solving.compare``: the fold protocol, the skip note on
 marker-only sessions, the optional bound, the table, the JSON and the figures."""
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from tmscal import calib
 from tmscal.calib.study import cross_validate
 from tmscal.cli import main
 from tmscal.errors import CalibrationError
-from tmscal.report.compare import compare_arrays, default_ns, format_compare
+from tmscal.report.compare import format_compare
 from tmscal.sim import Noise, simulate
+from tmscal.solving.compare import compare_arrays, default_ns
 
 
 def run(*args):
@@ -97,7 +98,7 @@ def test_a_bound_function_when_calib_has_one_is_shown(poses, monkeypatch) -> Non
         seen.append((len(A), noise["robot_sigma_mm"]))
         return {"X_trans_mm": 2.0 / len(A), "Y_trans_mm": 1.0 / len(A)}
 
-    import tmscal.report.compare as cmp
+    import tmscal.solving.compare as cmp
     monkeypatch.setattr(cmp, "find_bound", lambda: fake_bound)
     t = {k: getattr(truth, k) for k in "XYZ"}
     res = compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[10, 40], folds=5,
@@ -119,8 +120,8 @@ def test_the_real_bound_is_below_the_spread_of_qr36(sessions) -> None:
     for 3-D Gaussian errors; a third leaves room for 5 folds' spread)."""
     pytest.importorskip("tmscal.calib.bound")
     both, _ = sessions
-    from tmscal.report.compare import compare_session
     from tmscal.session import read_session
+    from tmscal.solving.compare import compare_session
     res = compare_session(read_session(both), ["qr36"], ns=[10, 48], folds=5)
     b = res["bound"]["Y_trans_mm"]
     assert 0 < b[1] < b[0]

@@ -15,11 +15,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tmscal.acquisition.skips import SkipWatch, skip_cause
+from tmscal.acquisition.skips import SkipWatch
 from tmscal.cli.live import AcquireProgress, fit, stderr_to_log
 from tmscal.config import RunConfig, parse_config
 from tmscal.errors import ConfigError
-from tmscal.session import PoseRecord
+from tmscal.session import PoseRecord, skip_cause
 
 
 def test_child_and_c_level_stderr_go_to_the_log_and_fd2_is_restored(caplog, capfd):

@@ -11,11 +11,12 @@ import pytest
 
 from tmscal import geometry as g
 from tmscal.calib import solve
-from tmscal.report.evaluate import SolveResult, solve_session, study_session
-from tmscal.report.outliers import find_outliers, outlier_threshold
 from tmscal.report.text import format_result, format_study
 from tmscal.session import make_header, read_session, records_from_arrays, write_session
 from tmscal.sim import simulate
+from tmscal.solving.outliers import find_outliers, outlier_threshold
+from tmscal.solving.solve import SolveResult, solve_session
+from tmscal.solving.study import study_session
 
 
 def write_sim(path, truth, d):
@@ -159,8 +160,8 @@ def test_study_reports_the_noise_floor_of_the_true_transforms(rig):
 
 def test_a_session_without_tracker_poses_points_to_selfcal_identify(tmp_path):
     from tmscal.errors import CalibrationError
-    from tmscal.report.evaluate import session_arrays
     from tmscal.session import make_header, read_session, write_session
+    from tmscal.solving.solve import session_arrays
 
     path = write_session(tmp_path / "sc.jsonl", make_header(["ft"]), [])
     with pytest.raises(CalibrationError, match="no tracker poses.*selfcal identify"):

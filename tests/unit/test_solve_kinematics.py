@@ -1,5 +1,5 @@
 """``tmscal solve SESSION --kinematics KIN``: A recomputed from the recorded joints with an arm
-model (tmscal.report.evaluate.with_kinematics). Sessions come from a sim rig whose arm has
+model (tmscal.solving.solve.with_kinematics). Sessions come from a sim rig whose arm has
 hidden kinematic errors (tmscal.sim.arm): the controller reports the nominal flange, the
 tracker sees the true one. Poses 4×4 mm, joints rad."""
 
@@ -19,9 +19,9 @@ from tmscal.errors import CalibrationError, SessionError
 from tmscal.exports.kinfile import kinematics_yaml
 from tmscal.geometry import make_pose, pose_mean, rot_x
 from tmscal.poses import eq14_poses
-from tmscal.report.evaluate import with_kinematics
 from tmscal.session import PoseRecord, make_header, read_session, write_session
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, make_arm, tms_rig_truth
+from tmscal.solving.solve import with_kinematics
 
 
 def _session(path: Path, errors: str, n: int = 60, seed: int = 11,

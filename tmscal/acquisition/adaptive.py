@@ -45,14 +45,14 @@ from ..calib.adaptive import (
 from ..config import RigConfig
 from ..drivers.base import ConfigError, SafetyError
 from ..errors import CalibrationError, SessionError
-from ..report.evaluate import (
+from ..session import PoseRecord, SessionWriter, make_header
+from ..solving.predict import (
     PHASES,
     adaptive_header,
     prediction_inputs,
     robot_time_of,
     settings_from_header,
 )
-from ..session import PoseRecord, SessionWriter, make_header
 from .devices import envelope_for
 from .plan import PlanSpec, check_plan
 from .run import (

@@ -8,27 +8,12 @@ later ones and a single early skip does not read as 100 %.
 
 from __future__ import annotations
 
-import re
 from collections import Counter, deque
 
 from ..config import RunConfig
-from ..session import PoseRecord
+from ..session import PoseRecord, skip_cause
 
-__all__ = ["SkipWatch", "skip_cause"]
-
-#: the wording of ``sample_pose``'s problem for a body with too few usable frames
-_UNSEEN = re.compile(r"(\w+) usable in \d+ of \d+ frames")
-
-
-def skip_cause(reason: str) -> str:
-    """A short cause for a skipped pose's ``reason``: the bodies not seen well enough
-    ("probe not seen (missing or out of volume)"), else the reason up to its first
-    parenthesis (e.g. "invalid measurement")."""
-    bodies = _UNSEEN.findall(reason)
-    if bodies:
-        return f"{' and '.join(bodies)} not seen (missing or out of volume)"
-    return reason.split(" (", 1)[0].strip() or "skipped"
-
+__all__ = ["SkipWatch"]
 
 class SkipWatch:
     """Feed it every pose record of a run (``add``); it says when to warn and when to stop."""

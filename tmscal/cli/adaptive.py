@@ -141,12 +141,12 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     same region), and QR36 on the session as ``demo`` prints it."""
     import numpy as np
 
-    from ..acquisition.plan import PlanSpec
     from ..calib.adaptive import true_coil_error
     from ..mocks.rig import build_sim_rig, spawn_mock_rig
-    from ..report.evaluate import solve_session
+    from ..poses import PlanSpec
     from ..report.text import format_prediction, format_result, format_robot_time
     from ..session import read_session
+    from ..solving.solve import solve_session
     from . import _print_json
     from .rig import _split_endpoint
 

@@ -70,8 +70,8 @@ def compare(session_file: Path, methods: str | None, n_text: str | None, folds: 
     the coil placement error and, when available, the Cramér–Rao bound beside them."""
     from tqdm import tqdm
 
-    from ..report.compare import compare_session
     from ..report.plots import plot_compare
+    from ..solving.compare import compare_session
 
     ms = None if methods is None else [m.strip() for m in methods.split(",") if m.strip()]
     if ms is not None and not ms:
@@ -92,7 +92,7 @@ def compare(session_file: Path, methods: str | None, n_text: str | None, folds: 
               title=session_file.name)
         written = [p for k, p in paths.items() if res["truth"] or "truth" not in k]
     if as_json:
-        from ..report.compare import json_safe
+        from ..session import json_safe
         _print_json(json_safe(res))
     else:
         from ..report.compare import format_compare

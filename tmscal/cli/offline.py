@@ -224,9 +224,9 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     With --calib, check a stored calibration on the session instead (no fitting). With
     --kinematics, the robot poses come from the recorded joints and the arm's calibrated
     kinematics."""
-    from ..report.evaluate import pose_residuals, solve_session
     from ..report.text import calibration_yaml, format_result, plot_residuals
     from ..session import sha256_of
+    from ..solving.solve import pose_residuals, solve_session
 
     if calib_file is not None:
         _check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
@@ -268,23 +268,23 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
 
 def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
     """The session with A recomputed from its joints by the arm model of ``kin_file``
-    (``report.evaluate.with_kinematics``), or as it is without one."""
+    (``solving.solve.with_kinematics``), or as it is without one."""
     if kin_file is None:
         return session
     from ..exports.kinfile import load_arm
-    from ..report.evaluate import with_kinematics
+    from ..solving.solve import with_kinematics
     return with_kinematics(session, load_arm(kin_file), str(kin_file))
 
 
 def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
     """For a session recorded by ``acquire --adaptive``: the prediction that run stopped on,
-    recomputed from the session (``report.evaluate.predict_session``; docs/adaptive.md), as
+    recomputed from the session (``solving.predict.predict_session``; docs/adaptive.md), as
     ({predicted_coil_mm, confidence, sigma_mm, n_poses, …, region, robot_time_s}, its text);
     None for other sessions."""
     if not isinstance(session.header.get("adaptive"), dict):
         return None
-    from ..report.evaluate import predict_session
     from ..report.text import format_prediction, format_robot_time
+    from ..solving.predict import predict_session
 
     pred, info = predict_session(session)
     text = ("adaptive acquisition (docs/adaptive.md), recomputed from the session:\n  "
@@ -341,8 +341,8 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
 
     from ..calib import METHODS
     from ..errors import CalibrationError
-    from ..report.evaluate import study_session
     from ..report.text import format_study, plot_study
+    from ..solving.study import study_session
 
     ms = [m.strip().lower() for m in methods.split(",") if m.strip()]
     bad = [m for m in ms if m not in METHODS]

@@ -438,9 +438,9 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
     from ..mocks.rig import build_sim_rig, spawn_mock_rig
-    from ..report.evaluate import solve_session
     from ..report.text import format_result
     from ..session import read_session
+    from ..solving.solve import solve_session
     from .live import AcquireProgress, stderr_to_log
 
     cfg_path = config or _default_demo_config()

@@ -14,8 +14,9 @@ import textwrap
 from typing import Any
 
 from ..errors import CalibrationError
-from ..report.evaluate import truth_errors_of
 from ..session import Session
+from ..solving.outliers import find_outliers
+from ..solving.solve import pose_residuals, truth_errors_of
 from .calibfile import CalibrationFile
 
 __all__ = ["check_calibration", "format_check"]
@@ -43,9 +44,6 @@ def check_calibration(session: Session, cf: CalibrationFile,
     the errors are in-sample, not a check), "errors" (e_t_mm, theta_t_deg, per body trans_mm
     and rot_deg, e_z/θ_z for QR24), "outliers", "truth" (None without one). Raises
     CalibrationError when the session has no usable pose or lacks the marker."""
-    from ..report.evaluate import pose_residuals
-    from ..report.outliers import find_outliers
-
     cal = cf.calibration
     if "marker" not in session.bodies:
         raise CalibrationError(f"{session.path}: the session has no marker poses (bodies: "

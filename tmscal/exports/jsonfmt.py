@@ -17,7 +17,7 @@ import json
 import numpy as np
 
 from .. import __version__
-from ..report.evaluate import plain
+from ..session import plain
 from .calibfile import CalibrationFile
 
 __all__ = ["render"]

@@ -45,7 +45,7 @@ import yaml
 
 from ..config_checks import check_tree
 from ..errors import CalibrationError, ConfigError
-from ..report.evaluate import plain
+from ..session import plain
 from .calibfile import _load_text, _matrix, read_text_file
 
 __all__ = ["FORMAT", "VERSION", "KinematicsFile", "kinematics_doc", "kinematics_yaml",

@@ -32,17 +32,17 @@ import numpy as np
 from .. import __version__
 from ..calib import Calibration, solve
 from ..errors import CalibrationError
-from ..session import Session
-from . import text
-from .evaluate import (
+from ..session import Session, skip_cause
+from ..solving.outliers import find_outliers
+from ..solving.solve import (
     SolveResult,
-    _flat_errors,
+    flat_errors,
     pose_residuals,
     solve_session,
-    study_session,
     truth_errors_of,
 )
-from .outliers import find_outliers
+from ..solving.study import study_session
+from . import text
 from .plots import _pyplot, plot_residuals, plot_study
 
 __all__ = ["SECTIONS", "html_report"]
@@ -200,8 +200,6 @@ def _draw_spreads(session: Session, path: str) -> None:
 
 
 def _samples(session: Session) -> str:
-    from ..acquisition.skips import skip_cause
-
     out = ["<p>Each pose averages many tracker frames (and robot reads); the spread is the "
            "RMS distance (mm) and angle (deg) of those samples about their mean "
            "(docs/session-format.md).</p>"]
@@ -236,7 +234,7 @@ def _stored_result(session: Session, cal: Calibration, doc: dict[str, Any],
         method=cal.method, applied=str(cal.applied), n_solve=cal.n_poses, n_test=len(A),
         errors_on="in-sample" if same else "held-out",
         n_skipped=sum(p.skipped is not None for p in session.poses), X=cal.X, Y=cal.Y,
-        Z=cal.Z, raw=raw, errors=_flat_errors(cal.errors(A, B, C)), Z_probe=cal.Z_probe,
+        Z=cal.Z, raw=raw, errors=flat_errors(cal.errors(A, B, C)), Z_probe=cal.Z_probe,
         truth=truth_errors_of(session, cal, C),
         outliers=find_outliers(pose_residuals(session, cal)),
         uncertainty=cal.uncertainty, distortion=cal.distortion)

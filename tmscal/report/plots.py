@@ -96,10 +96,10 @@ def _study_axes(plt: Any, axes: Any, ns: list[int]) -> None:
 def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
                    outliers: list[dict[str, Any]] | None = None) -> None:
     """Per-pose translation (mm) and rotation (deg) errors of each body against the session
-    pose index (``report.evaluate.pose_residuals``), the solve set shaded when only part of
-    the poses were solved on; the ``outliers`` (``report.outliers.find_outliers``) ringed and
+    pose index (``solving.solve.pose_residuals``), the solve set shaded when only part of
+    the poses were solved on; the ``outliers`` (``solving.outliers.find_outliers``) ringed and
     named by pose index, the rule under the axes. PNG."""
-    from .outliers import RULE, outlier_threshold
+    from ..solving.outliers import RULE, outlier_threshold
 
     plt = _pyplot()
     from matplotlib.lines import Line2D
@@ -165,7 +165,7 @@ def _curve(ax: Any, ns: list[int], d: dict[str, list[float]], col: str, label: s
 
 def plot_compare(res: dict[str, Any], paths: dict[str, str], title: str | None = None
                  ) -> None:
-    """The figures of ``tmscal compare`` (``report.compare.compare_arrays``), as Figure 2 of the
+    """The figures of ``tmscal compare`` (``solving.compare.compare_arrays``), as Figure 2 of the
     Panda/Vicra TMS study: ``paths["errors"]``: held-out position e_t (mm) and orientation
     θ_t (deg) against n; ``paths["time"]``: solve time (ms) against n; ``paths["truth"]``
     (only with a truth): the ground-truth translation error of Y (X when marker-only) and the

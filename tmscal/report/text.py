@@ -16,7 +16,7 @@ import yaml
 from .plots import plot_residuals, plot_study
 
 if TYPE_CHECKING:
-    from .evaluate import SolveResult
+    from ..solving.solve import SolveResult
 
 __all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "plot_residuals",
            "format_matrix", "distortion_text"]
@@ -146,7 +146,7 @@ def _uncertainty_rows(res: SolveResult) -> list[str]:
 
 
 def _outlier_lines(res: SolveResult) -> list[str]:
-    from .outliers import RULE
+    from ..solving.outliers import RULE
     if not res.outliers:
         return textwrap.wrap(f"outlier poses: none (rule: {RULE})", 98,
                              subsequent_indent="  ")

@@ -31,15 +31,17 @@ Integrity rules (``docs/session-format.md``):
 from __future__ import annotations
 
 from .files import Session, SessionWriter, read_session, sha256_of, write_session
+from .jsonable import json_default, json_safe, plain
 from .records import (
     FORMAT,
     VERSION,
     PoseRecord,
     make_header,
     records_from_arrays,
+    skip_cause,
     validate_record,
 )
 
 __all__ = ["FORMAT", "VERSION", "PoseRecord", "Session", "SessionWriter", "make_header",
            "read_session", "records_from_arrays", "sha256_of", "validate_record",
-           "write_session"]
+           "write_session", "skip_cause", "plain", "json_safe", "json_default"]

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SessionError
+from .jsonable import json_default
 
 log = logging.getLogger(__name__)
 
@@ -72,17 +73,8 @@ def _loads(text: str, finite: bool = True) -> Any:
     return obj
 
 
-def _json_default(o: Any) -> Any:
-    """numpy scalars and arrays as plain JSON numbers and lists (writer side)."""
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"{type(o).__name__!r} is not JSON-serialisable")
-
-
 def _dumps(obj: Any) -> str:
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_json_default)
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=json_default)
 
 
 _NUMBER_TYPES = frozenset((int, float))
@@ -305,6 +297,20 @@ class PoseRecord:
                 except (TypeError, ValueError, OverflowError) as e:
                     raise ValueError(f"field '{k}': not a list of numbers ({e})") from None
         return d
+
+
+#: the wording of ``acquisition.sample``'s problem for a body with too few usable frames
+_UNSEEN = re.compile(r"(\w+) usable in \d+ of \d+ frames")
+
+
+def skip_cause(reason: str) -> str:
+    """A short cause for a skipped pose's ``reason`` (``PoseRecord.skipped``): the bodies not
+    seen well enough ("probe not seen (missing or out of volume)"), else the reason up to its
+    first parenthesis (e.g. "invalid measurement")."""
+    bodies = _UNSEEN.findall(reason)
+    if bodies:
+        return f"{' and '.join(bodies)} not seen (missing or out of volume)"
+    return reason.split(" (", 1)[0].strip() or "skipped"
 
 
 def validate_record(rec: PoseRecord, where: str = "") -> PoseRecord:

@@ -1,4 +1,6 @@
-"""Solve a session and assemble the result object that ``tmscal solve --json`` prints.
+"""Solve a session and assemble the result object that ``tmscal solve --json`` prints; the
+per-pose residuals of a calibration on a session; a session's robot poses recomputed from its
+joints under an identified kinematic model.
 
 Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
 X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
@@ -11,16 +13,16 @@ from typing import Any
 
 import numpy as np
 
-from ..calib import Calibration, coil_placement_errors, noise_floor, solve, truth_errors
+from ..calib import Calibration, coil_placement_errors, solve, truth_errors
 from ..calib.metrics import body_errors
-from ..calib.study import convergence, cross_validate, summarize, threshold_n
-from ..errors import CalibrationError, SessionError
-from ..session import Session
+from ..calib.study import cross_validate
+from ..errors import CalibrationError
+from ..session import Session, plain
 from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
 
-__all__ = ["SolveResult", "solve_session", "study_session", "session_arrays", "pose_residuals",
-           "with_kinematics", "plain", "truth_errors_of"]
+__all__ = ["SolveResult", "solve_session", "session_arrays", "pose_residuals",
+           "with_kinematics", "truth_errors_of", "flat_errors"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -41,19 +43,6 @@ def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarra
     return A, B, C
 
 
-def plain(v: Any) -> Any:
-    """Arrays and numpy scalars inside dicts and lists as plain JSON / YAML types."""
-    if isinstance(v, dict):
-        return {str(k): plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [plain(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return plain(v.tolist())
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
-
-
 def _mat(M: np.ndarray | None) -> list | None:
     return None if M is None else np.asarray(M, dtype=float).tolist()
 
@@ -70,7 +59,7 @@ class SolveResult:
     over folds when cross-validated); ``errors_sd`` (the same keys: the SD over folds, None
     unless cross-validated); ``cv`` (folds, split, fold_sizes); ``truth`` ({X, Y, Z: {trans_mm,
     rot_deg}}, coil_placement_mm, coil_placement_max_mm, coil_placement_n) when the session
-    knows the truth; ``outliers`` (report.outliers.find_outliers on the per-pose errors of the
+    knows the truth; ``outliers`` (solving.outliers.find_outliers on the per-pose errors of the
     reported calibration). ``to_json()`` is the ``--json`` object."""
 
     method: str
@@ -184,11 +173,11 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         cv = {"folds": r["folds"], "split": r["split"], "fold_sizes": r["fold_sizes"]}
         errors_on, n_test = f"cross-validated ({r['folds']} folds)", n
     elif n_solve < n:
-        errors = _flat_errors(cal.errors(A[n_solve:], B[n_solve:],
+        errors = flat_errors(cal.errors(A[n_solve:], B[n_solve:],
                                          None if C is None else C[n_solve:]))
         errors_on, n_test = "held-out", n - n_solve
     else:
-        errors = _flat_errors(cal.errors(A, B, C))
+        errors = flat_errors(cal.errors(A, B, C))
         errors_on, n_test = "in-sample", n
     raw = {"X": cal.X_raw, "Y": cal.Y_raw, "Z": cal.Z_raw}
     if cal.Z_probe is not None:
@@ -235,7 +224,9 @@ def _nest(flat: dict[str, float]) -> dict[str, Any]:
     return out
 
 
-def _flat_errors(err: dict[str, Any]) -> dict[str, Any]:
+def flat_errors(err: dict[str, Any]) -> dict[str, Any]:
+    """``Calibration.errors`` output in the ``errors`` layout of SolveResult (e_t_mm,
+    theta_t_deg, per body {trans_mm, rot_deg}, e_z_mm/theta_z_deg for QR24 with a probe)."""
     out: dict[str, Any] = {"e_t_mm": err["e_t_mm"], "theta_t_deg": err["theta_t_deg"]}
     for b, d in err["bodies"].items():
         out[b] = {"trans_mm": d["trans_mm"], "rot_deg": d["rot_deg"]}
@@ -243,51 +234,6 @@ def _flat_errors(err: dict[str, Any]) -> dict[str, Any]:
         if k in err:
             out[k] = err[k]
     return out
-
-
-def study_session(session: Session, methods: list[str], n_max: int = 250, n_min: int = 5,
-                  thresholds_mm: tuple[float, ...] = (0.4, 0.3), orthonormal: bool = False,
-                  progress: Any = None) -> dict[str, Any]:
-    """The convergence study of Wang et al. (2018) on a session: curves (their Figure 3),
-    statistics with the n of each (Tables 1 and 2) and the n after which e_t stays below each
-    threshold (Table 3); "noise_floor" ({e_t_mm, theta_t_deg}: the true X, Y, Z on the
-    same test poses) when the session knows the truth."""
-    need_probe = "qr36" in methods
-    for m in methods:
-        session_arrays(session, m)
-    A, B, C, _ = session.arrays(need_probe=need_probe)
-    if len(A) == 0:
-        raise CalibrationError(f"{session.path}: no usable poses in the session")
-    if "probe" not in session.bodies:
-        C = None
-    curves = convergence(A, B, C, methods, n_min=n_min, n_max=n_max, orthonormal=orthonormal,
-                         progress=progress)
-    ns = curves["n"]
-    table: dict[str, Any] = {}
-    for m, c in curves["methods"].items():
-        stats = {k: summarize(v, ns) for k, v in c.items()}
-        thr = {f"{t:g}": threshold_n(c["e_t_mm"], ns, t) for t in thresholds_mm} \
-            if "e_t_mm" in c else {}
-        table[m] = {"stats": stats, "n_below_mm": thr}
-    out = {"n": ns, "n_test": curves["n_test"], "curves": curves["methods"], "table": table}
-    floor = _study_floor(session, A[n_max:], B[n_max:], None if C is None else C[n_max:])
-    if floor is not None:
-        out["noise_floor"] = floor
-    return out
-
-
-def _study_floor(session: Session, A: np.ndarray, B: np.ndarray,
-                 C: np.ndarray | None) -> dict[str, float] | None:
-    """The noise floor of a study (docs/methods.md): e_t (mm) and θ_t (deg) of the true X, Y,
-    Z on the study's test poses; None when the session has no truth."""
-    truth = session.truth
-    if not truth or "X" not in truth or "Z" not in truth:
-        return None
-    bodies, Xs = {"marker": B}, {"marker": truth["X"]}
-    if C is not None and "Y" in truth:
-        bodies["probe"], Xs["probe"] = C, truth["Y"]
-    f = noise_floor(A, bodies, Xs, truth["Z"])
-    return {"e_t_mm": f["e_t_mm"], "theta_t_deg": f["theta_t_deg"]}
 
 
 def pose_residuals(session: Session, cal: Calibration) -> dict[str, Any]:
@@ -307,104 +253,3 @@ def pose_residuals(session: Session, cal: Calibration) -> dict[str, Any]:
 
 
 # --- adaptive acquisition: its header entry, the prediction's inputs, robot time ------------
-
-#: the phases of a pose that count as robot time (docs/adaptive.md)
-PHASES = ("moving", "settling", "sampling")
-_ADAPTIVE_KEYS = ("target_mm", "confidence", "max_poses", "bootstrap", "pool", "region")
-#: what a resume may change in an adaptive session's settings (the pool and region are the
-#: session's: they fix which poses were candidates)
-ADAPTIVE_OVERRIDES = ("target_mm", "confidence", "max_poses", "bootstrap")
-
-
-def adaptive_header(settings: Any) -> dict[str, Any]:
-    """The session header's ``adaptive`` entry: the settings of the run (``AdaptiveSettings``
-    fields; ``pool`` is also the plan's length, ``region`` its first poses)."""
-    return {k: getattr(settings, k) for k in _ADAPTIVE_KEYS}
-
-
-def settings_from_header(header: dict[str, Any], default: Any,
-                         overrides: dict[str, Any] | None = None) -> tuple[Any, list[str]]:
-    """(AdaptiveSettings, notes) of an adaptive session: the header's ``adaptive`` entry,
-    with ``overrides`` (``ADAPTIVE_OVERRIDES``, not None) winning and named in the notes.
-    ``default`` (an AdaptiveSettings) fills keys the header lacks. SessionError for a session
-    without the entry or with invalid values."""
-    from ..calib.adaptive import AdaptiveSettings
-
-    rec = header.get("adaptive")
-    if not isinstance(rec, dict):
-        raise SessionError("the session header has no 'adaptive' entry: it was not recorded "
-                           "by tmscal acquire --adaptive (resume it without --adaptive)")
-    vals = {k: rec.get(k, getattr(default, k)) for k in _ADAPTIVE_KEYS}
-    notes = []
-    for k, v in (overrides or {}).items():
-        if v is None or k not in ADAPTIVE_OVERRIDES:
-            continue
-        if v != vals[k]:
-            notes.append(f"adaptive.{k} {v} from the command line (the session was recorded "
-                         f"with {vals[k]})")
-        vals[k] = v
-    try:
-        return AdaptiveSettings(**vals), notes
-    except (TypeError, ValueError) as e:
-        raise SessionError(f"the session header's 'adaptive' entry is invalid ({e})") from None
-
-
-def prediction_inputs(poses: list[Any], bodies: list[str]
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-    """(A, B, C, ml options) of the usable poses (marker and probe seen), in index order:
-    ``spreads`` (each pose's sample spreads and counts, the tracker noise per pose) when every
-    pose recorded spreads for both bodies; otherwise ml's default noise."""
-    use = [p for p in sorted(poses, key=lambda p: p.index)
-           if p.skipped is None and p.A is not None and p.B is not None and p.C is not None]
-    if not use:
-        z = np.zeros((0, 4, 4))
-        return z, z, z, {}
-    A, B, C = (np.stack([getattr(p, k) for p in use]) for k in "ABC")
-    names = [b for b in ("marker", "probe") if b in bodies]
-    opts: dict[str, Any] = {}
-    if all(all(b in p.spread for b in names) for p in use):
-        opts["spreads"] = [{"spread": p.spread, "samples": p.samples} for p in use]
-    return A, B, C, opts
-
-
-def robot_time_of(poses: list[Any]) -> dict[str, float]:
-    """Robot time (s) of the poses that recorded it (``robot_s``, adaptive sessions), by
-    phase (moving, settling, sampling) and in total."""
-    out = {k: 0.0 for k in PHASES}
-    for p in poses:
-        for k in PHASES:
-            out[k] += float((p.robot_s or {}).get(k, 0.0))
-    out["total"] = sum(out[k] for k in PHASES)
-    return out
-
-
-def predict_session(session: Session, settings: Any = None) -> tuple[Any, dict[str, Any]]:
-    """The adaptive prediction (``calib.adaptive.predict``: QR36 then ml, the predicted
-    coil-placement error at a confidence) recomputed from any session whose header records
-    a plan: the region is the first ``region`` poses of that plan (the header's ``adaptive``
-    settings, else ``settings``, else the defaults). Returns (Prediction, info: region,
-    plan kind, settings, robot_time_s, the poses' count). CalibrationError without a plan or
-    with too few usable poses."""
-    from ..acquisition.plan import PlanSpec
-    from ..calib.adaptive import AdaptiveSettings, predict
-
-    default = settings or AdaptiveSettings()
-    if isinstance(session.header.get("adaptive"), dict):
-        settings, _ = settings_from_header(session.header, default)
-    else:
-        settings = default
-    try:
-        spec = PlanSpec.from_header(session.header)
-    except SessionError as e:
-        raise CalibrationError(f"{session.path}: no prediction region: {e}") from None
-    region = spec.with_n(settings.region).poses()
-    A, B, C, opts = prediction_inputs(session.poses, session.bodies)
-    if len(A) < 3:
-        raise CalibrationError(f"{session.path}: {len(A)} usable poses with marker and probe; "
-                               "the prediction needs at least 3")
-    pred = predict(A, B, C, region, settings, **opts)
-    info = {"region": f"the first {settings.region} poses of the session's {spec.kind} plan "
-                      f"(seed {spec.seed}, ±{spec.radius_mm:g} mm, ±{spec.rotation_deg:g}°)",
-            "settings": settings, "robot_time_s": robot_time_of(session.poses),
-            "poses": len(A)}
-    return pred, info

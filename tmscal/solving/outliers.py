@@ -48,7 +48,7 @@ def outlier_threshold(values: Sequence[float], k: float = K) -> float:
 
 
 def find_outliers(residuals: dict[str, Any], k: float = K) -> list[dict[str, Any]]:
-    """Outlier poses of ``report.evaluate.pose_residuals`` output ({"index": [..], "<body>":
+    """Outlier poses of ``solving.solve.pose_residuals`` output ({"index": [..], "<body>":
     {"trans_mm": [..], "rot_deg": [..]}}): one entry per flagged pose, in index order,
     {"index": session pose index, "flags": [{"body", "metric" ("translation"/"rotation"),
     "value", "threshold", "unit"}]}."""

@@ -1,0 +1,34 @@
+"""The solve service: a recorded session in, a calibration and its evaluation out.
+
+Everything that solves, evaluates or predicts from a session, and reads the session header to
+do so, lives here, below its users (``tmscal.acquisition``, ``tmscal.exports``,
+``tmscal.stream``, ``tmscal.report`` and ``tmscal.cli``), which render or store its results;
+it imports none of them (docs/architecture.md). No I/O: sessions come in as
+:class:`tmscal.session.Session` objects.
+
+- :mod:`.solve`: ``solve_session`` (the calibration and its cross-validated, held-out or
+  in-sample errors, the truth errors, the outlier poses: ``SolveResult``), ``pose_residuals``,
+  ``truth_errors_of``, ``with_kinematics`` (A recomputed from the joints under an identified
+  arm model).
+- :mod:`.study`: ``study_session``, the convergence study of Wang et al. (2018).
+- :mod:`.compare`: ``compare_session`` / ``compare_arrays``, the method comparison of
+  ``tmscal compare``.
+- :mod:`.predict`: the adaptive header entry (``adaptive_header``, ``settings_from_header``),
+  the prediction's inputs, robot time by phase, and ``predict_session``.
+- :mod:`.outliers`: the robust rule that names outlier poses (Leys et al. 2013).
+
+Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
+X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
+"""
+
+from __future__ import annotations
+
+from .compare import compare_arrays, compare_session
+from .outliers import find_outliers
+from .predict import adaptive_header, predict_session, settings_from_header
+from .solve import SolveResult, pose_residuals, solve_session, truth_errors_of, with_kinematics
+from .study import study_session
+
+__all__ = ["SolveResult", "solve_session", "pose_residuals", "truth_errors_of",
+           "with_kinematics", "study_session", "compare_session", "compare_arrays",
+           "predict_session", "adaptive_header", "settings_from_header", "find_outliers"]
