@@ -47,7 +47,7 @@ from .drivers.base import Tracker, TrackerFrame
 log = logging.getLogger(__name__)
 
 __all__ = ["TRANSFORMS", "MAX_NAME_BYTES", "DEFAULT_PORT", "frame_transforms", "StreamServer",
-           "StreamStats", "stream_frames", "is_loopback"]
+           "StreamStats", "stream_frames"]
 
 #: OpenIGTLink's registered TCP port, the default of Slicer's OpenIGTLinkIF and PlusServer
 DEFAULT_PORT = 18944
@@ -89,17 +89,6 @@ def _usable(frame: TrackerFrame, tool: str) -> np.ndarray | None:
     if st is None or not st.usable:
         return None
     return np.asarray(st.pose, dtype=float)
-
-
-def is_loopback(host: str) -> bool:
-    """True when every address ``host`` stands for is a loopback address (127.0.0.0/8, ::1,
-    ``localhost``); False for anything else, including a name that does not resolve."""
-    from .mocks.net import NotLoopbackError, loopback_family
-    try:
-        loopback_family(host, "--host")
-    except NotLoopbackError:
-        return False
-    return True
 
 
 def _family(host: str) -> socket.AddressFamily:
@@ -146,7 +135,7 @@ class StreamServer(pyigtl.OpenIGTLinkServer):  # type: ignore[misc]
     caller owns Ctrl-C), and quiet when a client hangs up. One client at a time (a second one
     waits until the first disconnects). ``port`` 0 picks a free port; ``port`` and ``host``
     are then what was bound. Whether ``host`` may be off loopback is the caller's decision
-    (:func:`is_loopback`). Use as a context manager, or ``start()`` and ``stop()``."""
+    (:func:`tmscal.net.is_loopback`). Use as a context manager, or ``start()`` and ``stop()``."""
 
     allow_reuse_address = True
 

@@ -19,8 +19,8 @@ import yaml
 from click.testing import CliRunner
 
 import tmscal as tmscal_pkg
-from tmscal.calib import load
 from tmscal.cli import main
+from tmscal.exports import load_calibration
 from tmscal.session import read_session, write_session
 
 
@@ -90,4 +90,4 @@ def test_exports_of_a_session_acquired_on_the_mock_rig(tmp_path):
     Z = ET.parse(tmp_path / "plus.xml").getroot().find(
         "./CoordinateDefinitions/Transform[@From='Tracker']").get("Matrix")
     np.testing.assert_array_equal(np.reshape([float(v) for v in Z.split()], (4, 4)),
-                                  load(tmp_path / "c.yaml").Z)
+                                  load_calibration(tmp_path / "c.yaml").Z)

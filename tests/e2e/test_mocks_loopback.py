@@ -16,8 +16,8 @@ import yaml
 
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
-from tmscal.mocks.net import loopback_family
 from tmscal.mocks.rig import start_mock_rig
+from tmscal.net import loopback_family
 
 pytestmark = pytest.mark.e2e
 

@@ -1,5 +1,6 @@
-"""tmscal.calib.load: the file `tmscal solve -o` writes (and the json export) back into the
-Calibration `solve` returned; bad files are one CalibrationError naming the file and key."""
+"""tmscal.exports.load_calibration: the file `tmscal solve -o` writes (and the json export)
+back into the Calibration `solve` returned; bad files are one CalibrationError naming the file
+and key."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from tmscal.calib import Applied, load, solve
+from tmscal.calib import Applied, solve
 from tmscal.cli import main
 from tmscal.errors import CalibrationError
+from tmscal.exports import load_calibration
 from tmscal.session import read_session
 
 
@@ -57,7 +59,7 @@ def _same(a, b):
 def test_load_gives_the_calibration_solve_returns(files, name, method, opts):
     A, B, C = _arrays(files / "s.jsonl")
     cal = solve(A, B, C, method=method, **opts)
-    back = load(files / name)
+    back = load_calibration(files / name)
     _same(cal, back)
     assert back.applied == (Applied.ORTHONORMAL if opts else Applied.RAW)
     # the loaded calibration applies the same matrices: the same errors on every pose
@@ -71,7 +73,7 @@ def test_load_gives_the_calibration_solve_returns(files, name, method, opts):
 def test_load_ml_keeps_covariance_uncertainty_and_distortion(files, name):
     A, B, C = _arrays(files / "d.jsonl")
     cal = solve(A, B, C, method="ml", distortion="scale")
-    back = load(files / name)
+    back = load_calibration(files / name)
     _same(cal, back)
     np.testing.assert_allclose(back.covariance, cal.covariance, rtol=1e-12)
     assert back.extra["parameters"] == cal.extra["parameters"]
@@ -91,7 +93,7 @@ def _bad(tmp_path, text, *needles):
     p = tmp_path / "bad.yaml"
     p.write_text(text) if isinstance(text, str) else p.write_bytes(text)
     with pytest.raises(CalibrationError) as e:
-        load(p)
+        load_calibration(p)
     msg = str(e.value)
     assert str(p) in msg and "\n" not in msg
     for n in needles:
@@ -145,11 +147,11 @@ def test_yaml_bombs_and_recursion_are_refused(tmp_path):
 
 def test_a_missing_or_huge_file(tmp_path):
     with pytest.raises(CalibrationError, match="not a regular file"):
-        load(tmp_path / "nope.yaml")
+        load_calibration(tmp_path / "nope.yaml")
     p = tmp_path / "huge.yaml"
     p.write_text("# " + "x" * 4_100_000)
     with pytest.raises(CalibrationError, match="larger than"):
-        load(p)
+        load_calibration(p)
 
 
 def test_old_files_without_z_probe_still_load(files, tmp_path):
@@ -157,7 +159,7 @@ def test_old_files_without_z_probe_still_load(files, tmp_path):
     d.pop("Z_probe")
     p = tmp_path / "old.yaml"
     p.write_text(yaml.safe_dump(d))
-    back = load(p)
+    back = load_calibration(p)
     # projected from the raw one: rigid, and within the raw one's distance from rigid
     R = back.Z_probe[:3, :3]
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)

@@ -15,8 +15,8 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from tmscal.calib import load
 from tmscal.cli import main
+from tmscal.exports import load_calibration
 from tmscal.session import read_session
 
 sitk = pytest.importorskip("SimpleITK", reason="SimpleITK (the test extra) reads the .tfm")
@@ -54,7 +54,7 @@ def _tracker_points(n=20, seed=0):
 
 @pytest.mark.parametrize("calib", ["qr36.yaml", "ml.yaml"])
 def test_itk_file_read_by_simpleitk_maps_as_documented(files, calib):
-    cal = load(files / calib)
+    cal = load_calibration(files / calib)
     Z = cal.used()["Z"]  # base ← tracker, the applied (raw / distortion-correcting) one
     T = sitk.ReadTransform(str(export(files, calib, "itk", "Z.tfm")))
     assert T.GetName() == "AffineTransform"
@@ -80,7 +80,7 @@ def test_itk_file_read_by_simpleitk_maps_as_documented(files, calib):
 
 
 def test_plus_device_set_parses_against_plus_names(files, tmp_path):
-    cal = load(files / "qr36.yaml")
+    cal = load_calibration(files / "qr36.yaml")
     doc = yaml.safe_load((files / "qr36.yaml").read_text())
     root = ET.parse(export(files, "qr36.yaml", "plus", "plus.xml")).getroot()
     assert root.tag == "PlusConfiguration"
@@ -135,7 +135,7 @@ EH2_PARAMS = {"name", "calibration_type", "robot_base_frame", "robot_effector_fr
 
 @pytest.mark.parametrize("version", [1, 2])
 def test_easy_handeye_yaml_is_z_in_metres_xyzw(files, version):
-    cal = load(files / "qr36.yaml")
+    cal = load_calibration(files / "qr36.yaml")
     extra = ["--easy-handeye2"] if version == 2 else []
     d = yaml.safe_load(export(files, "qr36.yaml", "easy-handeye", f"eh{version}.yaml",
                               "--frame", "robot_base_frame=denso_base", *extra).read_text())
@@ -158,7 +158,7 @@ def test_easy_handeye_yaml_is_z_in_metres_xyzw(files, version):
 
 
 def test_invesalius_rbtf_read_as_invesalius_and_tms_robot_control_do(files):
-    cal = load(files / "qr36.yaml")
+    cal = load_calibration(files / "qr36.yaml")
     path = export(files, "qr36.yaml", "invesalius", "robot.rbtf")
     # InVesalius' RobotCoregistrationDialog.LoadRegistration
     with open(path) as f:
@@ -188,7 +188,7 @@ def test_json_export_has_everything_and_loads_back(files):
               "parameters", "errors", "session", "provenance", "used", "exported"):
         assert k in d, k
     assert d["provenance"]["versions"]["tmscal"] and len(d["session"]["sha256"]) == 64
-    a, b = load(files / "ml.yaml"), load(path)
+    a, b = load_calibration(files / "ml.yaml"), load_calibration(path)
     for k in ("X", "Y", "Z", "X_raw", "Z_raw"):
         np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
     np.testing.assert_allclose(d["used"]["Z"], a.used()["Z"], atol=0)

@@ -31,7 +31,7 @@ from .metrics import coil_placement_errors, holdout_errors, noise_floor, truth_e
 SOLVERS: dict[str, Callable[..., Calibration]] = {}
 METHODS = SOLVERS
 
-__all__ = ["solve", "load", "register_method", "SOLVERS", "Applied", "Calibration", "METHODS",
+__all__ = ["solve", "register_method", "SOLVERS", "Applied", "Calibration", "METHODS",
            "design_matrix", "holdout_errors", "truth_errors", "coil_placement_errors",
            "noise_floor", "check_inputs"]
 
@@ -137,16 +137,6 @@ class Calibration:
             X_of["probe"] = u["Y"]
             Z_of["probe"] = u["Z_probe"] if u["Z_probe"] is not None else u["Z"]
         return holdout_errors(A, bodies, X_of, Z_of)
-
-
-def load(path: Any) -> Calibration:
-    """The :class:`Calibration` stored in a calibration file: the YAML ``tmscal solve -o``
-    writes or the JSON of ``tmscal export --format json`` (X, Y, Z, raw matrices, method,
-    poses, applied, uncertainty, distortion, covariance where present; 4×4 mm). The reading
-    lives in :mod:`tmscal.exports.calibfile` (calib/ does no I/O). Raises CalibrationError
-    naming the file and the key for a file that is not a calibration."""
-    from ..exports.calibfile import load as _load
-    return _load(path)
 
 
 def check_inputs(A: Any, B: Any, C: Any = None) -> tuple[np.ndarray, np.ndarray,

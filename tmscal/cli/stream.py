@@ -58,7 +58,7 @@ class _Status:
 
 
 def _check_host(host: str, allow_remote: bool) -> None:
-    from ..stream import is_loopback
+    from ..net import is_loopback
 
     if is_loopback(host):
         return
@@ -110,14 +110,14 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     In Slicer: OpenIGTLinkIF, add a connector, type Client, this host and port, Active.
     Ctrl-C stops (docs/streaming.md)."""
     from ..acquisition.devices import make_tracker
-    from ..calib import load
     from ..config import load_config
+    from ..exports import load_calibration
     from ..stream import TRANSFORMS, StreamServer, stream_frames
     from .rig import _close_quietly, _StopFlag
 
     _check_host(host, allow_remote)
     cfg = load_config(config)
-    cal = load(calib_file)
+    cal = load_calibration(calib_file)
     tracker = make_tracker(cfg, tracker_port)
     tools = list(tracker.tools)
     if "marker" not in tools and "probe" not in tools:

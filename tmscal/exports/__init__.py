@@ -1,7 +1,8 @@
 """Calibration files and exports for the lab's other software (docs/exports.md).
 
 :mod:`.calibfile` reads the calibration file ``tmscal solve -o`` writes (and the ``json``
-export) back into a :class:`tmscal.calib.Calibration`; one module per export format:
+export) back into a :class:`tmscal.calib.Calibration` (``load_calibration``; calib itself does
+no I/O); one module per export format:
 :mod:`.itk` (3D Slicer / ITK ``.tfm``), :mod:`.plus` (PLUS toolkit device set),
 :mod:`.easy_handeye` (ROS easy_handeye / easy_handeye2), :mod:`.invesalius` (InVesalius'
 robot co-registration) and :mod:`.jsonfmt` (everything, for scripts).
@@ -13,7 +14,9 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["FORMATS", "render"]
+from .calibfile import load_calibration, read_calibration
+
+__all__ = ["FORMATS", "render", "load_calibration", "read_calibration"]
 
 #: export format → (module, one line for the help text)
 FORMATS = {
@@ -21,7 +24,7 @@ FORMATS = {
     "plus": ("plus", "PLUS device set: NDITracker block + CoordinateDefinitions (mm)"),
     "easy-handeye": ("easy_handeye", "ROS easy_handeye YAML, eye-on-base (m, quaternion)"),
     "invesalius": ("invesalius", "InVesalius robot co-registration .rbtf (X, Z; mm)"),
-    "json": ("jsonfmt", "everything, for scripts; tmscal.calib.load reads it back"),
+    "json": ("jsonfmt", "everything, for scripts; tmscal.exports.load_calibration reads it back"),
 }
 
 

@@ -29,7 +29,7 @@ from ..errors import CalibrationError, ConfigError
 from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
 
 __all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "read_calibration",
-           "parse_calibration", "load", "provenance"]
+           "parse_calibration", "load_calibration", "provenance"]
 
 FORMAT = "tmscal-calibration"
 VERSION = 1
@@ -275,8 +275,12 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     return CalibrationFile(calibration=cal, path=p, doc=doc)
 
 
-def load(path: str | Path) -> Calibration:
-    """The :class:`Calibration` stored in a calibration file (see :func:`read_calibration`)."""
+def load_calibration(path: str | Path) -> Calibration:
+    """The :class:`tmscal.calib.Calibration` stored in a calibration file: the YAML ``tmscal
+    solve -o`` writes or the JSON of ``tmscal export --format json`` (X, Y, Z, raw matrices,
+    method, poses, applied, uncertainty, distortion, covariance where present; 4×4 mm; see
+    :func:`read_calibration`). Raises CalibrationError naming the file and the key for a file
+    that is not a calibration."""
     return read_calibration(path).calibration
 
 

@@ -6,7 +6,7 @@ over folds, outlier poses, uncertainty, distortion, covariance with its paramete
 session path and SHA-256, provenance: versions, the session's config and devices) as JSON,
 plus ``used`` (the matrices ``Calibration.errors`` applies, distortion included) and
 ``exported`` (tmscal version, the source file and its SHA-256). 4×4 in mm.
-``tmscal.calib.load`` reads it back.
+``tmscal.exports.load_calibration`` reads it back.
 """
 
 from __future__ import annotations

@@ -22,6 +22,7 @@ import numpy as np
 from ..config import RigConfig, construct
 from ..drivers.registry import DriverSpec, get_spec
 from ..errors import ConfigError
+from ..net import loopback_family
 from ..sim import (
     TMS_RIG_P0,
     ArmPair,
@@ -35,7 +36,6 @@ from ..sim import (
     tms_rig_truth,
 )
 from .clock import FAST, REAL_TIME, Clock
-from .net import loopback_family
 
 log = logging.getLogger(__name__)
 

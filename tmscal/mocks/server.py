@@ -4,7 +4,7 @@ serves each connection in its own daemon thread and shuts every open connection 
 
 A mock subclasses ``MockDevice`` and fills ``_start`` / ``_close``; its servers are
 ``TCPListener``s whose ``handler(conn)`` speaks the device's protocol (python-urx's fake
-robot and ``socketserver`` are the models). Binding is loopback only (``mocks.net``).
+robot and ``socketserver`` are the models). Binding is loopback only (``tmscal.net``).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
-from .net import loopback_family, url_host
+from ..net import loopback_family, url_host
 
 log = logging.getLogger(__name__)
 

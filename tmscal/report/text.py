@@ -260,7 +260,7 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
     with their SD over folds), the outlier poses, the session's SHA-256; a statistical
     solver's parameter ``covariance`` with the ``parameters`` it is ordered by; the
     ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices). Units mm.
-    ``tmscal.calib.load`` reads it back."""
+    ``tmscal.exports.load_calibration`` reads it back."""
     j = res.to_json()
     doc = {
         "format": "tmscal-calibration",

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...drivers.ati import codec
+from ...net import loopback_family, url_host
 from ..clock import REAL_TIME, Clock
-from ..net import loopback_family, url_host
 from ..server import MockDevice
 
 log = logging.getLogger(__name__)

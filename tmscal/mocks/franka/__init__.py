@@ -41,9 +41,9 @@ import numpy as np
 
 from ...errors import ConfigError, MissingExtraError
 from ...geometry import angle_between
+from ...net import loopback_family
 from ...sim import SimRig
 from ..clock import REAL_TIME, Clock
-from ..net import loopback_family
 from ..server import MockDevice
 
 log = logging.getLogger(__name__)

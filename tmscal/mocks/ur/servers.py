@@ -13,9 +13,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ...net import loopback_family
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
-from ..net import loopback_family
 from ..server import MockDevice, TCPListener
 from .controller import (
     ROBOT_MODE_RUNNING,

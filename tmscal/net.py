@@ -1,4 +1,4 @@
-"""Loopback-only binding for the mock devices.
+"""Loopback-only binding: for the mock devices, and for ``tmscal stream``'s default host.
 
 The mocks answer anything they are sent and move a simulated rig on request: they must never
 be reachable from another machine. Hosts are compared as addresses, not by spelling: an IP
@@ -11,9 +11,9 @@ from __future__ import annotations
 import ipaddress
 import socket
 
-from ..errors import ConfigError
+from .errors import ConfigError
 
-__all__ = ["NotLoopbackError", "loopback_family", "url_host"]
+__all__ = ["NotLoopbackError", "loopback_family", "is_loopback", "url_host"]
 
 
 class NotLoopbackError(ConfigError, ValueError):
@@ -55,6 +55,16 @@ def loopback_family(host: str, what: str) -> socket.AddressFamily:
     if any(a.version == 4 for a in addrs):
         return socket.AF_INET
     return socket.AF_INET6
+
+
+def is_loopback(host: str) -> bool:
+    """True when every address ``host`` stands for is a loopback address (127.0.0.0/8, ::1,
+    ``localhost``); False for anything else, including a name that does not resolve."""
+    try:
+        loopback_family(host, "--host")
+    except NotLoopbackError:
+        return False
+    return True
 
 
 def url_host(host: str) -> str:
