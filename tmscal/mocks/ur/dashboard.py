@@ -5,7 +5,6 @@ command line; in Local Control the commands that act on the robot are refused.""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from .controller import (
     ROBOT_MODE_NAMES,
@@ -13,17 +12,15 @@ from .controller import (
     RUNTIME_PLAYING,
     RUNTIME_STOPPED,
     SAFETY_NORMAL,
+    URController,
 )
-
-if TYPE_CHECKING:
-    from .servers import URMock
 
 DASHBOARD_BANNER = b"Connected: Universal Robots Dashboard Server\n"
 #: The control program's name as the dashboard reports it.
 PROGRAM_NAME = "rtde_control"
 
 
-class _Dashboard:
+class Dashboard:
     """The dashboard server's command table: a fixed reply, or a handler of the command line
     (exact commands, then prefixes), all lower-cased; anything else gets the real server's
     ``could not understand: '…'``."""
@@ -41,12 +38,14 @@ class _Dashboard:
                      "Remote Control mode and reconnect to port 29999")
     HANG_UP = {"quit": "Disconnected", "shutdown": "Shutting down"}
 
-    def __init__(self, mock: URMock) -> None:
-        self.mock = mock
+    def __init__(self, controller: URController, version: tuple[int, ...], serial: str,
+                 model: str) -> None:
+        mock = self.mock = controller
+        self.version = version
         self.commands: dict[str, Callable[[str], str]] = {
             "polyscopeversion": self._version,
-            "get serial number": lambda cmd: mock.serial,
-            "get robot model": lambda cmd: mock.model,
+            "get serial number": lambda cmd: serial,
+            "get robot model": lambda cmd: model,
             "stop": self._stop,
             "play": self._play,
             "pause": self._pause,
@@ -91,7 +90,7 @@ class _Dashboard:
             return handler(cmd), False
 
     def _version(self, cmd: str) -> str:
-        return f"URSoftware {'.'.join(str(x) for x in self.mock.version)} (Mar 24 2021)"
+        return f"URSoftware {'.'.join(str(x) for x in self.version)} (Mar 24 2021)"
 
     def _stop(self, cmd: str) -> str:
         # A real controller answers "Stopped" even when the program has just ended

@@ -23,7 +23,7 @@ from .controller import (
     URController,
     URFaults,
 )
-from .dashboard import DASHBOARD_BANNER, _Dashboard
+from .dashboard import DASHBOARD_BANNER, Dashboard
 from .rtde import (
     CONTROLLER_VERSION,
     HEADER,
@@ -36,7 +36,7 @@ from .rtde import (
     parse_names,
     recv_exact,
 )
-from .urcap import _ExternalControl
+from .urcap import ExternalControl
 
 log = logging.getLogger(__name__)
 
@@ -112,20 +112,25 @@ class URMock(URController, MockDevice):
         super().__init__(rig, clock=clock, faults=faults,
                          program_running=program_running and urcap_port is None,
                          robot_mode=robot_mode, remote_control=remote_control)
-        self.urcap = _ExternalControl(self, urcap_host, urcap_port, play_when_ready) \
-            if urcap_port is not None else None
+        self._stop = threading.Event()
+        self.urcap = ExternalControl(self, urcap_host, urcap_port, play_when_ready,
+                                     self._stop) if urcap_port is not None else None
         self.host = host
         self.version = tuple(int(v) for v in version)
         self.serial = serial
         self.model = model
         self.last_script: str | None = None
-        self.last_urcap_script: str | None = None
         self.scripts_received = 0
         self.dashboard_log: list[str] = []
-        self._stop = threading.Event()
         self._listeners: list[TCPListener] = []
         self._script_thread: threading.Thread | None = None
-        self._dashboard = _Dashboard(self)
+        self._dashboard = Dashboard(self, self.version, serial, model)
+
+    @property
+    def last_urcap_script(self) -> str | None:
+        """The last program the External Control URCap fetched from the PC (None: none, or
+        no URCap)."""
+        return None if self.urcap is None else self.urcap.last_script
 
     # --- lifecycle ----------------------------------------------------------------------------
 

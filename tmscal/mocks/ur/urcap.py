@@ -15,12 +15,9 @@ import logging
 import re
 import socket
 import threading
-from typing import TYPE_CHECKING
 
 from ...timing import Deadline
-
-if TYPE_CHECKING:
-    from .servers import URMock
+from .controller import RUNTIME_PLAYING, URController
 
 log = logging.getLogger(__name__)
 
@@ -39,17 +36,21 @@ _LOOP_END = re.compile(r"#\s*NODE_CONTROL_LOOP_ENDS\s*$")
 QUIET_S = 0.2
 
 
-class _ExternalControl:
-    """The External Control program node of ``mock``: ``play()`` fetches the script from
-    ``host:port`` and starts it. ``play_when_ready``: a background operator presses Play as
-    soon as the PC answers (once per stopped program, while the mock runs)."""
+class ExternalControl:
+    """The External Control program node of ``controller``: ``play()`` fetches the script
+    from ``host:port`` and starts it (``last_script`` is the last one). ``play_when_ready``: a
+    background operator presses Play as soon as the PC answers (once per stopped program,
+    until ``stop`` is set: the mock's own stop event)."""
 
-    def __init__(self, mock: URMock, host: str, port: int, play_when_ready: bool) -> None:
-        self.mock = mock
+    def __init__(self, controller: URController, host: str, port: int, play_when_ready: bool,
+                 stop: threading.Event) -> None:
+        self.mock = controller
         self.host = host
         self.port = int(port)
         self.play_when_ready = play_when_ready
         self.requests = 0            # programs fetched from the PC
+        self.last_script: str | None = None
+        self._stop = stop
         self._thread: threading.Thread | None = None
 
     def start(self) -> None:
@@ -59,9 +60,8 @@ class _ExternalControl:
             self._thread.start()
 
     def _operator(self) -> None:
-        stop = self.mock._stop
-        while not stop.wait(RETRY_S):
-            if self.mock.runtime_state == 2:   # PLAYING: nothing to do
+        while not self._stop.wait(RETRY_S):
+            if self.mock.runtime_state == RUNTIME_PLAYING:   # nothing to do
                 continue
             if self.mock.why_no_program(network=False) is None:
                 self.play(quiet=True)
@@ -92,7 +92,7 @@ class _ExternalControl:
             return False
         with self.mock._lock:
             self.requests += 1
-            self.mock.last_urcap_script = program
+            self.last_script = program
             self.mock._start_program("External Control program played")
         return True
 
