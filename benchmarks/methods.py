@@ -29,7 +29,7 @@ import numpy as np
 
 from tmscal import calib
 from tmscal.calib import coil_placement_errors, solve, truth_errors
-from tmscal.calib.ml import undistort
+from tmscal.calib.ml_model import undistort
 from tmscal.errors import CalibrationError
 from tmscal.geometry import make_pose
 from tmscal.sim import TOOL_8700340_MM, Noise, simulate

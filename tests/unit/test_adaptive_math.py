@@ -11,7 +11,7 @@ from tmscal.acquisition.sample import spread_of
 from tmscal.calib import Applied, Calibration, solve
 from tmscal.calib import adaptive as ad
 from tmscal.calib.bound import STEPS, _placement_error, crb, sim_noise_options
-from tmscal.calib.ml import Problem
+from tmscal.calib.ml_model import Problem
 from tmscal.errors import CalibrationError
 from tmscal.geometry import angle_between, make_pose, pose_mean
 from tmscal.poses import make_plan

@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 from tmscal import geometry as g
-from tmscal.calib import CalibrationError, design_matrix, solve
+from tmscal.calib import design_matrix, solve
 from tmscal.calib.linear import unvec34, vec34
 from tmscal.calib.metrics import coil_placement_errors, holdout_errors
 from tmscal.calib.study import convergence, summarize, threshold_n
+from tmscal.errors import CalibrationError
 from tmscal.sim import Noise, Truth, simulate
 
 from ..rigs import simulated

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from tmscal import geometry as g
-from tmscal.calib import CalibrationError, solve
+from tmscal.calib import solve
+from tmscal.errors import CalibrationError
 from tmscal.sim import Noise
 
 from ..rigs import simulated

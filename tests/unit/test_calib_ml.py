@@ -9,7 +9,7 @@ import pytest
 
 from tmscal.calib import Applied, Calibration, coil_placement_errors, solve
 from tmscal.calib.bound import crb, sim_noise_options, tool_tracker_cov, translation_rms_bound
-from tmscal.calib.ml import tool_moment
+from tmscal.calib.ml_model import tool_moment
 from tmscal.errors import CalibrationError
 from tmscal.geometry import absolute_orientation, make_pose, rot_z
 from tmscal.sim import TOOL_8700340_MM, Noise, Truth, simulate

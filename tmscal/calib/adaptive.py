@@ -33,16 +33,17 @@ import numpy as np
 
 from ..geometry import angle_between, invert
 from ..motion import trapezoid_duration
-from . import Calibration, solve
+from .calibration import Calibration
+from .methods import solve
 from .metrics import coil_placement_errors
-from .ml import (
+from .ml import ml_solve
+from .ml_model import (
     Problem,
-    _g_of,
-    _tracker_covs,
-    _whitener,
-    ml_solve,
+    g_of,
     noise_covariance,
+    tracker_covs,
     undistortion,
+    whitener,
 )
 
 __all__ = ["AdaptiveSettings", "Prediction", "minimum_poses", "bootstrap_indices", "predict",
@@ -210,7 +211,7 @@ def _problem_of(cal: Calibration, A: np.ndarray, bodies: list[np.ndarray]) -> Pr
     Ws = [cal.X] if len(bodies) == 1 else [cal.X, cal.Y]
     tm = d.get("tool_moments") or {}
     moments = [tm.get(nm) for nm in ("marker", "probe")[:len(bodies)]]
-    return Problem(A, bodies, Ws, cal.Z, model, _g_of(model, G), moments)
+    return Problem(A, bodies, Ws, cal.Z, model, g_of(model, G), moments)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -304,7 +305,7 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     v = vf if scaled else 1.0
     names = ["marker", "probe"][:len(bodies)]
     o = {**_ml_defaults(), **opts}
-    tracker = _tracker_covs(len(A), names, o).mean(axis=0)
+    tracker = tracker_covs(len(A), names, o).mean(axis=0)
     noise = (float(o["robot_sigma_mm"]), float(np.radians(o["robot_sigma_deg"])), tracker)
     return Prediction(coil_mm=coil, sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q))),
                       confidence=settings.confidence, n_poses=len(A), calibration=cal,
@@ -349,7 +350,7 @@ def candidate_information(pred: Prediction, poses: np.ndarray) -> np.ndarray:
     prob = pred.problem
     Ws = prob.unpack(np.zeros(prob.n_params))[0]
     rs_mm, rs_rad, tracker = pred.noise
-    Li = _whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker[None]))
+    Li = whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker[None]))
     Jc = Li[None] @ residual_jacobians(prob, np.asarray(poses, dtype=float))
     return np.swapaxes(Jc, 1, 2) @ Jc
 

@@ -7,7 +7,7 @@ tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from
 4×4, mm.
 
 The bound is the inverse Fisher information of the linearised measurement model of
-:mod:`tmscal.calib.ml` at the true parameters: F = Jᵀ S⁻¹ J, J the Jacobian of the residuals
+:mod:`tmscal.calib.ml_model` at the true parameters: F = Jᵀ S⁻¹ J, J the Jacobian of the residuals
 of the noise-free tracker poses Z⁻¹ A_i W at the truth, S the per-pose residual covariance of
 the robot and tracker noise. No unbiased estimator has a covariance below F⁻¹ (in the order
 and units of ``parameter_names``: per transform a right rotation vector in rad, then a
@@ -22,16 +22,16 @@ from typing import Any
 import numpy as np
 
 from ..geometry import orthonormalize, rotvec_from_matrix
-from .ml import (
+from .ml_model import (
     G_STEP,
     STEPS,
     Problem,
-    _tracker_covs,
-    _whitener,
     covariance_from_jacobian,
     noise_covariance,
     parameter_names,
+    tracker_covs,
     undistort,
+    whitener,
 )
 
 __all__ = ["crb", "tool_tracker_cov", "sim_noise_options", "translation_rms_bound",
@@ -84,11 +84,11 @@ def crb(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | None,
     names = ["marker", "probe"][:len(Ws)]
     opts = {"tracker_cov": None, "spreads": None, "tracker_sigma_mm": None,
             "tracker_sigma_deg": None, **dict(noise)}
-    tracker = _tracker_covs(len(A), names, opts)
+    tracker = tracker_covs(len(A), names, opts)
     S = noise_covariance(Ws, float(opts["robot_sigma_mm"]),
                          float(np.radians(opts["robot_sigma_deg"])), tracker)
     prob = Problem(A, bodies, Ws, Z, "none")
-    J = prob.jacobian(np.zeros(prob.n_params), _whitener(S))
+    J = prob.jacobian(np.zeros(prob.n_params), whitener(S))
     return covariance_from_jacobian(J, "the calibration")
 
 

@@ -48,8 +48,9 @@ from ..geometry import (
     matrix_from_rotvec,
     quaternion_from_matrix,
 )
-from . import SOLVERS, Applied, Calibration, register_method
+from .calibration import Applied, Calibration
 from .linear import _check_diversity, resolve_translations
+from .methods import SOLVERS, register_method
 
 __all__ = ["check_rotations", "rigid_calibration", "normalize_rotation", "quat_rotations"]
 

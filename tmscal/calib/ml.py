@@ -49,218 +49,37 @@ the right, R = R̂ exp([ω]×), and a translation offset (mm, parent frame); the
 distortion's undistortion parameters g (dimensionless; G = I + …).
 """
 
-from __future__ import annotations
-
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..errors import CalibrationError
-from ..geometry import invert, make_pose, orthonormalize
-from . import Applied, Calibration, register_method, solve
+from ..geometry import make_pose, orthonormalize
+from .bound import uncertainty_at
+from .calibration import Applied, Calibration
+from .methods import register_method, solve
+from .ml_model import (
+    DISTORTION_MODELS,
+    Problem,
+    check_sigma,
+    covariance_from_jacobian,
+    g_of,
+    noise_covariance,
+    parameter_names,
+    tool_moment,
+    tracker_covs,
+    whiten_residuals,
+    whitener,
+)
 
-__all__ = ["DISTORTION_MODELS", "ml_solve", "noise_covariance", "Problem", "undistort",
-           "fit_model", "parameter_names", "tool_moment"]
-
-#: distortion model → number of parameters
-DISTORTION_MODELS = {"none": 0, "scale": 1, "axis": 3, "affine": 6}
-_SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))  # affine: symmetric G
-STEPS = (1e-6, 1e-4)  # finite-difference steps: rotation (rad), translation (mm)
-G_STEP = 1e-7
-
-
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix exp([w]×) of one rotation vector w (rad)."""
-    th = float(np.sqrt(w @ w))
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if th < 1e-8:
-        return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * K @ K
-
-
-def _log_so3(R: np.ndarray) -> np.ndarray:
-    """Rotation vectors (n, 3) of rotations (n, 3, 3) near the identity (angle well below π:
-    residuals), by θ = atan2(sin θ, cos θ) from the skew part and the trace."""
-    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0],
-                        R[:, 1, 0] - R[:, 0, 1]], axis=1)
-    s = np.linalg.norm(w, axis=1)
-    th = np.arctan2(s, 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0))
-    f = np.where(s < 1e-12, 1.0, th / np.where(s < 1e-12, 1.0, s))
-    return w * f[:, None]
-
-
-def undistortion(model: str, g: np.ndarray) -> np.ndarray:
-    """G = D⁻¹ (3×3) from the model's parameters g."""
-    if model == "none":
-        return np.eye(3)
-    if model == "scale":
-        return (1.0 + g[0]) * np.eye(3)
-    if model == "axis":
-        return np.diag(1.0 + g)
-    G = np.eye(3)
-    for v, (i, j) in zip(g, _SYM, strict=True):
-        G[i, j] += v
-        if i != j:
-            G[j, i] += v
-    return G
-
-
-def tool_moment(tool_mm: Any) -> np.ndarray:
-    """Second moment Σ q qᵀ (3×3, normalised) of a tool's fiducials (k, 3) mm about their
-    centroid."""
-    q = np.asarray(tool_mm, dtype=float)
-    if q.ndim != 2 or q.shape[1] != 3 or len(q) < 3 or not np.all(np.isfinite(q)):
-        raise CalibrationError("method 'ml': tools_mm must be (k ≥ 3, 3) fiducial positions, mm")
-    q = q - q.mean(axis=0)
-    M = q.T @ q
-    return M / np.trace(M)
-
-
-def undistort(N: np.ndarray, G: np.ndarray, model: str, M: np.ndarray | None = None
-              ) -> np.ndarray:
-    """Tracker poses N (n, 4, 4) with the distortion undone. The tracker fits each tool
-    rigidly to distorted fiducials, so it reports t = D t₀ and R = polar(D R₀ M) (M the tool's
-    second moment, :func:`tool_moment`); this returns G t and polar(G R M), which is R₀ to
-    first order in D − I (exactly for the isotropic scale, where R is left alone). Without M
-    (tool unknown) M = I, i.e. polar(G) R."""
-    if model == "none":
-        return N
-    out = N.copy()
-    out[:, :3, 3] = N[:, :3, 3] @ G.T
-    if model != "scale":
-        out[:, :3, :3] = (orthonormalize(G) @ N[:, :3, :3] if M is None else
-                          orthonormalize(G[None] @ N[:, :3, :3] @ M))
-    return out
-
-
-@dataclass
-class Problem:
-    """One ML problem: poses A (n, 4, 4), bodies [B, (C)], start transforms Ws [X0, (Y0)],
-    Z0, and the distortion model."""
-
-    A: np.ndarray
-    bodies: list[np.ndarray]
-    Ws: list[np.ndarray]
-    Z0: np.ndarray
-    model: str = "none"
-    g0: np.ndarray | None = None
-    moments: list[np.ndarray | None] | None = None
-
-    @property
-    def n_params(self) -> int:
-        return 6 * (len(self.Ws) + 1) + DISTORTION_MODELS[self.model]
-
-    def unpack(self, th: np.ndarray) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
-        """(Ws, Z, G) at parameters th (offsets from the start)."""
-        def pose(T0: np.ndarray, p: np.ndarray) -> np.ndarray:
-            return make_pose(T0[:3, :3] @ _rodrigues(p[:3]), T0[:3, 3] + p[3:])
-        m = len(self.Ws)
-        Ws = [pose(W, th[6 * j:6 * j + 6]) for j, W in enumerate(self.Ws)]
-        Z = pose(self.Z0, th[6 * m:6 * m + 6])
-        g = th[6 * m + 6:] if self.g0 is None else self.g0 + th[6 * m + 6:]
-        return Ws, Z, undistortion(self.model, g)
-
-    def residuals(self, th: np.ndarray) -> np.ndarray:
-        """Raw residuals (n, 6m): per body [rotation vector (rad), translation (mm)]."""
-        Ws, Z, G = self.unpack(th)
-        out = []
-        Ms = self.moments or [None] * len(Ws)
-        for W, N, M in zip(Ws, self.bodies, Ms, strict=True):
-            E = invert(self.A @ W) @ (Z @ undistort(N, G, self.model, M))
-            out.append(np.concatenate([_log_so3(E[:, :3, :3]), E[:, :3, 3]], axis=1))
-        return np.concatenate(out, axis=1)
-
-    def jacobian(self, th: np.ndarray, whiten: np.ndarray) -> np.ndarray:
-        """Whitened Jacobian (n·6m, k) by central differences."""
-        cols = []
-        for j in range(len(th)):
-            h = G_STEP if j >= 6 * (len(self.Ws) + 1) else STEPS[(j % 6) // 3]
-            e = np.zeros_like(th)
-            e[j] = h
-            d = (self.residuals(th + e) - self.residuals(th - e)) / (2 * h)
-            cols.append(_apply(whiten, d).ravel())
-        return np.stack(cols, axis=1)
-
-
-def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Whiten residuals r (n, q) with L⁻¹ (q, q) or per pose (n, q, q)."""
-    if whiten.ndim == 2:
-        return r @ whiten.T
-    return np.einsum("nij,nj->ni", whiten, r)
-
-
-def _check_sigma(name: str, v: Any) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"method 'ml': option {name} must be a number, got {v!r}") from None
-    if not np.isfinite(f) or f <= 0:
-        raise CalibrationError(f"method 'ml': option {name} must be finite and > 0, got {v!r}")
-    return f
-
-
-def _tracker_covs(n: int, names: list[str], opts: dict[str, Any]) -> np.ndarray:
-    """Tracker covariance per pose and body (n, m, 6, 6), body frame [rot rad; trans mm]."""
-    m = len(names)
-    if opts.get("spreads") is not None:
-        sp = list(opts["spreads"])
-        if len(sp) != n:
-            raise CalibrationError(f"method 'ml': spreads has {len(sp)} entries for {n} poses")
-        out = np.zeros((n, m, 6, 6))
-        for i, rec in enumerate(sp):
-            spread = rec.get("spread", rec)
-            samples = rec.get("samples", {})
-            for j, (nm, key) in enumerate(zip(names, ("B", "C"), strict=False)):
-                s = spread.get(nm) or {}
-                k = max(1.0, float(samples.get(key, 1)))
-                st = max(float(s.get("trans_mm", 0.0)), 1e-4) / np.sqrt(3 * k)
-                sr = max(np.radians(float(s.get("rot_deg", 0.0))), 1e-6) / np.sqrt(3 * k)
-                out[i, j] = np.diag([sr * sr] * 3 + [st * st] * 3)
-        return out
-    if opts.get("tracker_cov") is not None:
-        cov = np.asarray(opts["tracker_cov"], dtype=float)
-        if cov.shape != (6, 6) or not np.all(np.isfinite(cov)) or \
-                np.linalg.eigvalsh((cov + cov.T) / 2)[0] <= 0:
-            raise CalibrationError("method 'ml': tracker_cov must be a finite positive-definite "
-                                   "6×6 matrix (body frame, [rot rad; trans mm])")
-    else:
-        st = _check_sigma("tracker_sigma_mm", opts["tracker_sigma_mm"])
-        sr = np.radians(_check_sigma("tracker_sigma_deg", opts["tracker_sigma_deg"]))
-        cov = np.diag([sr * sr] * 3 + [st * st] * 3)
-    return np.broadcast_to(cov, (n, m, 6, 6))
-
-
-def noise_covariance(Ws: list[np.ndarray], robot_sigma_mm: float, robot_sigma_rad: float,
-                     tracker: np.ndarray) -> np.ndarray:
-    """Residual covariance per pose (n, 6m, 6m): the robot's error δ (shared by the bodies of
-    a pose) carried through each W, plus the tracker's (n, m, 6, 6) on the diagonal blocks."""
-    m = len(Ws)
-    J = np.zeros((6 * m, 6))
-    for j, W in enumerate(Ws):
-        R, t = W[:3, :3], W[:3, 3]
-        tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-        J[6 * j:6 * j + 3, :3] = R.T
-        J[6 * j + 3:6 * j + 6, :3] = -R.T @ tx
-        J[6 * j + 3:6 * j + 6, 3:] = R.T
-    Sd = np.diag([robot_sigma_rad ** 2] * 3 + [robot_sigma_mm ** 2] * 3)
-    S = np.repeat((J @ Sd @ J.T)[None], len(tracker), axis=0)
-    for j in range(m):
-        S[:, 6 * j:6 * j + 6, 6 * j:6 * j + 6] += tracker[:, j]
-    return S
-
-
-def _whitener(S: np.ndarray) -> np.ndarray:
-    """L⁻¹ per pose for S = L Lᵀ (collapsed to one matrix when all poses share S)."""
-    if np.all(S == S[0]):
-        return np.linalg.inv(np.linalg.cholesky(S[0]))
-    return np.linalg.inv(np.linalg.cholesky(S))
+__all__ = ["ml_solve", "fit_model", "Fit", "levenberg_marquardt"]
 
 
 def levenberg_marquardt(prob: Problem, whiten: np.ndarray, th: np.ndarray,
                         max_iter: int = 50) -> tuple[np.ndarray, np.ndarray, int]:
     """Minimise the whitened χ²; returns (θ, whitened Jacobian at θ, iterations)."""
-    r = _apply(whiten, prob.residuals(th)).ravel()
+    r = whiten_residuals(whiten, prob.residuals(th)).ravel()
     cost = r @ r
     lam = 1e-6
     for it in range(1, max_iter + 1):
@@ -272,7 +91,7 @@ def levenberg_marquardt(prob: Problem, whiten: np.ndarray, th: np.ndarray,
         while True:
             step = np.linalg.solve(H + lam * np.eye(len(th)), -g)
             new = th + step / d
-            r_new = _apply(whiten, prob.residuals(new)).ravel()
+            r_new = whiten_residuals(whiten, prob.residuals(new)).ravel()
             c_new = r_new @ r_new
             if c_new <= cost or lam > 1e8:
                 break
@@ -307,19 +126,6 @@ class Fit:
         return fit + (2.0 * k if name == "aic" else k * np.log(self.m))
 
 
-def covariance_from_jacobian(J: np.ndarray, what: str) -> np.ndarray:
-    """(JᵀJ)⁻¹ through column scaling; CalibrationError when J is rank deficient."""
-    d = np.linalg.norm(J, axis=0)
-    d[d == 0] = 1.0
-    Js = J / d
-    w, V = np.linalg.eigh(Js.T @ Js)  # columns scaled to unit norm: well conditioned
-    if w[0] < 1e-14 * w[-1]:
-        raise CalibrationError(f"{what} is not identifiable from these poses (the Jacobian is "
-                               "rank deficient): use more poses with more rotation and "
-                               "translation diversity, or a simpler distortion model")
-    return (V / w) @ V.T / np.outer(d, d)
-
-
 def fit_model(A: np.ndarray, bodies: list[np.ndarray], Ws: list[np.ndarray], Z0: np.ndarray,
               model: str, noise: tuple[float, float, np.ndarray], max_iter: int = 50,
               moments: list[np.ndarray | None] | None = None) -> Fit:
@@ -334,48 +140,23 @@ def fit_model(A: np.ndarray, bodies: list[np.ndarray], Ws: list[np.ndarray], Z0:
     its = 0
     for _ in range(2):
         Ws_now, Z, G = prob.unpack(np.zeros(prob.n_params))
-        whiten = _whitener(noise_covariance(Ws_now, noise[0], noise[1], noise[2]))
+        whiten = whitener(noise_covariance(Ws_now, noise[0], noise[1], noise[2]))
         th, _, it = levenberg_marquardt(prob, whiten, np.zeros(prob.n_params), max_iter)
         its += it
         Ws_new, Z, G = prob.unpack(th)
-        prob = Problem(A, bodies, Ws_new, Z, model, _g_of(model, G), moments)
+        prob = Problem(A, bodies, Ws_new, Z, model, g_of(model, G), moments)
     th0 = np.zeros(prob.n_params)
     J = prob.jacobian(th0, whiten)
     P = covariance_from_jacobian(J, f"the ml model (distortion {model!r})")
-    r = _apply(whiten, prob.residuals(th0)).ravel()
+    r = whiten_residuals(whiten, prob.residuals(th0)).ravel()
     return Fit(prob, J, P, float(r @ r), m, its)
-
-
-def _g_of(model: str, G: np.ndarray) -> np.ndarray:
-    """The parameters g of an undistortion G (inverse of :func:`undistortion`)."""
-    if model == "none":
-        return np.zeros(0)
-    if model == "scale":
-        return np.array([G[0, 0] - 1.0])
-    if model == "axis":
-        return np.diag(G) - 1.0
-    return np.array([G[i, j] - (i == j) for i, j in _SYM])
-
-
-def parameter_names(bodies: int, model: str) -> list[str]:
-    """Names (with units) of the parameters, in the covariance's order."""
-    names = []
-    for T in ["X", "Y"][:bodies] + ["Z"]:
-        names += [f"{T}.r{a} (rad)" for a in "xyz"] + [f"{T}.t{a} (mm)" for a in "xyz"]
-    k = DISTORTION_MODELS[model]
-    if model == "scale":
-        names.append("G.s (1)")
-    elif k:
-        names += [f"G.{i} (1)" for i in (("xx", "yy", "zz") if model == "axis" else
-                                          ("xx", "yy", "zz", "xy", "xz", "yz"))]
-    return names
 
 
 def _noise(n: int, names: list[str], opts: dict[str, Any]
            ) -> tuple[float, float, np.ndarray]:
-    rs_mm = _check_sigma("robot_sigma_mm", opts["robot_sigma_mm"])
-    rs_rad = np.radians(_check_sigma("robot_sigma_deg", opts["robot_sigma_deg"]))
-    return rs_mm, rs_rad, _tracker_covs(n, names, opts)
+    rs_mm = check_sigma("robot_sigma_mm", opts["robot_sigma_mm"])
+    rs_rad = np.radians(check_sigma("robot_sigma_deg", opts["robot_sigma_deg"]))
+    return rs_mm, rs_rad, tracker_covs(n, names, opts)
 
 
 def _select(A: np.ndarray, bodies: list[np.ndarray], Ws: list[np.ndarray], Z0: np.ndarray,
@@ -446,7 +227,6 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
     G4[:3, :3] = G
     N_ref = make_pose(orthonormalize(bodies[-1][:, :3, :3].mean(axis=0)),
                       bodies[-1][:, :3, 3].mean(axis=0))
-    from .bound import uncertainty_at
     u = uncertainty_at(fit.prob, P, N_ref, len(bodies) - 1)
     pos, ax = ("coil_centre_mm", "coil_axis_deg") if C is not None else \
         ("marker_origin_mm", "marker_axis_deg")

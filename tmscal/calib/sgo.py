@@ -39,9 +39,10 @@ import numpy as np
 
 from ..errors import CalibrationError
 from ..geometry import matrix_from_rotvec, random_rotation
-from . import Calibration, register_method
+from .calibration import Calibration
 from .classic import bodies_of, rigid_calibration
 from .linear import resolve_translations
+from .methods import register_method
 
 __all__ = ["SgoCost", "solve_sgo"]
 

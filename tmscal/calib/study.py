@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
-from . import solve
+from .methods import solve
 
 __all__ = ["convergence", "summarize", "threshold_n", "cross_validate"]
 

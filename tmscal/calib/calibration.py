@@ -1,0 +1,122 @@
+"""The result of a solve: ``Calibration`` (X, Y, Z and the raw linear solution; 4×4 mm), which
+matrices it applies (``Applied``), its hold-out errors and the placement of the coil it
+commands (docs/methods.md).
+
+Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
+X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from .metrics import holdout_errors
+from .ml_model import undistort
+
+__all__ = ["Applied", "Calibration"]
+
+
+class Applied(StrEnum):
+    """Which matrices a calibration applies: the raw linear solution (the paper's way: raw
+    matrices, the product orthonormalised) or the orthonormal ones."""
+
+    RAW = "raw"
+    ORTHONORMAL = "orthonormal"
+
+
+@dataclass
+class Calibration:
+    """Result of a solve. All 4×4, mm.
+
+    ``X``, ``Y``, ``Z``: orthonormal (rotations projected to SO(3), translations re-solved).
+    ``X_raw``, ``Y_raw``, ``Z_raw``: the linear solution, general 3×4 (last row 0001).
+    ``Z_probe_raw`` / ``Z_probe``: QR24 on two bodies solves the probe separately; this is its Z.
+    ``applied``: "raw" (the paper's way: raw matrices, orthonormalise the product) or
+    "orthonormal" — which set :meth:`used` returns and :meth:`errors` applies.
+    Y is None for marker-only data.
+    """
+
+    method: str
+    n_poses: int
+    X: np.ndarray
+    Z: np.ndarray
+    X_raw: np.ndarray
+    Z_raw: np.ndarray
+    Y: np.ndarray | None = None
+    Y_raw: np.ndarray | None = None
+    Z_probe: np.ndarray | None = None
+    Z_probe_raw: np.ndarray | None = None
+    applied: Applied = Applied.RAW
+    #: parameter covariance of a statistical solver (e.g. ``ml``), in the order and units its
+    #: ``extra["parameters"]`` names; None for the closed-form methods
+    covariance: np.ndarray | None = None
+    #: predicted uncertainty, e.g. {"coil_centre_mm": {"sigma": …, "p95": …},
+    #: "coil_axis_deg": {…}}; None when the method gives none
+    uncertainty: dict[str, Any] | None = None
+    #: the tracker distortion a solver found, e.g. {"model": "scale", "matrix": 3×3,
+    #: "scale_percent": 0.08}; None when not modelled
+    distortion: dict[str, Any] | None = None
+    #: method-specific facts (iterations, restarts, the information criterion, …)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def used(self) -> dict[str, np.ndarray | None]:
+        """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal).
+
+        With a tracker ``distortion`` (measured positions = D · true), the applied Z undoes
+        it: Z · G with G = D⁻¹ on the 3×3 block (a solver that reports a distortion already
+        puts G into its Z_raw), so Z N of a measured N is the undistorted pose."""
+        if self.applied == Applied.RAW:
+            return {"X": self.X_raw, "Y": self.Y_raw, "Z": self.Z_raw,
+                    "Z_probe": self.Z_probe_raw}
+        out = {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
+        if self.distortion is not None and self.distortion.get("matrix") is not None:
+            G4 = np.eye(4)
+            G4[:3, :3] = np.linalg.inv(np.asarray(self.distortion["matrix"], dtype=float))
+            out = {k: (None if v is None else v @ G4) if k in ("Z", "Z_probe") else v
+                   for k, v in out.items()}
+        return out
+
+    def placement(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(targets, Y, Z) with which a robot places the coil at measured probe poses C
+        (n, 4, 4) mm: the applied Y and Z; with a tracker ``distortion``, the targets
+        undistorted first (``ml_model.undistort``) and the rigid Y, Z, so that no scale of the
+        distortion leaks into the commanded flange pose Z C Y⁻¹."""
+        d = self.distortion
+        if d and d.get("matrix") is not None and d.get("model") != "none":
+            G = np.linalg.inv(np.asarray(d["matrix"], dtype=float))
+            return undistort(C, G, "affine"), self.Y, self.Z
+        u = self.used()
+        return C, u["Y"], u["Z"]
+
+    def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
+               ) -> dict[str, Any]:
+        """Hold-out errors of Wang et al. (2018) on the poses given (n, 4, 4), as defined in
+        docs/methods.md: per body "trans_mm", "rot_deg";
+        with a ``distortion`` the measured poses are undistorted first (positions by D⁻¹,
+        orientations as the tracker's rigid fit of the tool distorted them, with the tool
+        moments when the solver had them) and Z is applied without the G it carries;
+        "e_t_mm", "theta_t_deg"; "e_z_mm", "theta_z_deg" for QR24 on two bodies."""
+        u = self.used()
+        d = self.distortion
+        if d is not None and d.get("matrix") is not None and d.get("model") != "none":
+            # the tracker's rigid fit of distorted fiducials, undone
+            G = np.linalg.inv(np.asarray(d["matrix"], dtype=float))
+            G4 = np.eye(4)
+            G4[:3, :3] = np.linalg.inv(G)
+            M = d.get("tool_moments") or {}
+            B = undistort(B, G, "affine", M.get("marker"))
+            C = None if C is None else undistort(C, G, "affine", M.get("probe"))
+            u = {k: v @ G4 if k in ("Z", "Z_probe") and v is not None else v
+                 for k, v in u.items()}  # Z without the G it carries
+        bodies = {"marker": B}
+        X_of = {"marker": u["X"]}
+        Z_of = {"marker": u["Z"]}
+        if C is not None and u["Y"] is not None:
+            bodies["probe"] = C
+            X_of["probe"] = u["Y"]
+            Z_of["probe"] = u["Z_probe"] if u["Z_probe"] is not None else u["Z"]
+        return holdout_errors(A, bodies, X_of, Z_of)
