@@ -1,4 +1,5 @@
-"""Loopback-only binding: for the mock devices, and for ``tmscal stream``'s default host.
+"""Network addresses: loopback-only binding (the mock devices, ``tmscal stream``'s check of
+its host) and endpoint strings ("host:port", "[v6]:port").
 
 The mocks answer anything they are sent and move a simulated rig on request: they must never
 be reachable from another machine. Hosts are compared as addresses, not by spelling: an IP
@@ -13,7 +14,8 @@ import socket
 
 from .errors import ConfigError
 
-__all__ = ["NotLoopbackError", "loopback_family", "is_loopback", "url_host"]
+__all__ = ["NotLoopbackError", "loopback_family", "is_loopback", "url_host",
+           "split_endpoint"]
 
 
 class NotLoopbackError(ConfigError, ValueError):
@@ -70,3 +72,14 @@ def is_loopback(host: str) -> bool:
 def url_host(host: str) -> str:
     """``host`` as written in a URL (an IPv6 literal in brackets)."""
     return f"[{host}]" if ":" in host and not host.startswith("[") else host
+
+
+def split_endpoint(ep: str) -> tuple[str, int | None]:
+    """"host", "host:port", "[v6]" or "[v6]:port" → (host, port or None)."""
+    if ep.startswith("["):
+        host, _, rest = ep[1:].partition("]")
+        return host, int(rest[1:]) if rest.startswith(":") else None
+    if ep.count(":") == 1:
+        host, _, port = ep.partition(":")
+        return host, int(port)
+    return ep, None

@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from . import _Finite
+from .app import _Finite
 
 #: the command-line overrides of the ``adaptive:`` section (option → AdaptiveSettings field)
 OVERRIDES = ("target_mm", "confidence", "max_poses", "bootstrap")
@@ -143,19 +143,19 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
 
     from ..calib.adaptive import true_coil_error
     from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..net import split_endpoint
     from ..poses import PlanSpec
     from ..report.text import format_prediction, format_result, format_robot_time
     from ..session import read_session
     from ..solving.solve import solve_session
-    from . import _print_json
-    from .rig import _split_endpoint
+    from .app import _print_json
 
     truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
     with spawn_mock_rig(cfg_path, transport=transport) as mp:
         ep = mp.endpoints
         if not as_json:
             click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
-        host, port = _split_endpoint(ep["robot"])
+        host, port = split_endpoint(ep["robot"])
         res = run(cfg, output, resume=False, overrides=overrides, samples=samples,
                   tracker_port=ep["tracker"], robot_host=host, robot_port=port,
                   quiet=as_json)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from . import (
+from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..exports import FORMATS
-from . import FORCE_HELP, INPUT_FILE, _write_atomic, check_outputs, handle_errors, main
+from .app import FORCE_HELP, INPUT_FILE, _write_atomic, check_outputs, handle_errors, main
 
 _FORMAT_HELP = "; ".join(f"{k}: {v[1]}" for k, v in FORMATS.items())
 

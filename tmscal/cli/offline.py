@@ -9,7 +9,7 @@ from typing import Any
 import click
 import numpy as np
 
-from . import (
+from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,

@@ -12,7 +12,9 @@ from typing import Any
 import click
 import numpy as np
 
-from . import (
+from ..net import split_endpoint
+from .adaptive import adaptive_options, check_adaptive_flags
+from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
@@ -24,20 +26,8 @@ from . import (
     handle_errors,
     main,
 )
-from .adaptive import adaptive_options, check_adaptive_flags
 
 # --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
-
-def _split_endpoint(ep: str) -> tuple[str, int | None]:
-    """"host", "host:port", "[v6]" or "[v6]:port" → (host, port or None)."""
-    if ep.startswith("["):
-        host, _, rest = ep[1:].partition("]")
-        return host, int(rest[1:]) if rest.startswith(":") else None
-    if ep.count(":") == 1:
-        host, _, port = ep.partition(":")
-        return host, int(port)
-    return ep, None
-
 
 def _default_demo_config() -> Path:
     """The built-in mock rig, ``mock-ur-polaris.yaml`` of the package data
@@ -464,7 +454,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
             ep = mp.endpoints
             if not as_json:
                 click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
-            host, port = _split_endpoint(ep["robot"])
+            host, port = split_endpoint(ep["robot"])
             with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
                 res = run_acquire(cfg, output, poses=poses, samples=samples,
                                   tracker_port=ep["tracker"], robot_host=host,

@@ -13,7 +13,7 @@ from typing import Any
 
 import click
 
-from . import _Finite, _print_json, handle_errors, main
+from .app import _Finite, _print_json, handle_errors, main
 
 
 @main.group()

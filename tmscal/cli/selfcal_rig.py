@@ -13,7 +13,7 @@ from typing import Any
 import click
 import numpy as np
 
-from . import (
+from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
@@ -88,8 +88,9 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     from ..acquisition.run import AcquisitionStopped
     from ..acquisition.selfcal import acquire_selfcal, resume_command
     from ..config import load_config
+    from ..net import split_endpoint
     from .live import AcquireProgress, stderr_to_log
-    from .rig import _split_endpoint, _StopFlag
+    from .rig import _StopFlag
 
     if _same_file(output, config):
         raise click.BadParameter(f"{output} is the config file; it is never written over",
@@ -103,7 +104,7 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
         _dry_run(cfg, name, k, pool, seed, span_deg, robot_host)
         return
     try:
-        ft_addr = _split_endpoint(ft_host) if ft_host else (None, None)
+        ft_addr = split_endpoint(ft_host) if ft_host else (None, None)
     except ValueError:
         raise click.BadParameter(f"{ft_host!r}: expected HOST or HOST:PORT",
                                  param_hint="--ft-host") from None

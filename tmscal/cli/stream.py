@@ -11,7 +11,7 @@ from typing import Any, TextIO
 
 import click
 
-from . import INPUT_FILE, _Finite, handle_errors, main
+from .app import INPUT_FILE, _Finite, handle_errors, main
 
 #: seconds between two status lines when stderr is not a terminal
 PLAIN_STATUS_S = 5.0

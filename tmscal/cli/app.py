@@ -1,0 +1,255 @@
+"""The ``tmscal`` click group and what every command shares: the typed-error handler (one
+``error: …`` line, exit 1), the argument types, the one rule for output files, session
+reading, JSON output. The commands register themselves on ``main`` from their own modules
+(:mod:`tmscal.cli` imports them).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import os
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from .. import __version__
+from ..errors import TmscalError
+from ..session.jsonable import json_default
+
+log = logging.getLogger("tmscal")
+
+EXIT_ERROR = 1
+EXIT_INTERRUPTED = 130
+
+
+def _fail(msg: str, code: int = EXIT_ERROR) -> None:
+    click.echo(f"error: {msg}", err=True)
+    sys.exit(code)
+
+
+def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Turn tmscal's typed errors (and OS errors) into one ``error:`` line and exit 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except TmscalError as e:
+            _fail(str(e))
+        except OSError as e:
+            where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+            _fail(f"{where}{e.strerror or e}")
+
+    return wrapper
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` only once it is complete (temp file + rename)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
+    """Call a report plotting function; a missing matplotlib is one clear error."""
+    from ..errors import MissingExtraError
+    try:
+        fn(*args, **kwargs)
+    except ImportError as e:
+        raise MissingExtraError("--plot", "plot", str(e)) from None
+
+
+def _json_default(o: Any) -> Any:
+    """``json_default`` of the session's JSON types, and paths as strings."""
+    return str(o) if isinstance(o, Path) else json_default(o)
+
+
+def _print_json(obj: Any) -> None:
+    click.echo(json.dumps(obj, default=_json_default))
+
+
+# --- argument types and the one rule for output files -----------------------------------------
+
+class _Finite(click.ParamType):
+    """A finite float (NaN and ±∞ refused) in [lo, hi]; ``lo_open`` makes the lower bound
+    exclusive (e.g. a speed must be > 0)."""
+
+    name = "number"
+
+    def __init__(self, lo: float | None = None, hi: float | None = None,
+                 lo_open: bool = False) -> None:
+        self.lo, self.hi, self.lo_open = lo, hi, lo_open
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        if isinstance(value, float):
+            v = value
+        else:
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"{value!r} is not a number", param, ctx)
+        if not np.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
+            self.fail(f"{v:g} must be {'>' if self.lo_open else '≥'} {self.lo:g}", param, ctx)
+        if self.hi is not None and v > self.hi:
+            self.fail(f"{v:g} must be ≤ {self.hi:g}", param, ctx)
+        return v
+
+
+class _InputFile(click.ParamType):
+    """An existing regular file to read (a directory, FIFO or device is refused at once, so
+    that a command never hangs reading one)."""
+
+    name = "file"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Path:
+        import stat
+
+        path = Path(value)
+        try:
+            mode = path.stat().st_mode
+        except OSError as e:
+            self.fail(f"{path}: {e.strerror or e}", param, ctx)
+        if not stat.S_ISREG(mode):
+            kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                    else "not a regular file")
+            self.fail(f"{path}: is {kind}; expected a file", param, ctx)
+        return path
+
+
+INPUT_FILE = _InputFile()
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_outputs(outputs: dict[str, Path | None], inputs: list[Path], force: bool) -> None:
+    """The one rule for every file a command writes (``-o``, ``--plot``, ``--report``): an
+    existing file is refused unless ``--force``; an input of the command is never written
+    over, even with ``--force``; two outputs may not be the same file. Raises
+    ``click.BadParameter`` naming the option."""
+    seen: dict[Path, str] = {}
+    for opt, out in outputs.items():
+        if out is None:
+            continue
+        for inp in inputs:
+            if _same_file(out, inp) or out.resolve() == inp.resolve():
+                raise click.BadParameter(f"{out} is an input of this command; it is never "
+                                         "written over (choose another file)", param_hint=opt)
+        key = out.resolve()
+        if key in seen:
+            raise click.BadParameter(f"{out} is also the {seen[key]} file", param_hint=opt)
+        seen[key] = opt
+        if out.is_dir():
+            raise click.BadParameter(f"{out} is a directory", param_hint=opt)
+        if out.exists() and not force:
+            raise click.BadParameter(f"{out} already exists; add --force to overwrite it",
+                                     param_hint=opt)
+
+
+def _read_session(path: Path, strict: bool) -> Any:
+    """Read a session for a command; what the reader skipped is said in one warning line
+    (``_warn_damage``) instead of one log line per damaged line (unless -v)."""
+    from ..session import read_session
+
+    logger = logging.getLogger("tmscal.session")
+    level = logger.level
+    if not log.isEnabledFor(logging.INFO):
+        logger.setLevel(logging.ERROR)
+    try:
+        session = read_session(path, strict=strict)
+    finally:
+        logger.setLevel(level)
+    _warn_damage(session)
+    return session
+
+
+def _warn_damage(session: Any) -> None:
+    """Say on stderr what the reader skipped: a torn last line, damaged middle lines."""
+    if session.torn_tail:
+        click.echo(f"warning: {session.path}: torn last line ignored (an interrupted write)",
+                   err=True)
+    summary = session.damage_summary(limit=3)
+    if summary:
+        click.echo(f"warning: {session.path}: {summary}", err=True)
+
+
+FORCE_HELP = "Overwrite existing output files (never an input file)."
+STRICT_HELP = ("Refuse a session with a damaged line (default: skip it with a warning naming "
+               "the line).")
+
+
+class _OneLineErrors(click.Group):
+    """The command group: a usage error (bad option, missing argument, bad value) prints one
+    line ``error: …`` naming the option, then exits 2, as tmscal's own errors print one line
+    and exit 1."""
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:  # type: ignore[override]
+        kwargs["standalone_mode"] = False
+        try:
+            rv = super().main(*args, **kwargs)
+        except click.exceptions.Abort:
+            click.echo("aborted", err=True)
+            sys.exit(EXIT_ERROR)
+        except click.ClickException as e:
+            cmd = getattr(getattr(e, "ctx", None), "command_path", None) or "tmscal"
+            click.echo(f"error: {e.format_message()} (see: {cmd} --help)", err=True)
+            sys.exit(e.exit_code)
+        if isinstance(rv, int) and not isinstance(rv, bool):
+            sys.exit(rv)  # click's Exit (e.g. after --help) returns its code here
+        sys.exit(0)
+
+
+@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="tmscal")
+@click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
+def main(verbose: int) -> None:
+    """tmscal: calibrate a robotized, navigated TMS rig.
+
+    A robot (base ← flange = A) holds a coil; a tracker sees a marker on the coil
+    (tracker ← marker = B) and a probe at its centre (tracker ← probe = C). tmscal solves
+    X = flange ← marker, Y = flange ← probe (the coil calibration) and Z = base ← tracker
+    from A X = Z B and A Y = Z C. All lengths are mm, angles degrees.
+
+    \b
+    Typical use:
+      tmscal demo                          the whole job on the built-in mock rig
+      tmscal simulate -o sim.jsonl         a simulated session (Wang et al. 2018)
+      tmscal solve sim.jsonl --train 250   QR36 on 250 poses, errors on the rest
+      tmscal study sim.jsonl --plot f.png  convergence: error against the pose count
+      tmscal compare sim.jsonl             every method side by side (error, time)
+      tmscal report sim.jsonl -o r.html    one HTML page for the lab notebook
+      tmscal export c.yaml --format itk    the calibration for Slicer, PLUS, ROS, InVesalius
+      tmscal selfcal simulate              force-torque self-calibration study
+    \b
+    At the rig (or against `tmscal mock CONFIG`):
+      tmscal track CONFIG                  live tool poses: are the tools right?
+      tmscal robot CONFIG                  robot identity and flange pose
+      tmscal acquire CONFIG -o s.jsonl --adaptive
+                                           record a session until the predicted
+                                           coil error reaches 0.05 mm (--dry-run first)
+      tmscal solve s.jsonl --calib c.yaml  the daily check of a stored calibration
+      tmscal stream CONFIG --calib c.yaml  the live coil pose to 3D Slicer (OpenIGTLink)
+      tmscal selfcal acquire CONFIG -o f.jsonl
+                                           joints + wrist wrench for self-calibration
+    """
+    level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
