@@ -1,5 +1,5 @@
 # make demo   -- build .venv from nothing and run the demo on the built-in mock rig
-# make test   -- build .venv from nothing and run the linter and the whole test suite
+# make test   -- build .venv from nothing and run the linters and the whole test suite
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -19,8 +19,10 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/tmscal demo
 
+# ruff, then the layers of docs/architecture.md ([tool.importlinter] in pyproject.toml)
 lint: $(STAMP)
 	$(BIN)/ruff check tmscal tests benchmarks
+	$(BIN)/lint-imports
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q
