@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tmscal.acquisition.run import _valid_or_skipped, resume_command
+from tmscal.acquisition.engine import valid_or_skipped
+from tmscal.acquisition.resume import resume_command
 from tmscal.session import PoseRecord, SessionWriter, make_header, read_session
 
 
@@ -15,15 +16,15 @@ def test_nan_robot_pose_is_recorded_as_skipped_and_the_session_stays_readable(tm
     A[0, 3] = np.nan
     rec = PoseRecord(index=0, A=A, B=np.eye(4), C=np.eye(4), commanded=np.eye(4),
                      samples={"A": 10, "B": 10, "C": 10}, spread={})
-    out = _valid_or_skipped(rec)
+    out = valid_or_skipped(rec)
     assert out.skipped and "invalid measurement" in out.skipped and "'A'" in out.skipped
     assert out.A is None and out.B is None and out.index == 0
     good = PoseRecord(index=1, A=np.eye(4), B=np.eye(4), C=np.eye(4), commanded=np.eye(4))
-    assert _valid_or_skipped(good).skipped is None
+    assert valid_or_skipped(good).skipped is None
     p = tmp_path / "s.jsonl"
     with SessionWriter.create(p, make_header(["marker", "probe"])) as w:
         w.append(out)
-        w.append(_valid_or_skipped(good))
+        w.append(valid_or_skipped(good))
     s = read_session(p, strict=True)
     assert [r.skipped is None for r in s.poses] == [False, True]
 
