@@ -1,6 +1,6 @@
 """Small steps of the acquisition loop that need no device: an invalid measurement becomes a
-skipped pose (never a line the reader rejects), and the resume command repeats the device
-overrides only."""
+skipped pose (never a line the reader rejects), and the resume command (``tmscal acquire`` or
+``tmscal selfcal acquire``) repeats the device overrides only."""
 
 from __future__ import annotations
 
@@ -34,3 +34,10 @@ def test_resume_command_repeats_device_overrides_only():
     assert cmd == ("tmscal acquire rig.yaml -o s.jsonl --resume --tracker-port /dev/pts/3 "
                    "--robot-host 127.0.0.5")
     assert "--samples" not in resume_command("rig.yaml", "s.jsonl")
+
+
+def test_the_self_calibration_run_resumes_through_its_own_command():
+    cmd = resume_command("rig.yaml", "s.jsonl", robot_host="127.0.0.5",
+                         ft_host="127.0.0.6:49152", command="selfcal acquire")
+    assert cmd == ("tmscal selfcal acquire rig.yaml -o s.jsonl --resume --robot-host "
+                   "127.0.0.5 --ft-host 127.0.0.6:49152")

@@ -152,6 +152,8 @@ class Engine:
         self.endpoints = endpoints or Endpoints()
         self.should_stop = should_stop
         self.sleep = sleep
+        self.hint = ""  # "resume with: …", once the strategy is known
+        self._t0 = time.monotonic()
 
     def run(self, strategy: Strategy, progress: Progress | None = None) -> AcquireResult:
         """Run (or resume) ``strategy`` to its end, a stop request, or an error. Raises

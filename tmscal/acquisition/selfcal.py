@@ -61,7 +61,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["DESIGN_SIGMA", "SelfcalPlan", "candidate_configurations", "nominal_poses",
            "select_configurations", "plan_selfcal", "acquire_selfcal", "resume_command",
-           "nominal_arm", "SelfcalStrategy", "SelfcalSettings"]
+           "nominal_arm", "SelfcalStrategy", "SelfcalSettings", "measure_wrench"]
 
 #: channel noise (N, N, N, N·m, N·m, N·m) that weights the design's rows: the wrench noise of
 #: Joubair et al.'s (2016) simulation; only the ratio of forces to torques matters here
