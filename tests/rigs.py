@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from tmscal.acquisition.progress import Progress
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, Truth, simulate, tms_rig_truth
 from tmscal.timing import Deadline
 
@@ -53,6 +54,17 @@ def point_config(cfg_path: Path, ep: dict[str, str], name: str = "run.yaml") -> 
     out = cfg_path.parent / name
     out.write_text(yaml.safe_dump(data))
     return out
+
+
+class SeenPoses(Progress):
+    """A run's Progress that keeps the session index of every pose saved, in ``seen`` (the
+    list given, so that a ``should_stop`` can look at it)."""
+
+    def __init__(self, seen: list[int] | None = None) -> None:
+        self.seen = [] if seen is None else seen
+
+    def pose(self, done: int, total: int, record: Any) -> None:
+        self.seen.append(record.index)
 
 
 def endpoints_kwargs(ep: dict[str, str]) -> dict[str, Any]:

@@ -65,7 +65,6 @@ import yaml
 from .config_checks import (
     INT_BOUND,
     build,
-    check_adaptive,
     check_ft,
     check_kinematics,
     check_mock_ft,
@@ -88,7 +87,6 @@ from .config_sections import (  # noqa: F401  (re-exported: the public config na
     SAFETY_KEYS,
     TOOL_BOUND_MM,
     TRACKER_RESERVED_OPTIONS,
-    AdaptiveConfig,
     FTConfig,
     MockConfig,
     PlanConfig,
@@ -102,7 +100,7 @@ from .config_sections import (  # noqa: F401  (re-exported: the public config na
 from .errors import ConfigError
 
 __all__ = ["RigConfig", "RobotConfig", "TrackerConfig", "FTConfig", "PlanConfig", "SamplingConfig",
-           "SafetyConfig", "RunConfig", "MockConfig", "AdaptiveConfig", "load_config",
+           "SafetyConfig", "RunConfig", "MockConfig", "load_config",
            "parse_config", "pose_from_config", "construct", "tracker_port_problem",
            "ROBOT_RESERVED_OPTIONS", "TRACKER_RESERVED_OPTIONS", "SAFETY_KEYS"]
 
@@ -359,7 +357,9 @@ def parse_config(data: Any, src: str = "<config>", base_dir: Path | None = None,
     safety = _check_safety(data, src, robot is not None)
     run = _parse_run(data.get("run"), src)
     mock = _parse_mock(data.get("mock"), src)
-    adaptive = check_adaptive(build(AdaptiveConfig, data.get("adaptive"), src, "adaptive"), src)
+    from .calib.adaptive import AdaptiveSettings  # the one dataclass; it checks its ranges
+
+    adaptive = build(AdaptiveSettings, data.get("adaptive"), src, "adaptive")
     ft = None
     if data.get("ft") is not None:
         ft = build(FTConfig, data["ft"], src, "ft")

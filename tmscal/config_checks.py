@@ -23,7 +23,7 @@ from .errors import ConfigError
 
 __all__ = ["err", "show", "join", "check_tree", "build", "number", "coerce", "xyz", "positive",
            "in_range", "key_lines", "with_line", "construct", "MAX_DEPTH", "MAX_VALUES",
-           "INT_BOUND", "check_adaptive", "check_sampling", "SETTLE_MODES",
+           "INT_BOUND", "check_sampling", "SETTLE_MODES",
            "check_kinematics", "KINEMATIC_ARMS", "KINEMATIC_ERRORS", "check_ft",
            "check_mock_ft", "FT_RESERVED_OPTIONS", "MOCK_FT_KEYS"]
 
@@ -120,6 +120,10 @@ def build(cls: type, data: Any, src: str, section: str) -> Any:
         return cls(**kwargs)
     except TypeError as e:
         raise err(src, section, str(e)) from None
+    except ValueError as e:  # a dataclass that checks its own ranges names the field
+        field = getattr(e, "field", None)
+        raise err(src, f"{section}.{field}" if field else section,
+                  getattr(e, "reason", str(e))) from None
 
 
 def number(v: Any, src: str, key: str, what: str = "a number") -> float:
@@ -258,28 +262,6 @@ def construct(cls: Any, where: str, *args: Any, **options: Any) -> Any:
         return cls(*args, **options)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{where}: {e}") from None
-
-
-#: the most poses an adaptive run may take or choose among (as a plan's length)
-_MAX_POOL = 100_000
-
-
-def check_adaptive(a: Any, src: str) -> Any:
-    """The ``adaptive`` section (an ``AdaptiveConfig``): target_mm in (0, 100] mm, confidence
-    in (0, 1), 3 ≤ bootstrap ≤ max_poses ≤ pool (3 poses: the fewest that fix X, Y and Z),
-    1 ≤ region ≤ pool ≤ 100,000; else a ConfigError naming the key. Returns ``a``."""
-    positive(src, "adaptive.target_mm", a.target_mm, at_most=100.0)
-    if not 0 < a.confidence < 1:
-        raise err(src, "adaptive.confidence", f"must be in (0, 1), got {a.confidence}")
-    in_range(src, "adaptive.pool", a.pool, 1, _MAX_POOL)
-    from .calib.adaptive import minimum_poses  # the fewest poses that fix X, Y and Z
-
-    least = minimum_poses(2)
-    in_range(src, "adaptive.max_poses", a.max_poses, least, a.pool)
-    in_range(src, "adaptive.region", a.region, 1, a.pool)
-    if a.bootstrap is not None:
-        in_range(src, "adaptive.bootstrap", a.bootstrap, least, a.max_poses)
-    return a
 
 
 #: sampling.settle: wait for stillness (bounded by settle_s) or a fixed settle_s

@@ -7,7 +7,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .calib.adaptive import AdaptiveSettings
 
 ROBOT_RESERVED_OPTIONS = ("envelope", "speed_mm_s", "accel_mm_s2", "host", "port")
 #: tracker.options keys that have their own key in the tracker section
@@ -159,20 +162,10 @@ class FTConfig:
     options: dict[str, Any] = field(default_factory=dict)
 
 
-@dataclass
-class AdaptiveConfig:
-    """Adaptive acquisition (``tmscal acquire --adaptive``, docs/adaptive.md): stop when the
-    predicted coil-placement error (mm) at ``confidence`` is ≤ ``target_mm``, or after
-    ``max_poses``; ``bootstrap`` spread poses first (None: the fewest that make the problem
-    well posed, plus one); the candidates are the config's plan with ``pool`` poses, of which
-    the first ``region`` are where the rig will place the coil (the prediction's region)."""
+def _default_adaptive() -> AdaptiveSettings:
+    from .calib.adaptive import AdaptiveSettings  # numerics: imported when a config is built
 
-    target_mm: float = 0.05
-    confidence: float = 0.95
-    max_poses: int = 40
-    bootstrap: int | None = None
-    pool: int = 1000
-    region: int = 200
+    return AdaptiveSettings()
 
 
 @dataclass
@@ -188,7 +181,7 @@ class RigConfig:
     run: RunConfig
     mock: MockConfig | None
     raw: dict[str, Any]
-    adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
+    adaptive: AdaptiveSettings = field(default_factory=_default_adaptive)
     ft: FTConfig | None = None
 
     @property

@@ -22,6 +22,7 @@ from tmscal.session import read_session
 from tmscal.solving.solve import solve_session
 
 from ..rigs import (  # noqa: F401 (write_config re-exported for older importers)
+    SeenPoses,
     endpoints_kwargs,
     point_config,
     wait_for_lines,
@@ -105,7 +106,7 @@ def test_stop_request_leaves_resumable_session(tmp_path, mock_config):
         kw = endpoints_kwargs(mr.endpoints)
         calls = []
         res = acquire(cfg, out, should_stop=lambda: len(calls) >= 5,
-                      on_pose=lambda d, t, r: calls.append(r.index), **kw)
+                      progress=SeenPoses(calls), **kw)
         assert res.stopped and res.recorded == 5
         res2 = acquire(cfg, out, resume=True, **kw)
         assert res2.new_poses == 7 and res2.recorded == 12 and not res2.stopped

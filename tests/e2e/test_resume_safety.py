@@ -17,7 +17,7 @@ from tmscal.errors import SessionError
 from tmscal.mocks.rig import start_mock_rig
 from tmscal.session import read_session
 
-from ..rigs import endpoints_kwargs, write_config
+from ..rigs import SeenPoses, endpoints_kwargs, write_config
 
 
 def _edit_header(path: Path, edit) -> None:
@@ -47,7 +47,7 @@ def test_resume_refuses_a_header_whose_p0_was_moved(tmp_path, recorded):
         kw = endpoints_kwargs(mr.endpoints)
         done: list[int] = []
         res = acquire(cfg, out, should_stop=lambda: len(done) >= recorded,
-                      on_pose=lambda d, t, r: done.append(r.index), **kw)
+                      progress=SeenPoses(done), **kw)
         assert res.stopped and res.recorded == recorded
 
         def shift(h):
@@ -90,9 +90,9 @@ def test_resume_keeps_the_sessions_sampling_settings(tmp_path):
         kw = endpoints_kwargs(mr.endpoints)
         done: list[int] = []
         acquire(cfg, out, samples=3, should_stop=lambda: len(done) >= 2,
-                on_pose=lambda d, t, r: done.append(r.index), **kw)
+                progress=SeenPoses(done), **kw)
         res = acquire(cfg, out, resume=True, should_stop=lambda: len(done) >= 4,
-                      on_pose=lambda d, t, r: done.append(r.index), **kw)
+                      progress=SeenPoses(done), **kw)
         assert any("samples 3" in n and "config says 4" in n for n in res.notes), res.notes
         res = acquire(cfg, out, resume=True, samples=5, **kw)
         assert any("samples 5" in n for n in res.notes), res.notes

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 from tmscal.acquisition import adaptive as loop
+from tmscal.acquisition.engine import PhaseClock
+from tmscal.acquisition.progress import Progress
 from tmscal.acquisition.settings import sampling_settings as _settings
 from tmscal.calib.adaptive import AdaptiveSettings, bootstrap_indices
 from tmscal.config import load_config
@@ -113,7 +115,12 @@ def test_cost_is_the_trapezoidal_move_plus_the_measured_overhead(cfg):
 def test_robot_time_goes_to_its_phase_and_reconnecting_is_not_robot_time():
     t = iter([0.0, 1.5, 1.75, 3.0, 10.0, 10.5, 11.0, 20.0])  # the phase reports' times (s)
     heard: list[str] = []
-    clock = loop._PhaseClock(lambda i, name: heard.append(name), clock=lambda: next(t))
+
+    class Heard(Progress):
+        def phase(self, i: int, name: str) -> None:
+            heard.append(name)
+
+    clock = PhaseClock(Heard(), clock=lambda: next(t))
     for name in ("moving", "settling", "sampling", "reconnecting", "moving", "sampling"):
         clock(4, name)
     assert clock.take() == {"moving": 1.5 + 0.5, "settling": 0.25, "sampling": 1.25 + 0.5}

@@ -78,7 +78,7 @@ _HIDDEN = "probe usable in 58 of 100 frames (< 80%: missing or out of volume)"
 def test_plain_lines_count_skips_from_a_resumed_session_and_fit_80_columns():
     out = io.StringIO()
     p = AcquireProgress(out, tty=False)
-    p.start(done=10, total=500, skipped=4)
+    p.started(done=10, total=500, skipped=4)
     p.pose(11, 500, _rec(10, spread=0.045))
     p.pose(12, 500, _rec(11, skipped=_HIDDEN))
     lines = out.getvalue().splitlines()

@@ -1,5 +1,7 @@
 """Drivers from a rig config, through the one driver registry (``tmscal.drivers.registry``):
 the spec of the configured driver names its class and default port; nothing here names a brand.
+``Devices`` holds the devices of a run (the robot and a tracker or a force-torque sensor) and
+opens them again after a fault.
 
 Poses and speeds pass through unchanged: mm, mm/s, base_from_flange. Every robot built here
 carries the config's safety envelope (caps, workspace box, tool points) and the config's
@@ -9,6 +11,8 @@ argument that has its own key or carries a limit.
 
 from __future__ import annotations
 
+import logging
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,7 +29,13 @@ from ..config_paths import check_rom_exists
 from ..drivers.base import ConfigError, Envelope, ForceTorque, Robot, SafetyError, Tracker
 from ..drivers.registry import get_spec
 
-__all__ = ["envelope_for", "make_robot", "make_tracker", "make_ft"]
+__all__ = ["envelope_for", "make_robot", "make_tracker", "make_ft", "Devices", "Endpoints",
+           "SENSORS"]
+
+log = logging.getLogger(__name__)
+
+#: the device a run uses beside the robot: an optical tracker or a force-torque sensor
+SENSORS = ("tracker", "ft")
 
 
 def envelope_for(cfg: RigConfig, p0: np.ndarray | None) -> Envelope:
@@ -182,3 +192,102 @@ def _check_spec_options(cfg: RigConfig, kind: str, options: dict[str, Any],
     if unknown:
         raise ConfigError(f"{cfg.path}: key '{kind}.options.{unknown[0]}': unknown option; "
                           f"expected one of: {', '.join(sorted(accepted))}")
+
+
+@dataclass(frozen=True)
+class Endpoints:
+    """Device addresses given on the command line, over the config's: the tracker's port
+    (a device path or socket://host:port), the robot's host and port, the force-torque
+    sensor's host and port. None keeps the config's."""
+
+    tracker_port: str | None = None
+    robot_host: str | None = None
+    robot_port: int | None = None
+    ft_host: str | None = None
+    ft_port: int | None = None
+
+    @property
+    def ft_address(self) -> str | None:
+        """``ft_host`` as HOST[:PORT] (as ``--ft-host`` takes it), or None."""
+        if self.ft_host is None:
+            return None
+        return self.ft_host + (f":{self.ft_port}" if self.ft_port else "")
+
+
+class Devices:
+    """The devices of a run: the robot and the ``sensor`` beside it ("tracker" or "ft", a
+    force-torque sensor), built from the config and ``endpoints``. ``open(envelope)`` opens
+    both, the robot carrying ``envelope``; ``close`` closes them (best effort), stopping the
+    robot first when asked; a reconnect is ``close`` then ``open``."""
+
+    def __init__(self, cfg: RigConfig, sensor: str, endpoints: Endpoints | None = None) -> None:
+        if sensor not in SENSORS:
+            raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
+        self.cfg = cfg
+        self.sensor = sensor
+        self.endpoints = endpoints or Endpoints()
+        self.robot: Robot | None = None
+        self.tracker: Tracker | None = None
+        self.ft: ForceTorque | None = None
+
+    def open(self, envelope: Envelope | None = None) -> None:
+        """Open the robot (with ``envelope``: at least as strict as the config's) and the
+        sensor."""
+        ep = self.endpoints
+        self.robot = make_robot(self.cfg, envelope, ep.robot_host, ep.robot_port)
+        self.robot.open()
+        if self.sensor == "tracker":
+            self.tracker = make_tracker(self.cfg, ep.tracker_port)
+            self.tracker.open()
+            return
+        ft_host = ep.ft_host
+        on_robot = self.cfg.ft is not None and self.cfg.ft.host in (None, "robot")
+        if ft_host is None and on_robot and ep.robot_host:
+            ft_host = ep.robot_host  # a sensor in the arm follows --robot-host
+        self.ft = make_ft(self.cfg, ft_host, ep.ft_port)
+        self.ft.open()
+
+    def close(self, stop_robot: bool = False) -> None:
+        """Stop the robot (``stop_robot``), close it, close the sensor; a failure is logged
+        and the next step still runs."""
+        steps: list[tuple[str, Any]] = []
+        if self.robot is not None:
+            steps += [("stopping the robot", stop_robot and self.robot.stop),
+                      ("closing the robot", self.robot.close)]
+        sensor = self.tracker if self.sensor == "tracker" else self.ft
+        if sensor is not None:
+            steps.append((f"closing the {_NAMES[self.sensor]}", sensor.close))
+        for what, step in steps:
+            try:
+                if step:
+                    step()
+            except Exception:  # best effort on the way out
+                log.warning("%s failed", what, exc_info=True)
+
+    @property
+    def bodies(self) -> list[str]:
+        """The session's bodies: the tracker's tool names, or ["ft"]."""
+        if self.sensor == "tracker":
+            assert self.tracker is not None
+            return list(self.tracker.tools)
+        return ["ft"]
+
+    def identities(self) -> dict[str, Any]:
+        """{"robot": identity, "tracker" or "ft": identity} for the session header."""
+        assert self.robot is not None
+        sensor = self.tracker if self.sensor == "tracker" else self.ft
+        assert sensor is not None
+        return {"robot": self.robot.identity(), self.sensor: sensor.identity()}
+
+    def joints(self) -> np.ndarray:
+        """The robot's joint angles (rad); ConfigError naming ``robot.driver`` when its
+        driver does not report them."""
+        assert self.robot is not None
+        try:
+            return np.asarray(self.robot.joint_positions(), dtype=float)
+        except NotImplementedError as e:
+            raise ConfigError(f"{self.cfg.path}: key 'robot.driver': {e}; self-calibration "
+                              "needs the joint angles") from None
+
+
+_NAMES = {"tracker": "tracker", "ft": "force-torque sensor"}

@@ -26,11 +26,12 @@ again before each move exactly as in ``tmscal acquire``. At each configuration: 
 force-torque readings (N, N·m, sensor frame; mean and SD per channel), read the flange pose,
 append one fsynced line (``joints_rad``, ``wrench``, ``wrench_spread``, A, commanded).
 
-Crash safety as in :mod:`tmscal.acquisition.run`: the header records the whole plan
-(configurations and poses), so ``resume`` continues it and skips the configurations already
-recorded, after checking the robot driver, the plan and where the arm is; Ctrl-C
-(``should_stop``) finishes the configuration in flight; a device fault is retried with a
-reconnect (``run.retries``); a robot fault stops at once. Either way the session stays valid.
+The run is a strategy of the one engine (:mod:`tmscal.acquisition.engine`), so crash safety
+is the plan run's: the header records the whole plan (configurations and poses), so
+``resume`` continues it and skips the configurations already recorded, after checking the
+drivers, the plan and where the arm is; Ctrl-C (``should_stop``) finishes the configuration
+in flight; a device fault is retried with a reconnect (``run.retries``); a robot fault stops
+at once. Either way the session stays valid.
 """
 
 from __future__ import annotations
@@ -45,23 +46,22 @@ from typing import Any
 import numpy as np
 
 from ..config import RigConfig
-from ..drivers.base import ConfigError, Envelope, Robot, SafetyError
+from ..drivers.base import ConfigError, Envelope, SafetyError
 from ..errors import SessionError
 from ..geometry import check_pose, invert
-from ..session import PoseRecord, SessionWriter, make_header
-from .devices import envelope_for, make_robot
+from ..session import PoseRecord, Session
+from .devices import Devices, Endpoints
+from .engine import AcquireResult, Engine
 from .plan import check_plan
-from .run import (
-    AcquireResult,
-    _check_robot_where_run_stopped,
-    with_reconnect,
-)
+from .progress import Progress
+from .resume import POSE_TOL_MM, resume_command
+from .strategy import Step, Strategy
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DESIGN_SIGMA", "SelfcalPlan", "candidate_configurations", "nominal_poses",
            "select_configurations", "plan_selfcal", "acquire_selfcal", "resume_command",
-           "nominal_arm"]
+           "nominal_arm", "SelfcalStrategy", "SelfcalSettings", "measure_wrench"]
 
 #: channel noise (N, N, N, N·m, N·m, N·m) that weights the design's rows: the wrench noise of
 #: Joubair et al.'s (2016) simulation; only the ratio of forces to torques matters here
@@ -240,59 +240,7 @@ def plan_selfcal(model: Any, q0: np.ndarray, p0: np.ndarray, envelope: Envelope,
     return plan
 
 
-# --- the run ----------------------------------------------------------------------------------
-
-class _Devices:
-    """The open robot and force-torque sensor, with reconnect."""
-
-    def __init__(self, cfg: RigConfig, robot_host: str | None, robot_port: int | None,
-                 ft_host: str | None = None, ft_port: int | None = None) -> None:
-        self.cfg, self.robot_host, self.robot_port = cfg, robot_host, robot_port
-        self.ft_host, self.ft_port = ft_host, ft_port
-        self.robot: Robot | None = None
-        self.ft: Any = None
-
-    def open(self, envelope: Envelope) -> None:
-        from .devices import make_ft
-
-        self.robot = make_robot(self.cfg, envelope, self.robot_host, self.robot_port)
-        self.robot.open()
-        ft_host = self.ft_host
-        on_robot = self.cfg.ft is not None and self.cfg.ft.host in (None, "robot")
-        if ft_host is None and on_robot and self.robot_host:
-            ft_host = self.robot_host  # a sensor in the arm follows --robot-host
-        self.ft = make_ft(self.cfg, ft_host, self.ft_port)
-        self.ft.open()
-
-    def close(self, stop_robot: bool = False) -> None:
-        steps = [("closing the force-torque sensor", self.ft and self.ft.close)]
-        if self.robot is not None:
-            steps += [("stopping the robot", stop_robot and self.robot.stop),
-                      ("closing the robot", self.robot.close)]
-        for what, step in steps:
-            try:
-                if step:
-                    step()
-            except Exception:  # best effort on the way out
-                log.warning("%s failed", what, exc_info=True)
-
-    def joints(self) -> np.ndarray:
-        assert self.robot is not None
-        try:
-            return np.asarray(self.robot.joint_positions(), dtype=float)
-        except NotImplementedError as e:
-            raise ConfigError(f"{self.cfg.path}: key 'robot.driver': {e}; self-calibration "
-                              "needs the joint angles") from None
-
-
-@dataclass(frozen=True)
-class _Settings:
-    """What a run does at each configuration: wait ``settle_s``, average ``samples``
-    force-torque readings."""
-
-    samples: int
-    settle_s: float
-
+# --- the run ---------------------------------------------------------------------------------
 
 def nominal_arm(arm: str, where: Any = "--arm") -> Any:
     """The nominal ``ArmModel`` named ``arm`` (``tmscal.calib.selfcal.model.NOMINAL``);
@@ -305,6 +253,15 @@ def nominal_arm(arm: str, where: Any = "--arm") -> Any:
     return NOMINAL[arm]
 
 
+@dataclass(frozen=True)
+class SelfcalSettings:
+    """What a run does at each configuration: wait ``settle_s``, average ``samples``
+    force-torque readings."""
+
+    samples: int
+    settle_s: float
+
+
 def _ft_samples(cfg: RigConfig, header: dict[str, Any] | None, samples: int | None) -> int:
     """--samples, else the resumed session's, else the config's ``ft.samples``."""
     n = ((header or {}).get("sampling") or {}).get("samples") if samples is None else samples
@@ -312,81 +269,19 @@ def _ft_samples(cfg: RigConfig, header: dict[str, Any] | None, samples: int | No
     return int(n) if ok else int(cfg.ft.samples if cfg.ft is not None else 100)
 
 
-def _check_resume(cfg: RigConfig, session: Any, plan: SelfcalPlan) -> None:
-    """A resumed session must come from the same robot driver, and its recorded commanded
-    poses must be the header plan's (an edited or foreign header would not)."""
-    where = session.path
-    rec = (session.header.get("devices") or {}).get("robot")
-    driver = rec.get("driver") if isinstance(rec, dict) else None
-    if cfg.robot is not None and driver != cfg.robot.driver:
-        raise SessionError(f"{where}: the session was recorded with robot driver {driver!r}; "
-                           f"{cfg.path} configures {cfg.robot.driver!r}; resume with the "
-                           "config the session was recorded with")
-    for r in session.poses:
-        if r.commanded is None or r.index >= len(plan.poses):
-            continue
-        if not float(np.abs(r.commanded - plan.poses[r.index]).max()) <= 1e-6:
-            raise SessionError(f"{where}: configuration {r.index} was commanded elsewhere "
-                               "than the header's plan: the header was edited or belongs to "
-                               "another run; refusing to resume")
-
-
-def _start(cfg: RigConfig, out: Path, dev: _Devices, resume: bool, arm: str | None, k: int,
-           pool: int, seed: int, span_deg: float, samples: int | None
-           ) -> tuple[SessionWriter, SelfcalPlan, Envelope, _Settings]:
-    """Open the devices and make (or, resuming, read back and check) the plan; every pose of
-    it is checked against the envelope before anything moves; a new session is created."""
-    settle = float(cfg.sampling.settle_s)
-    if resume:
-        writer = SessionWriter.resume(out)
-        try:
-            plan = SelfcalPlan.from_header(writer.session.header, out)
-            _check_resume(cfg, writer.session, plan)
-            envelope = envelope_for(cfg, plan.p0)
-            check_plan(plan.poses, envelope)
-            dev.open(envelope)
-            assert dev.robot is not None
-            _check_robot_where_run_stopped(dev.robot.flange_pose(), plan.poses, plan.p0,
-                                           writer.session.indices(), out)
-        except BaseException:
-            writer.close()
-            raise
-        return writer, plan, envelope, _Settings(
-            _ft_samples(cfg, writer.session.header, samples), settle)
-    if out.exists():
-        raise SessionError(f"{out}: already exists; use --resume to continue it, or choose "
-                           "another file")
-    if arm is None:
-        raise ConfigError(f"{cfg.path}: name the arm's nominal model (--arm)")
-    model = nominal_arm(arm)
-    dev.open(envelope_for(cfg, None))  # the caps and the box until P0 is known
-    assert dev.robot is not None
-    p0 = dev.robot.flange_pose()
-    envelope = envelope_for(cfg, p0)
-    plan = plan_selfcal(model, dev.joints(), p0, envelope, k, pool, seed, span_deg)
-    dev.robot.envelope = envelope
-    st = _Settings(_ft_samples(cfg, None, samples), settle)
-    header = make_header(
-        ["ft"], config=cfg.raw,
-        devices={"robot": dev.robot.identity(), "ft": dev.ft.identity()},
-        selfcal=plan.to_header(), sampling={"samples": st.samples, "settle_s": st.settle_s})
-    return SessionWriter.create(out, header), plan, envelope, st
-
-
-def _one(dev: _Devices, i: int, P: np.ndarray, st: _Settings, t: float,
-         sleep: Callable[[float], None],
-         on_phase: Callable[[int, str], None] | None) -> PoseRecord:
-    """Move to configuration i's flange pose, settle, read the joints and the wrench."""
+def measure_wrench(dev: Devices, i: int, P: np.ndarray, st: SelfcalSettings, t: float,
+                   phase: Callable[[str], None], sleep: Callable[[float], None]
+                   ) -> PoseRecord:
+    """Move to configuration i's flange pose ``P`` (base_from_flange mm), wait ``settle_s``,
+    read the joints (rad), average the force-torque readings (N, N·m; mean and SD per
+    channel) and read the flange pose; the record at session time ``t`` (s)."""
     assert dev.robot is not None and dev.ft is not None
-    if on_phase:
-        on_phase(i, "moving")
+    phase("moving")
     dev.robot.move_to(P)
-    if on_phase:
-        on_phase(i, "settling")
+    phase("settling")
     if st.settle_s > 0:
         sleep(st.settle_s)
-    if on_phase:
-        on_phase(i, "sampling")
+    phase("sampling")
     q = dev.joints()
     w = np.asarray(dev.ft.read(st.samples), dtype=float)
     A = dev.robot.flange_pose()
@@ -396,24 +291,71 @@ def _one(dev: _Devices, i: int, P: np.ndarray, st: _Settings, t: float,
                       wrench=w.mean(axis=0).tolist(), wrench_spread=spread.tolist())
 
 
-def _with_reconnect(dev: _Devices, cfg: RigConfig, envelope: Envelope, i: int,
-                    P: np.ndarray, st: _Settings, t: float, sleep: Callable[[float], None],
-                    on_phase: Callable[[int, str], None] | None, state: Callable[[], str]
-                    ) -> tuple[PoseRecord, int]:
-    """One configuration through the acquisition loop's reconnect rule (``run.with_reconnect``:
-    at most ``run.retries`` reconnects for it; a robot fault stops)."""
-    return with_reconnect(dev, cfg, envelope, "configuration", i,
-                          lambda: _one(dev, i, P, st, t, sleep, on_phase), sleep, state,
-                          on_phase)
+class SelfcalStrategy(Strategy):
+    """The self-calibration run: the robot and its force-torque sensor; a new run plans
+    ``k`` configurations of the nominal arm ``arm`` from ``pool`` candidates (``seed``,
+    ±``span_deg`` at the wrist; :func:`plan_selfcal`) from where the arm is; a resumed run
+    reads the plan back from the header. ``samples`` F/T readings per configuration
+    (default: the header's on a resume, else ``ft.samples``)."""
 
+    sensor = "ft"
+    unit = "configuration"
+    command = "selfcal acquire"
 
-def resume_command(config: str | Path | None, out: str | Path, robot_host: str | None = None,
-                   ft_host: str | None = None) -> str:
-    """The command that resumes a self-calibration run (the plan is in the session; device
-    overrides are repeated, ``ft_host`` as HOST[:PORT])."""
-    cmd = f"tmscal selfcal acquire {config} -o {out} --resume"
-    cmd += f" --robot-host {robot_host}" if robot_host else ""
-    return cmd + (f" --ft-host {ft_host}" if ft_host else "")
+    def __init__(self, cfg: RigConfig, arm: str | None = None, k: int = 60, pool: int = 5000,
+                 seed: int = 0, span_deg: float = 90.0, samples: int | None = None) -> None:
+        super().__init__(cfg)
+        self.arm, self.k, self.pool, self.seed, self.span_deg = arm, k, pool, seed, span_deg
+        self.samples = samples
+        self.model: Any = None
+        self.st: SelfcalSettings | None = None
+
+    def check(self) -> None:
+        if self.cfg.ft is None:
+            raise ConfigError(f"{self.cfg.path}: key 'ft': self-calibration needs a "
+                              "force-torque sensor section (ft: {driver, host, ...}; "
+                              "docs/configs.md)")
+
+    def prepare(self) -> None:
+        if self.arm is None:
+            raise ConfigError(f"{self.cfg.path}: name the arm's nominal model (--arm)")
+        self.model = nominal_arm(self.arm)
+
+    def _use(self, plan: SelfcalPlan) -> None:
+        self.plan, self.p0, self.poses = plan, plan.p0, plan.poses
+
+    def make_plan(self, dev: Devices, p0: np.ndarray, envelope: Any) -> None:
+        self._use(plan_selfcal(self.model, dev.joints(), p0, envelope, self.k, self.pool,
+                               self.seed, self.span_deg))
+
+    def read(self, session: Session) -> None:
+        self._use(SelfcalPlan.from_header(session.header, session.path))
+
+    def check_resume(self, session: Session) -> None:
+        """The recorded commanded poses must be the header plan's (an edited or foreign
+        header would not)."""
+        for r in session.poses:
+            if r.commanded is None or r.index >= len(self.poses):
+                continue
+            if not float(np.abs(r.commanded - self.poses[r.index]).max()) <= POSE_TOL_MM:
+                raise SessionError(f"{session.path}: configuration {r.index} was commanded "
+                                   "elsewhere than the header's plan: the header was edited "
+                                   "or belongs to another run; refusing to resume")
+
+    def settings(self, header: dict[str, Any] | None) -> list[str]:
+        self.st = SelfcalSettings(_ft_samples(self.cfg, header, self.samples),
+                                  float(self.cfg.sampling.settle_s))
+        return []
+
+    def header(self) -> dict[str, Any]:
+        assert self.st is not None
+        return {"selfcal": self.plan.to_header(),
+                "sampling": {"samples": self.st.samples, "settle_s": self.st.settle_s}}
+
+    def measure(self, dev: Devices, step: Step, t: float, phase: Callable[[str], None],
+                sleep: Callable[[float], None]) -> PoseRecord:
+        assert self.st is not None
+        return measure_wrench(dev, step.index, step.target, self.st, t, phase, sleep)
 
 
 def acquire_selfcal(cfg: RigConfig, output: str | Path, *, arm: str | None = None,
@@ -421,10 +363,7 @@ def acquire_selfcal(cfg: RigConfig, output: str | Path, *, arm: str | None = Non
                     resume: bool = False, samples: int | None = None,
                     robot_host: str | None = None, robot_port: int | None = None,
                     ft_host: str | None = None, ft_port: int | None = None,
-                    on_plan: Callable[[SelfcalPlan], None] | None = None,
-                    on_start: Callable[[int, int, int], None] | None = None,
-                    on_pose: Callable[[int, int, PoseRecord], None] | None = None,
-                    on_phase: Callable[[int, str], None] | None = None,
+                    progress: Progress | None = None,
                     should_stop: Callable[[], bool] = lambda: False,
                     sleep: Callable[[float], None] = time.sleep) -> AcquireResult:
     """Run (or resume) a self-calibration acquisition into session ``output`` (module
@@ -432,53 +371,12 @@ def acquire_selfcal(cfg: RigConfig, output: str | Path, *, arm: str | None = Non
     around the arm's joints (±``span_deg`` at the wrist; ``seed`` fixes them); ``samples``
     force-torque readings averaged at each (default: the config's ``ft.samples``); ``ft_host``
     and ``ft_port`` override the sensor's address. On a resume the plan and the sampling come
-    from the session header. ``on_plan(plan)`` hears the plan before anything moves; the
-    other callbacks are those of :func:`tmscal.acquisition.run.acquire`. Raises SafetyError
-    (nothing moved), ConfigError, SessionError, or AcquisitionStopped (session intact,
-    resumable; the message says how)."""
-    out = Path(output)
-    if cfg.ft is None:
-        raise ConfigError(f"{cfg.path}: key 'ft': self-calibration needs a force-torque "
-                          "sensor section (ft: {driver, host, ...}; docs/configs.md)")
-    t_start = time.monotonic()
-    dev = _Devices(cfg, robot_host, robot_port, ft_host, ft_port)
-    writer: SessionWriter | None = None
-    new = faults = 0
-    stopped = clean = False
-    ft = None if ft_host is None else ft_host + (f":{ft_port}" if ft_port else "")
-    hint = "resume with: " + resume_command(cfg.path, out, robot_host, ft)
-    try:
-        writer, plan, envelope, st = _start(cfg, out, dev, resume, arm, k, pool, seed,
-                                            span_deg, samples)
-        if on_plan:
-            on_plan(plan)
-        done = writer.session.indices()
-        total = len(plan.poses)
-        t_offset = max((p.time for p in writer.session.poses), default=0.0)
-        if on_start:
-            on_start(len(done), total, 0)
-        for i in range(total):
-            if i in done:
-                continue
-            if should_stop():
-                stopped = True
-                break
-            rec, n = _with_reconnect(
-                dev, cfg, envelope, i, plan.poses[i], st,
-                t_offset + time.monotonic() - t_start, sleep, on_phase,
-                lambda: f"The session {out} holds {len(writer.session.poses)} "
-                        f"configurations; {hint}")
-            faults += n
-            writer.append(rec)
-            new += 1
-            if on_pose:
-                on_pose(len(writer.session.indices()), total, rec)
-        clean = True
-        n_rec = len(writer.session.indices() & set(range(total)))
-        return AcquireResult(path=out, recorded=n_rec, skipped=0, total=total,
-                             stopped=stopped, faults=faults,
-                             elapsed_s=time.monotonic() - t_start, new_poses=new)
-    finally:
-        dev.close(stop_robot=not clean)
-        if writer is not None:
-            writer.close()
+    from the session header. ``progress`` hears the plan (``planned``, before anything moves)
+    and the run, as in :func:`tmscal.acquisition.run.acquire`. Raises SafetyError (nothing
+    moved), ConfigError, SessionError, or AcquisitionStopped (session intact, resumable; the
+    message says how)."""
+    engine = Engine(cfg, output, resume=resume,
+                    endpoints=Endpoints(robot_host=robot_host, robot_port=robot_port,
+                                        ft_host=ft_host, ft_port=ft_port),
+                    should_stop=should_stop, sleep=sleep)
+    return engine.run(SelfcalStrategy(cfg, arm, k, pool, seed, span_deg, samples), progress)

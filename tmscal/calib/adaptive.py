@@ -46,9 +46,10 @@ from .ml_model import (
     whitener,
 )
 
-__all__ = ["AdaptiveSettings", "Prediction", "minimum_poses", "bootstrap_indices", "predict",
-           "placement_jacobians", "residual_jacobians", "candidate_information", "choose_next",
-           "stop_reason", "candidate_cost_s", "true_coil_error", "MC_DRAWS"]
+__all__ = ["AdaptiveSettings", "SettingError", "MAX_TARGET_MM", "MAX_POOL", "Prediction",
+           "minimum_poses", "bootstrap_indices", "predict", "placement_jacobians",
+           "residual_jacobians", "candidate_information", "choose_next", "stop_reason",
+           "candidate_cost_s", "true_coil_error", "MC_DRAWS"]
 
 #: Monte Carlo draws of the parameter error behind the predicted quantile (fixed seed 0)
 MC_DRAWS = 4000
@@ -66,22 +67,44 @@ def minimum_poses(bodies: int) -> int:
     return 3
 
 
-def _positive_int(name: str, v: Any, low: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-        raise ValueError(f"AdaptiveSettings.{name} must be an integer ≥ {low}, got {v!r}")
+#: the largest coil-placement target an adaptive run takes (mm): a larger one is a unit mistake
+MAX_TARGET_MM = 100.0
+#: the most candidate poses (the plan's length limit)
+MAX_POOL = 100_000
+
+
+class SettingError(ValueError):
+    """An ``AdaptiveSettings`` field out of range: ``field`` names it, ``reason`` says why
+    (the config parser names the key ``adaptive.<field>`` with it)."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"AdaptiveSettings.{field} {reason}")
+        self.field = field
+        self.reason = reason
+
+
+def _int_in(name: str, v: Any, low: int, high: int, high_name: str | None = None) -> int:
+    if (isinstance(v, bool) or not isinstance(v, (int, np.integer))
+            or not low <= v <= high):
+        bound = f"{high} ({high_name})" if high_name else f"{high}"
+        raise SettingError(name, f"must be an integer in {low}…{bound}, got {v!r}")
     return int(v)
 
 
 @dataclass(frozen=True)
 class AdaptiveSettings:
-    """Settings of an adaptive run (the config's ``adaptive:`` section).
+    """Settings of an adaptive run: the config's ``adaptive:`` section (docs/adaptive.md),
+    a session header's ``adaptive`` entry, the command line's overrides.
 
     ``target_mm``: stop when the predicted coil-placement error (mean over the region, at
-    ``confidence``) is at or below this (mm). ``confidence``: 0 < c < 1. ``max_poses``: stop
-    there in any case. ``bootstrap``: number of well-spread start poses (None: the minimum
-    that makes the problem well posed plus one, :meth:`bootstrap_poses`). ``pool``: candidate
-    poses (the plan with this many poses). ``region``: the first ``region`` pool poses, where
-    the rig will place coils (the prediction's average). ValueError naming the field."""
+    ``confidence``) is at or below this (mm; at most ``MAX_TARGET_MM``). ``confidence``:
+    0 < c < 1. ``max_poses``: stop there in any case (3 ≤ max_poses ≤ pool: 3 poses are
+    the fewest that fix X, Y and Z). ``bootstrap``: number of well-spread start poses (None:
+    the minimum that makes the problem well posed plus one, :meth:`bootstrap_poses`; else
+    3 … max_poses). ``pool``: candidate poses (the plan with this many poses, at most
+    ``MAX_POOL``). ``region``: the first ``region`` pool poses (1 … pool), where the rig will
+    place coils (the prediction's average). ``SettingError`` (a ValueError) naming the
+    field."""
 
     target_mm: float = 0.05
     confidence: float = 0.95
@@ -93,23 +116,18 @@ class AdaptiveSettings:
     def __post_init__(self) -> None:
         t = self.target_mm
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not (
-                math.isfinite(t) and t > 0):
-            raise ValueError(f"AdaptiveSettings.target_mm must be a finite number > 0 (mm), "
-                             f"got {t!r}")
+                math.isfinite(t) and 0 < t <= MAX_TARGET_MM):
+            raise SettingError("target_mm", f"must be a finite number in (0, "
+                               f"{MAX_TARGET_MM:g}] (mm), got {t!r}")
         c = self.confidence
         if isinstance(c, bool) or not isinstance(c, (int, float)) or not 0 < c < 1:
-            raise ValueError(f"AdaptiveSettings.confidence must be a number in (0, 1), got {c!r}")
+            raise SettingError("confidence", f"must be a number in (0, 1), got {c!r}")
         low = minimum_poses(2)
-        mx = _positive_int("max_poses", self.max_poses, low)
+        pool = _int_in("pool", self.pool, low, MAX_POOL)
+        mx = _int_in("max_poses", self.max_poses, low, pool, "pool")
+        _int_in("region", self.region, 1, pool, "pool")
         if self.bootstrap is not None:
-            b = _positive_int("bootstrap", self.bootstrap, low)
-            if b > mx:
-                raise ValueError(f"AdaptiveSettings.bootstrap ({b}) must not exceed max_poses "
-                                 f"({mx})")
-        pool = _positive_int("pool", self.pool, max(mx, low))
-        reg = _positive_int("region", self.region, 1)
-        if reg > pool:
-            raise ValueError(f"AdaptiveSettings.region ({reg}) must not exceed pool ({pool})")
+            _int_in("bootstrap", self.bootstrap, low, mx, "max_poses")
 
     def bootstrap_poses(self, bodies: int = 2) -> int:
         """The number of bootstrap poses: ``bootstrap``, or minimum_poses(bodies) + 1 (one

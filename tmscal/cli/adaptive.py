@@ -1,7 +1,7 @@
 """The adaptive parts of ``tmscal acquire --adaptive`` and ``tmscal demo --adaptive``
-(docs/adaptive.md): running the loop with a progress display, the end-of-run report, and the
-demo's comparison with the mock rig's truth. The commands' options live in
-:mod:`tmscal.cli.rig`; the loop in :mod:`tmscal.acquisition.adaptive`."""
+(docs/adaptive.md): running the loop with a progress display (the bars and a line per
+prediction), the end-of-run report, and the demo's comparison with the mock rig's truth. The
+commands' options live in :mod:`tmscal.cli.rig`; the run in :mod:`tmscal.acquisition.adaptive`."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from typing import Any
 
 import click
 
+from ..acquisition.progress import Progress
 from .app import _Finite
 
 #: the command-line overrides of the ``adaptive:`` section (option → AdaptiveSettings field)
@@ -81,13 +82,20 @@ def _note(msg: str) -> None:
     tqdm.write(msg, file=sys.stderr)
 
 
-def _on_predict(pred: Any, info: dict[str, Any]) -> None:
-    line = (f"{pred.n_poses} poses: predicted coil-placement error {pred.coil_mm:.3g} mm at "
-            f"{pred.confidence * 100:g} %")
-    if info.get("next") is not None and "gain_per_s" in info:
-        line += (f"; next: pool pose {info['next']} (RMS {info['rms_now_mm']:.3g} → "
-                 f"{info['rms_after_mm']:.3g} mm for {info['cost_s']:.1f} s of robot time)")
-    _note(line)
+class PredictionLines(Progress):
+    """One line on stderr per prediction of an adaptive run: the predicted coil-placement
+    error (mm) at its confidence and, unless the run stops, the next pool pose with the RMS
+    error it is expected to bring (mm) and its robot time (s)."""
+
+    def predicted(self, prediction: Any, info: dict[str, Any]) -> None:
+        pred = prediction
+        line = (f"{pred.n_poses} poses: predicted coil-placement error {pred.coil_mm:.3g} mm "
+                f"at {pred.confidence * 100:g} %")
+        if info.get("next") is not None and "gain_per_s" in info:
+            line += (f"; next: pool pose {info['next']} (RMS {info['rms_now_mm']:.3g} → "
+                     f"{info['rms_after_mm']:.3g} mm for {info['cost_s']:.1f} s of robot "
+                     "time)")
+        _note(line)
 
 
 def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
@@ -95,8 +103,9 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         robot_port: int | None = None, should_stop: Any = lambda: False,
         quiet: bool = False) -> Any:
     """``acquire_adaptive`` with the progress display (the bars and a line per prediction on
-    stderr unless ``quiet``); returns its AdaptiveResult."""
+    stderr unless ``quiet``); returns its AcquireResult."""
     from ..acquisition.adaptive import acquire_adaptive, settings_for
+    from ..acquisition.progress import ProgressGroup
     from .live import AcquireProgress, stderr_to_log
 
     settings = None if resume else settings_for(cfg, **overrides)
@@ -104,15 +113,15 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         return acquire_adaptive(
             cfg, output, settings=settings, resume=resume, overrides=overrides,
             samples=samples, tracker_port=tracker_port, robot_host=robot_host,
-            robot_port=robot_port, on_pose=bar.pose, on_start=bar.start, on_phase=bar.phase,
-            on_predict=None if quiet else _on_predict, should_stop=should_stop)
+            robot_port=robot_port, should_stop=should_stop,
+            progress=bar if quiet else ProgressGroup(bar, PredictionLines()))
 
 
 def summary(res: Any, config: Path | None, output: Path, tracker_port: str | None = None,
             robot_host: str | None = None) -> None:
     """The end-of-run report: why it stopped, the poses used, the prediction with its
     confidence and region, the robot time by phase, and what to run next."""
-    from ..acquisition.run import resume_command
+    from ..acquisition.resume import resume_command
     from ..report.text import format_prediction, format_robot_time
 
     for note in res.notes:

@@ -34,6 +34,8 @@ import numpy as np
 from tqdm import tqdm
 from tqdm.contrib.logging import logging_redirect_tqdm
 
+from ..acquisition.progress import Progress
+
 __all__ = ["AcquireProgress", "TrackView", "fit", "spread_text", "stderr_to_log", "track_rows"]
 
 PLAIN_WIDTH = 80
@@ -89,10 +91,10 @@ def _isatty(stream: TextIO) -> bool:
         return False
 
 
-class AcquireProgress:
-    """Progress of an acquisition on ``stream``: feed it ``start``, ``phase`` and ``pose``
-    (the callbacks of ``tmscal.acquisition.run.acquire``); ``close`` at the end. ``tty``
-    None decides from the stream."""
+class AcquireProgress(Progress):
+    """Progress of an acquisition on ``stream``, a ``tmscal.acquisition.progress.Progress``:
+    it shows ``started``, ``phase`` and ``pose``; ``close`` at the end. ``tty`` None decides
+    from the stream; ``label`` names one pose ("pose", "configuration")."""
 
     def __init__(self, stream: TextIO, tty: bool | None = None, label: str = "pose") -> None:
         self.stream = stream
@@ -114,7 +116,7 @@ class AcquireProgress:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def start(self, done: int, total: int, skipped: int = 0) -> None:
+    def started(self, done: int, total: int, skipped: int = 0) -> None:
         """The plan is known: ``done`` of ``total`` poses already in the session, ``skipped``
         of them skipped."""
         self.skipped, self._first, self._t0 = skipped, done, time.monotonic()

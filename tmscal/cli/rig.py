@@ -295,7 +295,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     reaches --target-mm or --max-poses; it ends with the robot time by phase. --resume
     continues an adaptive session adaptively.
     """
-    from ..acquisition.run import AcquisitionStopped
+    from ..acquisition.engine import AcquisitionStopped
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
     from .live import AcquireProgress, stderr_to_log
@@ -321,8 +321,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
             res = run_acquire(cfg, output, resume=resume, poses=poses, samples=samples,
                               tracker_port=tracker_port, robot_host=robot_host,
-                              on_pose=bar.pose, on_start=bar.start, on_phase=bar.phase,
-                              should_stop=stop)
+                              progress=bar, should_stop=stop)
     except AcquisitionStopped as e:
         _fail(f"acquisition stopped: {e}")
         return
@@ -334,7 +333,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
 def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
                       overrides: dict[str, Any], samples: int | None,
                       tracker_port: str | None, robot_host: str | None, stop: Any) -> None:
-    from ..acquisition.run import AcquisitionStopped
+    from ..acquisition.engine import AcquisitionStopped
     from . import adaptive as cli_adaptive
 
     try:
@@ -351,7 +350,7 @@ def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
 
 def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | None = None,
                      robot_host: str | None = None) -> None:
-    from ..acquisition.run import resume_command
+    from ..acquisition.resume import resume_command
 
     state = "stopped early (resumable)" if res.stopped else "complete"
     for note in res.notes:
@@ -458,8 +457,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
             with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
                 res = run_acquire(cfg, output, poses=poses, samples=samples,
                                   tracker_port=ep["tracker"], robot_host=host,
-                                  robot_port=port, on_start=bar.start, on_pose=bar.pose,
-                                  on_phase=bar.phase)
+                                  robot_port=port, progress=bar)
         session = read_session(output)
         session.header["truth"] = truth.as_dict()
         _, result = solve_session(session, "qr36")

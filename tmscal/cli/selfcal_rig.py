@@ -13,6 +13,7 @@ from typing import Any
 import click
 import numpy as np
 
+from ..acquisition.progress import Progress
 from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
@@ -85,8 +86,10 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     joints, average the F/T readings, append one fsynced line. Ctrl-C finishes the
     configuration in flight and leaves a resumable session; device faults are retried with a
     reconnect. Then: tmscal selfcal identify SESSION -o KIN.yaml."""
-    from ..acquisition.run import AcquisitionStopped
-    from ..acquisition.selfcal import acquire_selfcal, resume_command
+    from ..acquisition.engine import AcquisitionStopped
+    from ..acquisition.progress import ProgressGroup
+    from ..acquisition.resume import resume_command
+    from ..acquisition.selfcal import acquire_selfcal
     from ..config import load_config
     from ..net import split_endpoint
     from .live import AcquireProgress, stderr_to_log
@@ -115,9 +118,8 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
             res = acquire_selfcal(cfg, output, arm=name, k=k, pool=pool, seed=seed,
                                   span_deg=span_deg, resume=resume, samples=samples,
                                   robot_host=robot_host, ft_host=ft_addr[0],
-                                  ft_port=ft_addr[1], on_plan=_echo_plan,
-                                  on_start=bar.start,
-                                  on_pose=bar.pose, on_phase=bar.phase, should_stop=stop)
+                                  ft_port=ft_addr[1], progress=ProgressGroup(PlanLine(), bar),
+                                  should_stop=stop)
     except AcquisitionStopped as e:
         _fail(f"acquisition stopped: {e}")
         return
@@ -126,7 +128,8 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
                f"recorded, {res.new_poses} new in {res.elapsed_s:.1f} s; device faults "
                f"recovered: {res.faults}")
     if res.stopped:
-        click.echo("resume with: " + resume_command(config, output, robot_host, ft_host))
+        click.echo("resume with: " + resume_command(config, output, robot_host=robot_host,
+                                                    ft_host=ft_host, command="selfcal acquire"))
         sys.exit(EXIT_INTERRUPTED)
     click.echo(f"next: tmscal selfcal identify {output} -o {output.with_suffix('.kin.yaml')}")
 
@@ -137,6 +140,13 @@ def _echo_plan(plan: Any) -> None:
                f"±{plan.span_deg:g}°), for {len(plan.identifiable)} identifiable parameters; "
                f"O1 {plan.o1:.3g}")
     sys.stdout.flush()
+
+
+class PlanLine(Progress):
+    """The self-calibration plan (a ``SelfcalPlan``) on stdout before anything moves."""
+
+    def planned(self, plan: Any) -> None:
+        _echo_plan(plan)
 
 
 def _dry_run(cfg: Any, arm: str | None, k: int, pool: int, seed: int, span_deg: float,
