@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from ..calib import Applied, Calibration
-from ..config_checks import check_tree
+from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
 
