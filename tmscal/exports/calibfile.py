@@ -61,16 +61,6 @@ class CalibrationFile:
         c = self.doc.get("created")
         return str(c) if c is not None else None
 
-    @property
-    def tools(self) -> dict[str, str]:
-        """The tracker's tool definition (ROM) files {body: path} of the session's config,
-        when the file records them (sessions acquired at a rig); else {}."""
-        cfg = (self.doc.get("provenance") or {}).get("config") or {}
-        tools = (cfg.get("tracker") or {}).get("tools") if isinstance(cfg, dict) else None
-        if not isinstance(tools, dict):
-            return {}
-        return {str(k): str(v) for k, v in tools.items() if isinstance(v, str)}
-
 
 def _bad(src: str, key: str, msg: str) -> CalibrationError:
     return CalibrationError(f"{src}: key '{key}': {msg}")
