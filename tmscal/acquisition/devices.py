@@ -74,6 +74,8 @@ def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
             raise SafetyError(f"{cfg.path}: the robot's envelope is looser than the config's "
                               f"safety section ({weak}); nothing was opened")
     spec = get_spec(r.driver, "robot")
+    if r.settings is not None:  # the driver's own keys (none for the built-in robots)
+        kw.update(r.settings.kwargs())
     # the safety and motion arguments come last: nothing in options can override them
     kw.update(host=host or r.host, envelope=envelope, speed_mm_s=r.speed_mm_s,
               accel_mm_s2=r.accel_mm_s2)
