@@ -16,9 +16,9 @@ from hypothesis import event, given
 from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
+from tmscal import registry
 from tmscal.acquisition.devices import envelope_for, make_robot
 from tmscal.config import parse_config
-from tmscal.drivers import registry
 from tmscal.drivers.base import Robot
 from tmscal.errors import ConfigError, SafetyError
 

@@ -91,16 +91,18 @@ def test_start_pose_from_xyz_rpy(tmp_path):
 
 
 def test_unknown_driver_and_fault_options_are_named(tmp_path):
-    from tmscal.acquisition.devices import make_robot
     from tmscal.mocks.rig import start_mock_rig
     data = yaml.safe_load((CONFIGS / "mock-denso-polaris.yaml").read_text())
     data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
     data["robot"]["options"] = {"max_linear_speed_mm_s": 1000, "turbo": True}
     data["mock"]["tracker"] = {"faults": {"crc_eror_prob": 0.1}}
     p = _write(tmp_path, data)
-    cfg = load_config(p)
-    with pytest.raises(ConfigError, match=r"key 'robot.options': unknown key 'turbo'"):
-        make_robot(cfg)
+    # the driver's settings declare its options: an unknown one is refused at load
+    with pytest.raises(ConfigError, match=r"key 'robot.options': unknown key 'turbo'.*"
+                                          r"max_linear_speed_mm_s"):
+        load_config(p)
+    del data["robot"]["options"]["turbo"]
+    cfg = load_config(_write(tmp_path, data))
     with pytest.raises(ConfigError, match=r"key 'mock.tracker.faults': unknown key "
                                           r"'crc_eror_prob'.*crc_error_prob"):
         start_mock_rig(cfg)

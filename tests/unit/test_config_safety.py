@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 import yaml
 
+from tmscal import registry
 from tmscal.acquisition.devices import envelope_for, make_robot, make_tracker
 from tmscal.acquisition.plan import plan_summary
-from tmscal.config import SAFETY_KEYS, load_config, parse_config, tracker_port_problem
-from tmscal.drivers import registry
+from tmscal.config import SAFETY_KEYS, load_config, parse_config
 from tmscal.drivers.base import Envelope, Robot
+from tmscal.drivers.ndi.settings import tracker_port_problem
 from tmscal.errors import ConfigError, SafetyError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"

@@ -8,10 +8,10 @@ from importlib.metadata import EntryPoint
 
 import pytest
 
-from tmscal.drivers import registry
+from tmscal import registry
 from tmscal.drivers.base import ConfigError, ForceTorque, Robot, Tracker, driver_class
-from tmscal.drivers.registry import DriverSpec
 from tmscal.errors import MissingExtraError
+from tmscal.registry import DriverSpec
 
 BUILTIN = [s.name for s in registry.BUILTIN]
 

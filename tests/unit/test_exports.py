@@ -115,6 +115,28 @@ def test_plus_device_set_parses_against_plus_names(files, tmp_path):
         == ["CoilMarker", "CoilCentre"]
 
 
+def test_plus_device_set_of_another_tracker_has_no_rom_files(files, tmp_path, monkeypatch):
+    """A session on a tracker driver that is not an NDI: no RomFile, and the file and the
+    command say why (the ROM files come from the NDI driver's settings only)."""
+    from tmscal import registry
+
+    monkeypatch.setitem(registry.SPECS, "lab", registry.DriverSpec(
+        "lab", "tracker", "tmscal.drivers.ndi.tracker:NDITracker"))
+    doc = yaml.safe_load((files / "qr36.yaml").read_text())
+    doc["provenance"]["config"] = {"tracker": {
+        "driver": "lab", "frame_rate_hz": 60, "tools": {"marker": "M1", "probe": "P1"}}}
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(doc))
+    r = run("export", tmp_path / "rig.yaml", "--format", "plus", "-o", tmp_path / "p.xml")
+    assert "not an NDI" in r.output
+    text = (tmp_path / "p.xml").read_text()
+    assert "driver 'lab') is not an NDI and has no ROM files" in text
+    dev = ET.parse(tmp_path / "p.xml").getroot().find("./DataCollection/Device")
+    assert dev.get("Type").startswith("CHECK") and dev.get("SerialPort") is None
+    sources = dev.findall("./DataSources/DataSource")
+    assert [s.get("Id") for s in sources] == ["CoilMarker", "CoilCentre"]
+    assert all(s.get("RomFile") is None for s in sources)
+
+
 def _R_from_xyzw(x, y, z, w):
     """Rotation matrix of a unit quaternion (Hamilton, scalar w), written out."""
     return np.array([

@@ -128,7 +128,7 @@ def test_config_log_wire_resolves_and_reaches_the_driver(tmp_path: Path) -> None
     cfg = load_config(_config(tmp_path, "  log_wire: traces/wire.log\n"
                               "  options: {init_timeout_s: 8}\n"))
     assert cfg.tracker is not None
-    assert cfg.tracker.log_wire == str(tmp_path / "traces" / "wire.log")
+    assert cfg.tracker.settings.log_wire == str(tmp_path / "traces" / "wire.log")
     tr = make_tracker(cfg)
     assert isinstance(tr, NDITracker)
     assert tr.log_wire == tmp_path / "traces" / "wire.log"

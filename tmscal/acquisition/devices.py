@@ -1,12 +1,13 @@
-"""Drivers from a rig config, through the one driver registry (``tmscal.drivers.registry``):
-the spec of the configured driver names its class and default port; nothing here names a brand.
+"""Drivers from a rig config, through the one driver registry (``tmscal.registry``): the
+spec of the configured driver names its class and default port, and the driver's settings
+(``cfg.<kind>.settings``) give its own constructor arguments; nothing here names a brand.
 ``Devices`` holds the devices of a run (the robot and a tracker or a force-torque sensor) and
 opens them again after a fault.
 
 Poses and speeds pass through unchanged: mm, mm/s, base_from_flange. Every robot built here
 carries the config's safety envelope (caps, workspace box, tool points) and the config's
-speed and acceleration; ``robot.options`` / ``tracker.options`` can never override an
-argument that has its own key or carries a limit.
+speed and acceleration; ``robot.options`` / ``tracker.options`` / ``ft.options`` can never
+override an argument that has its own key or carries a limit.
 """
 
 from __future__ import annotations
@@ -17,17 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from ..config import (
-    ROBOT_RESERVED_OPTIONS,
-    TRACKER_RESERVED_OPTIONS,
-    RigConfig,
-    construct,
-    tracker_port_problem,
-)
-from ..config_checks import FT_RESERVED_OPTIONS
-from ..config_paths import check_rom_exists
+from ..config import RigConfig, construct, reserved_options
 from ..drivers.base import ConfigError, Envelope, ForceTorque, Robot, SafetyError, Tracker
-from ..drivers.registry import get_spec
+from ..registry import get_spec
 
 __all__ = ["envelope_for", "make_robot", "make_tracker", "make_ft", "Devices", "Endpoints",
            "SENSORS"]
@@ -81,10 +74,7 @@ def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
     if cfg.robot is None:
         raise ConfigError(f"{cfg.path}: key 'robot': this command needs a robot section")
     r = cfg.robot
-    for k in r.options:
-        if k in ROBOT_RESERVED_OPTIONS:
-            raise ConfigError(f"{cfg.path}: key 'robot.options.{k}': '{k}' cannot be set "
-                              "through options")
+    kw = _options(cfg, "robot", r.options, r.settings)
     cfg_env = envelope_for(cfg, None)
     if envelope is None:
         envelope = cfg_env
@@ -94,8 +84,8 @@ def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
             raise SafetyError(f"{cfg.path}: the robot's envelope is looser than the config's "
                               f"safety section ({weak}); nothing was opened")
     spec = get_spec(r.driver, "robot")
-    _check_spec_options(cfg, "robot", r.options, spec.options)
-    kw: dict[str, Any] = dict(r.options)
+    if r.settings is not None:  # the driver's own keys (none for the built-in robots)
+        kw.update(r.settings.kwargs())
     # the safety and motion arguments come last: nothing in options can override them
     kw.update(host=host or r.host, envelope=envelope, speed_mm_s=r.speed_mm_s,
               accel_mm_s2=r.accel_mm_s2)
@@ -110,30 +100,17 @@ def make_robot(cfg: RigConfig, envelope: Envelope | None = None,
 
 
 def make_tracker(cfg: RigConfig, port: str | None = None) -> Tracker:
-    """The configured tracker driver (not yet opened). ``port`` overrides the config's; it
-    must be a device path or socket://host:port like ``tracker.port``."""
+    """The configured tracker driver (not yet opened). ``port`` overrides where the tracker
+    is (the driver's address, e.g. an NDI tracker's device path or socket://host:port),
+    checked as the config's is (``settings.with_address``)."""
     if cfg.tracker is None:
         raise ConfigError(f"{cfg.path}: key 'tracker': this command needs a tracker section")
     t = cfg.tracker
-    p = port or t.port
-    if not p:
-        raise ConfigError(f"{cfg.path}: key 'tracker.port': no port given (a device such as "
-                          "/dev/ttyUSB0, a pty path, or socket://host:port)")
-    problem = tracker_port_problem(p)
-    if problem:
-        raise ConfigError(f"{cfg.path}: key 'tracker.port': {p!r}: {problem}")
-    for name, rom in t.tools.items():  # checked here too: a config may be loaded without it
-        check_rom_exists(str(cfg.path), name, rom)
-    for k in t.options:
-        if k in TRACKER_RESERVED_OPTIONS:
-            raise ConfigError(f"{cfg.path}: key 'tracker.options.{k}': '{k}' cannot be set "
-                              f"through options; set tracker.{k} instead")
+    settings = t.settings.with_address(port) if port else t.settings
+    kw = _options(cfg, "tracker", t.options, settings)
+    kw.update(settings.kwargs())
+    kw["frame_rate_hz"] = t.frame_rate_hz
     spec = get_spec(t.driver, "tracker")
-    _check_spec_options(cfg, "tracker", t.options, spec.options)
-    kw: dict[str, Any] = dict(t.options)
-    kw.update(port=p, tools=t.tools, baud=t.baud, frame_rate_hz=t.frame_rate_hz, reply=t.reply)
-    if t.log_wire is not None:  # only drivers that record the wire take it
-        kw["log_wire"] = t.log_wire
     return construct(spec.load(), f"{cfg.path}: key 'tracker.options'", **kw)
 
 
@@ -141,22 +118,15 @@ def make_ft(cfg: RigConfig, host: str | None = None, port: int | None = None) ->
     """The configured force-torque sensor driver (not yet opened). ``host``/``port`` override
     the config's. ``ft.host`` "robot" (or none given) is the robot's address, for a driver
     that reads a sensor in the arm (``on_robot``, e.g. ``ur_wrench``); any other driver needs
-    its own address. The calibration's counts per unit go to a driver that takes them; one
-    that requires them (the Net F/T) without them in the config is a ConfigError naming the
-    key, before anything opens."""
-    import inspect
-
+    its own address. The driver's settings give its own arguments (the Net F/T: the
+    calibration's counts per unit, which the config parser requires)."""
     if cfg.ft is None:
         raise ConfigError(f"{cfg.path}: key 'ft': this command needs a force-torque sensor "
                           "section (ft: {driver, host, ...}; docs/devices.md)")
     f = cfg.ft
     spec = get_spec(f.driver, "ft")
     cls = spec.load()
-    for k in f.options:
-        if k in FT_RESERVED_OPTIONS:
-            raise ConfigError(f"{cfg.path}: key 'ft.options.{k}': '{k}' cannot be set through "
-                              f"options; set ft.{k} instead")
-    _check_spec_options(cfg, "ft", f.options, spec.options)
+    kw = _options(cfg, "ft", f.options, f.settings)
     where = host or f.host
     if where in (None, "robot"):
         if not getattr(cls, "on_robot", False):
@@ -166,34 +136,23 @@ def make_ft(cfg: RigConfig, host: str | None = None, port: int | None = None) ->
             raise ConfigError(f"{cfg.path}: key 'ft.host': {where or 'no host'!s} means the "
                               "robot's address, but the config has no robot section")
         where = cfg.robot.host
-    kw: dict[str, Any] = dict(f.options)
+    if f.settings is not None:
+        kw.update(f.settings.kwargs())
     kw["host"] = where
-    params = inspect.signature(cls).parameters
-    for key in ("counts_per_force", "counts_per_torque"):
-        value = getattr(f, key)
-        if value is not None:
-            kw[key] = value
-        elif key in params and params[key].default is inspect.Parameter.empty:
-            raise ConfigError(f"{cfg.path}: key 'ft.{key}': driver {f.driver!r} needs the "
-                              "sensor calibration's counts per unit (its web page or "
-                              "netftapi2.xml: cfgcpf per N, cfgcpt per N·m); there is no "
-                              "default")
     if spec.default_port is not None:
         kw["port"] = port or f.port or spec.default_port
     return construct(cls, f"{cfg.path}: key 'ft.options'", **kw)
 
 
-def _check_spec_options(cfg: RigConfig, kind: str, options: dict[str, Any],
-                        accepted: tuple[str, ...] | None) -> None:
-    """Refuse an option the driver's spec does not list (None: the constructor decides)."""
-    if accepted is None:
-        return
-    unknown = sorted(set(options) - set(accepted))
-    if unknown:
-        raise ConfigError(f"{cfg.path}: key '{kind}.options.{unknown[0]}': unknown option; "
-                          f"expected one of: {', '.join(sorted(accepted))}")
-
-
+def _options(cfg: RigConfig, kind: str, options: dict[str, Any],
+             settings: Any) -> dict[str, Any]:
+    """A copy of ``<kind>.options``, refusing (again: the parser does first) a name that is
+    a generic argument or one of the driver's own keys."""
+    for k in options:
+        if k in reserved_options(kind, settings):
+            raise ConfigError(f"{cfg.path}: key '{kind}.options.{k}': '{k}' cannot be set "
+                              f"through options; set {kind}.{k} instead")
+    return dict(options)
 @dataclass(frozen=True)
 class Endpoints:
     """Device addresses given on the command line, over the config's: the tracker's port

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config_checks import SETTLE_MODES
+from ..config import SETTLE_MODES
 from ..drivers.base import Robot, Tracker
 from ..geometry import angle_between, pose_mean
 from ..timing import Deadline

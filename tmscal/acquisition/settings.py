@@ -9,8 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..config import RigConfig
-from ..config_checks import SETTLE_MODES
+from ..config import SETTLE_MODES, RigConfig
 
 __all__ = ["SamplingSettings", "sampling_settings"]
 

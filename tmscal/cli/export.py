@@ -76,7 +76,15 @@ def _notes(fmt: str, cf: object, out_suffix: str) -> list[str]:
     if fmt == "itk" and out_suffix not in (".tfm", ".txt"):
         out.append("ITK readers (3D Slicer, SimpleITK) pick the file type by its suffix: name "
                    "the file *.tfm")
-    if fmt == "plus" and not cf.tools:
-        out.append("the calibration file does not record the tracker's tools (a simulated "
-                   "session?): fill in the CHECK placeholders")
+    if fmt == "plus":
+        from ..exports.plus import recorded_tracker, rom_files
+
+        roms = rom_files(cf)
+        if roms is None:
+            out.append(f"the session's tracker (driver {recorded_tracker(cf)[0]!r}) is not an "
+                       "NDI: the PLUS device set carries no ROM files; set its device type and "
+                       "tool sources (the CHECK placeholders)")
+        elif not roms:
+            out.append("the calibration file does not record the tracker's tools (a simulated "
+                       "session?): fill in the CHECK placeholders")
     return out

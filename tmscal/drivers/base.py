@@ -35,8 +35,8 @@ from ..errors import (  # noqa: F401  (re-exported: the contract's error types)
     SessionError,
     TmscalError,
 )
+from ..registry import DriverSpec, driver_class  # noqa: F401  (re-exported: the registry)
 from ..timing import Deadline
-from .registry import DriverSpec, driver_class  # noqa: F401  (re-exported: the registry)
 
 log = logging.getLogger(__name__)
 

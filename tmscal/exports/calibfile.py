@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from ..calib import Applied, Calibration
-from ..config_checks import check_tree
+from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
 
@@ -60,16 +60,6 @@ class CalibrationFile:
         """When the file was written (ISO 8601, UTC), if recorded."""
         c = self.doc.get("created")
         return str(c) if c is not None else None
-
-    @property
-    def tools(self) -> dict[str, str]:
-        """The tracker's tool definition (ROM) files {body: path} of the session's config,
-        when the file records them (sessions acquired at a rig); else {}."""
-        cfg = (self.doc.get("provenance") or {}).get("config") or {}
-        tools = (cfg.get("tracker") or {}).get("tools") if isinstance(cfg, dict) else None
-        if not isinstance(tools, dict):
-            return {}
-        return {str(k): str(v) for k, v in tools.items() if isinstance(v, str)}
 
 
 def _bad(src: str, key: str, msg: str) -> CalibrationError:

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..config_checks import check_tree
+from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..session import plain
 from .calibfile import _load_text, _matrix, read_text_file

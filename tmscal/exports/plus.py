@@ -13,8 +13,10 @@ marker's for X, the probe's for Y, the total e_t for Z; docs/methods.md), ``Date
 calibration was written (PLUS' "YYYY.MM.DD hh:mm:ss"). The NDITracker device lists the tools
 as ``DataSource`` elements whose ``Id`` are the frames above (CoilMarker, CoilCentre), so
 PLUS' transform repository chains CoilMarkerToTracker with the definitions; the ROM files,
-serial port and baud rate come from the session's rig config when the calibration file
-records it (``tmscal solve -o`` does), else placeholders to fill in.
+serial port and baud rate come from the NDI driver's settings of the session's rig config
+when the calibration file records it (``tmscal solve -o`` does), else placeholders to fill
+in. A session on another tracker driver has no ROM files: its device block carries none, and
+its device type is a placeholder (the file's comment says so).
 """
 
 from __future__ import annotations
@@ -25,9 +27,13 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..config import settings_class
+from ..config.settings import TrackerSettings
+from ..drivers.ndi.settings import NDISettings
+from ..errors import ConfigError
 from .calibfile import CalibrationFile
 
-__all__ = ["FRAMES", "TOOL_IDS", "matrix_text", "render"]
+__all__ = ["FRAMES", "TOOL_IDS", "matrix_text", "render", "recorded_tracker", "rom_files"]
 
 #: tmscal matrix → (PLUS From, PLUS To)
 FRAMES = {"X": ("CoilMarker", "Flange"), "Y": ("CoilCentre", "Flange"),
@@ -56,31 +62,72 @@ def _error(doc: dict[str, Any], key: str) -> str:
     return "" if v is None else f"{float(v):.4f}"
 
 
-def _port_attrs(tracker: dict[str, Any]) -> list[str]:
-    port = tracker.get("port")
-    if isinstance(port, str) and port.startswith("socket://"):
+def recorded_tracker(cf: CalibrationFile) -> tuple[str | None, TrackerSettings | None]:
+    """The tracker driver of the session's rig config and its settings, read by the driver's
+    settings class with paths as the config wrote them (relative to its folder; files not
+    checked, nor the wire log, which concerns the acquiring machine). (None, None) when the
+    calibration file records no tracker; (driver, None) when its keys cannot be read here
+    (a driver not installed, a config that no longer parses)."""
+    cfg = (cf.doc.get("provenance") or {}).get("config") or {}
+    tracker = cfg.get("tracker") if isinstance(cfg, dict) else None
+    if not isinstance(tracker, dict):
+        return None, None
+    driver = tracker.get("driver", "ndi")
+    if not isinstance(driver, str):
+        return None, None
+    section = {k: v for k, v in tracker.items() if k != "log_wire"}
+    try:
+        settings = settings_class("tracker", driver).parse(section, str(cf.path), None, False)
+    except ConfigError:
+        return driver, None
+    return driver, settings if isinstance(settings, TrackerSettings) else None
+
+
+def rom_files(cf: CalibrationFile) -> dict[str, str] | None:
+    """The tools' ROM files {body: path} of the session's NDI tracker, as its rig config
+    wrote them; {} when the file records none; None when the tracker is not an NDI (its
+    driver has no ROM files)."""
+    return _roms(*recorded_tracker(cf))
+
+
+def _roms(driver: str | None, settings: TrackerSettings | None) -> dict[str, str] | None:
+    if driver is not None and driver != "ndi":
+        return None
+    if not isinstance(settings, NDISettings):
+        return {}
+    return {k: v for k, v in settings.tools.items() if isinstance(v, str)}
+
+
+def _port_attrs(settings: NDISettings | None) -> list[str]:
+    port = settings.port if settings is not None else ""
+    if port.startswith("socket://"):
         host, _, num = port.removeprefix("socket://").rpartition(":")
         return [f"NetworkHostname={quoteattr(host)}", f"NetworkPort={quoteattr(num)}"]
-    out = [f"SerialPort={quoteattr(str(port) if port else 'CHECK: the tracker port')}"]
-    if tracker.get("baud"):
-        out.append(f"BaudRate={quoteattr(str(tracker['baud']))}")
+    out = [f"SerialPort={quoteattr(port or 'CHECK: the tracker port')}"]
+    if settings is not None:
+        out.append(f"BaudRate={quoteattr(str(settings.baud))}")
     return out
 
 
-def _device(cf: CalibrationFile) -> list[str]:
+def _device(cf: CalibrationFile, driver: str | None,
+            settings: TrackerSettings | None) -> list[str]:
     cfg = (cf.doc.get("provenance") or {}).get("config") or {}
     tracker = cfg.get("tracker") if isinstance(cfg.get("tracker"), dict) else {}
-    tools = cf.tools
+    roms = _roms(driver, settings)
     bodies = ["marker", "probe"] if cf.calibration.Y is not None else ["marker"]
-    attrs = ['Id="TrackerDevice"', 'Type="NDITracker"', *_port_attrs(tracker),
-             'ToolReferenceFrame="Tracker"']
+    if roms is None:
+        kind = [f"Type={quoteattr(f'CHECK: the PLUS device of tracker driver {driver!r}')}"]
+    else:
+        ndi = settings if isinstance(settings, NDISettings) else None
+        kind = ['Type="NDITracker"', *_port_attrs(ndi)]
+    attrs = ['Id="TrackerDevice"', *kind, 'ToolReferenceFrame="Tracker"']
     if tracker.get("frame_rate_hz"):
         attrs.insert(2, f"AcquisitionRate={quoteattr(str(tracker['frame_rate_hz']))}")
     lines = ["    <Device " + "\n      ".join(attrs) + " >", "      <DataSources>"]
     for b in bodies:
-        rom = tools.get(b) or f"CHECK: the {b} tool's ROM file"
-        lines.append(f'        <DataSource Type="Tool" Id="{TOOL_IDS[b]}" '
-                     f"RomFile={quoteattr(rom)} />")
+        rom = "" if roms is None else " RomFile=" + quoteattr(
+            roms.get(b) or f"CHECK: the {b} tool's ROM file")
+        lines.append(f'        <DataSource Type="Tool" Id="{TOOL_IDS[b]}"{rom} />')
     lines += ["      </DataSources>", "      <OutputChannels>",
               '        <OutputChannel Id="TrackerStream" >']
     lines += [f'          <DataSource Id="{TOOL_IDS[b]}" />' for b in bodies]
@@ -92,8 +139,12 @@ def render(cf: CalibrationFile) -> str:
     """The device-set XML text (comments name the frames and units)."""
     cal = cf.calibration
     date = _date(cf.created)
-    known = ("as the session's rig config wrote them (relative to its folder)" if cf.tools
-             else "placeholders: fill in CHECK")
+    driver, settings = recorded_tracker(cf)
+    roms = _roms(driver, settings)
+    known = ("as the session's rig config wrote them (relative to its folder)" if roms
+             else "placeholders: fill in CHECK" if roms is not None
+             else f"none: the session's tracker (driver {driver!r}) is not an NDI and has no "
+                  "ROM files; set its PLUS device and tool sources (CHECK)")
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f"<!-- tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 "
              "numbers row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
@@ -105,7 +156,7 @@ def render(cf: CalibrationFile) -> str:
              '    <DeviceSet Name="tmscal: NDI tracker and the robot calibration" '
              'Description="CoilMarker and CoilCentre tracked; the calibration in '
              'CoordinateDefinitions" />',
-             *_device(cf), "  </DataCollection>", "  <CoordinateDefinitions>"]
+             *_device(cf, driver, settings), "  </DataCollection>", "  <CoordinateDefinitions>"]
     for k, (a, b) in FRAMES.items():
         M = getattr(cal, k)
         if M is None:

@@ -20,9 +20,9 @@ from urllib.parse import urlparse
 import numpy as np
 
 from ..config import RigConfig, construct
-from ..drivers.registry import DriverSpec, get_spec
 from ..errors import ConfigError
 from ..net import loopback_family
+from ..registry import DriverSpec, get_spec
 from ..sim import (
     TMS_RIG_P0,
     ArmPair,
@@ -119,17 +119,13 @@ def _check_endpoints(cfg: RigConfig, tracker_transport: str,
     """Refuse (``ConfigError``) a mock endpoint that is not on loopback, before anything
     binds. Returns the tracker's (host, port) when it is served on a ``socket://`` URL."""
     url: tuple[str, int] | None = None
-    if cfg.tracker is not None and tracker_transport == "config" and cfg.tracker.port:
-        where = f"{cfg.path}: key 'tracker.port' ({cfg.tracker.port})"
-        u = urlparse(cfg.tracker.port)
-        if u.scheme == "socket":
-            try:
-                port = u.port or 0
-            except ValueError:
-                raise ConfigError(f"{where}: not a valid port number") from None
-            host = u.hostname or "127.0.0.1"
-            loopback_family(host, where)
-            url = (host, port)
+    if cfg.tracker is not None and tracker_transport == "config":
+        settings = cfg.tracker.settings
+        address = settings.address()
+        where = f"{cfg.path}: key 'tracker.{settings.ADDRESS_KEY}' ({address})"
+        url = _tcp_endpoint(address, where)
+        if url is not None:
+            loopback_family(url[0], where)
     if cfg.robot is not None:
         host = robot_host or cfg.robot.host
         where = (f"{cfg.path}: key 'robot.host' ({host})" if robot_host is None
@@ -140,13 +136,28 @@ def _check_endpoints(cfg: RigConfig, tracker_transport: str,
     return url
 
 
+def _tcp_endpoint(address: str, where: str) -> tuple[str, int] | None:
+    """(host, port) of a tracker address that is a TCP endpoint (``scheme://host:port``,
+    ``host:port``), else None (a device path: served on a pty). Host default 127.0.0.1."""
+    url = "://" in address
+    if not address or (not url and (address.startswith("/") or ":" not in address)):
+        return None
+    u = urlparse(address if url else f"tcp://{address}")
+    try:
+        port = u.port or 0
+    except ValueError:
+        raise ConfigError(f"{where}: not a valid port number") from None
+    return (u.hostname or "127.0.0.1", port)
+
+
 def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
                    robot_host: str | None = None, robot_port: int | None = None) -> MockRig:
     """Start the mock tracker, robot and force-torque sensor (``ft``) of ``cfg`` around one
     sim rig.
 
     ``tracker_transport``: "pty" (a new /dev/pts), "tcp" (an ephemeral loopback port),
-    or "config" (TCP on the port of a ``socket://`` tracker.port, else a pty).
+    or "config" (TCP at the tracker's address when it is a host and port, e.g. an NDI
+    tracker's ``socket://`` port; else a pty).
     ``robot_host``/``robot_port`` override where the robot mock binds (loopback only).
 
     Every endpoint is checked before anything starts: a host that is not a loopback address
@@ -212,9 +223,8 @@ def _ft_mock(cfg: RigConfig, mr: MockRig, clock: Clock) -> None:
         source=source, host=f.host if f.host not in (None, "robot") else "127.0.0.1",
         port=f.port if f.port is not None else spec.default_port, clock=clock,
         faults=_faults(cfg, spec, opts.pop("faults", {})), seed=cfg.mock.seed)
-    for key in ("counts_per_force", "counts_per_torque"):
-        if getattr(f, key) is not None:
-            kw[key] = getattr(f, key)
+    if f.settings is not None:
+        kw.update(f.settings.mock_kwargs())
     _not_overriding(cfg, "mock.ft", opts, kw)
     fm = construct(spec.load_mock(), where, **kw, **opts)
     mr.devices.append(fm)
@@ -222,7 +232,7 @@ def _ft_mock(cfg: RigConfig, mr: MockRig, clock: Clock) -> None:
 
 
 def _robot_specs() -> list[DriverSpec]:
-    from ..drivers.registry import driver_names
+    from ..registry import driver_names
 
     return [get_spec(n, "robot") for n in driver_names("robot")]
 

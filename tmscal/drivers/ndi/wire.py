@@ -17,8 +17,8 @@ from typing import Any
 
 import serial
 
-from ...config_paths import tracker_port_problem
 from ...errors import ConfigError, ConnectionLost
+from .settings import tracker_port_problem
 
 __all__ = ["open_port", "wire_log_problem", "spy_url"]
 

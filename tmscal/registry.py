@@ -1,16 +1,20 @@
 """The one driver registry: driver name → ``DriverSpec`` (what kind of device it is, which
-class drives it, which mock serves it, its default port and its pip extra).
+class drives it, which class reads its config keys, which mock serves it, its default port and
+its pip extra).
 
-The config parser asks it which names are valid for ``robot.driver``, ``tracker.driver`` and
-``ft.driver`` (force-torque sensors);
+A ground module (it imports only ``tmscal.errors``), so every layer may ask it: the config
+parser for the names valid in ``robot.driver``, ``tracker.driver`` and ``ft.driver``
+(force-torque sensors) and for each driver's own settings class (``tmscal.config.devices``);
 ``acquisition.devices`` builds drivers from it and ``mocks.rig`` builds mocks from it, so none
 of them names a brand. Classes are given as ``"module:Class"`` strings and imported only when
 used, so a driver whose optional extra is missing costs nothing until a config names it, and
 then is one ``MissingExtraError`` saying which extra to install.
 
-Adding a device family is one folder (``tmscal/drivers/<name>/``) and one line in
-``BUILTIN``. A third-party package registers its own through the entry-point group
-``tmscal.drivers``, each entry point giving a ``DriverSpec`` (or a function returning one)::
+Adding a device family is one folder (``tmscal/drivers/<name>/``: the driver and its settings
+class) and one line in ``BUILTIN``, plus its protocol-level mock in ``tmscal/mocks/``
+(docs/devices.md, "Adding a driver"). A third-party package registers its own through the
+entry-point group ``tmscal.drivers``, each entry point giving a ``DriverSpec`` (or a function
+returning one)::
 
     [project.entry-points."tmscal.drivers"]
     kuka = "tmscal_kuka:SPEC"
@@ -29,7 +33,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import ConfigError, MissingExtraError
+from .errors import ConfigError, MissingExtraError
 
 __all__ = ["DriverSpec", "BUILTIN", "ENTRY_POINT_GROUP", "KINDS", "register", "get_spec",
            "driver_names", "driver_class", "alternatives", "is_registered"]
@@ -67,8 +71,11 @@ class DriverSpec:
     UDP for ``ati``) the driver and mock take when the config gives none (None: the driver
     takes no ``port``, e.g. UR's fixed RTDE ports).
     ``extra`` is the pip extra the driver needs and ``requires`` the modules that extra
-    provides (checked when the driver is loaded). ``options``, when given, are the only
-    ``<kind>.options`` names the driver accepts (None: whatever its constructor accepts).
+    provides (checked when the driver is loaded). ``settings`` is the class that reads and
+    checks the driver's own config keys and options (``"module:Class"``, a subclass of
+    ``tmscal.config.devices.DriverSettings``; None: the kind's generic settings, which check
+    no key of their own and pass the options to the constructor as they are). It is imported
+    when a config names the driver, so it must not need the driver's extra.
     """
 
     name: str
@@ -80,7 +87,7 @@ class DriverSpec:
     default_port: int | None = None
     extra: str | None = None
     requires: tuple[str, ...] = ()
-    options: tuple[str, ...] | None = None
+    settings: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -88,7 +95,7 @@ class DriverSpec:
         if self.kind not in KINDS:
             raise ValueError(f"DriverSpec {self.name!r}: kind must be one of {KINDS}, got "
                              f"{self.kind!r}")
-        for field in ("cls", "mock", "mock_faults", "mock_volume"):
+        for field in ("cls", "mock", "mock_faults", "mock_volume", "settings"):
             v = getattr(self, field)
             if v is not None and (not isinstance(v, str) or v.count(":") != 1):
                 raise ValueError(f"DriverSpec {self.name!r}: {field} must be 'module:Class', "
@@ -104,6 +111,13 @@ class DriverSpec:
                                         f"no module named {mod!r}")
         return _import(self.cls, what, self.extra)
 
+    def load_settings(self) -> type | None:
+        """The settings class (None: the spec names none). ``ConfigError`` when it cannot be
+        imported: a settings module needs no optional extra."""
+        if self.settings is None:
+            return None
+        return _import(self.settings, f"the {self.name!r} settings", None)
+
     def load_mock(self, part: str = "mock") -> type:
         """The mock class (``part="mock"``) or one of its option classes (``"mock_faults"``,
         ``"mock_volume"``); ``ConfigError`` when this driver has none."""
@@ -117,25 +131,28 @@ class DriverSpec:
 BUILTIN: tuple[DriverSpec, ...] = (
     DriverSpec("ur", "robot", "tmscal.drivers.ur.robot:URRobot", mock="tmscal.mocks.ur:URMock",
                mock_faults="tmscal.mocks.ur:URFaults", extra="ur",
-               requires=("rtde_control", "rtde_receive")),
+               requires=("rtde_control", "rtde_receive"),
+               settings="tmscal.drivers.ur.settings:URSettings"),
     DriverSpec("denso", "robot", "tmscal.drivers.denso.robot:DensoRobot",
                mock="tmscal.mocks.denso:DensoMock", mock_faults="tmscal.mocks.denso:DensoFaults",
-               default_port=5007),
+               default_port=5007, settings="tmscal.drivers.denso.settings:DensoSettings"),
     DriverSpec("ndi", "tracker", "tmscal.drivers.ndi.tracker:NDITracker",
                mock="tmscal.mocks.polaris:PolarisMock",
                mock_faults="tmscal.mocks.polaris:PolarisFaults",
-               mock_volume="tmscal.mocks.polaris:MeasurementVolume"),
+               mock_volume="tmscal.mocks.polaris:MeasurementVolume",
+               settings="tmscal.drivers.ndi.settings:NDISettings"),
     DriverSpec("franka", "robot", "tmscal.drivers.franka.robot:FrankaRobot",
                mock="tmscal.mocks.franka:FrankaMock",
                mock_faults="tmscal.mocks.franka:FrankaFaults", extra="franka",
-               requires=("franky",)),
+               requires=("franky",), settings="tmscal.drivers.franka.settings:FrankaSettings"),
     DriverSpec("ati", "ft", "tmscal.drivers.ati.sensor:ATINetFT",
                mock="tmscal.mocks.ati:ATINetFTMock", mock_faults="tmscal.mocks.ati:ATIFaults",
-               default_port=49152),
+               default_port=49152, settings="tmscal.drivers.ati.settings:ATISettings"),
     # the UR's built-in sensor: the UR mock serves it (ft_raw_wrench, actual_TCP_force)
     DriverSpec("ur_wrench", "ft", "tmscal.drivers.ur.wrench:URWrench",
                mock="tmscal.mocks.ur:URMock", mock_faults="tmscal.mocks.ur:URFaults",
-               extra="ur", requires=("rtde_receive",)),
+               extra="ur", requires=("rtde_receive",),
+               settings="tmscal.drivers.ur.settings:URWrenchSettings"),
 )
 
 #: name → spec, in registration order (built-ins first, then entry points)

@@ -1,6 +1,6 @@
 """Checks of config values shared by every section: each failure is one ``ConfigError`` line
 naming the file and the dotted key (``"rig.yaml: key 'robot.port': …"``), with the line number
-added from the YAML node tree when the text is at hand.
+added from the YAML node tree when the text is at hand (``with_line``).
 
 ``check_tree`` bounds the whole document (plain JSON-like data, depth, value count);
 ``build`` turns one section mapping into its dataclass with per-field type checks;
@@ -19,17 +19,17 @@ from typing import Any
 
 import yaml
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 __all__ = ["err", "show", "join", "check_tree", "build", "number", "coerce", "xyz", "positive",
            "in_range", "key_lines", "with_line", "construct", "MAX_DEPTH", "MAX_VALUES",
-           "INT_BOUND", "check_sampling", "SETTLE_MODES",
-           "check_kinematics", "KINEMATIC_ARMS", "KINEMATIC_ERRORS", "check_ft",
-           "check_mock_ft", "FT_RESERVED_OPTIONS", "MOCK_FT_KEYS"]
+           "INT_BOUND", "MAX_CONFIG_BYTES"]
 
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
 INT_BOUND = 2**63
+#: the largest config file read (bytes)
+MAX_CONFIG_BYTES = 1_000_000
 
 
 def err(src: str, key: str, msg: str) -> ConfigError:
@@ -140,13 +140,17 @@ def number(v: Any, src: str, key: str, what: str = "a number") -> float:
 
 
 def coerce(v: Any, typ: Any, src: str, key: str) -> Any:
-    """``v`` checked against the dataclass field type ``typ`` (int, float, str, xyz point,
-    list of points, mapping with string keys); None only where the type allows it."""
+    """``v`` checked against the dataclass field type ``typ`` (bool, int, float, str, xyz
+    point, list of points, mapping with string keys); None only where the type allows it."""
     t = str(typ)
     if v is None:
         if "None" in t or t in ("Any",):
             return None
         raise err(src, key, f"must not be empty (expected {t})")
+    if t.startswith("bool"):
+        if not isinstance(v, bool):
+            raise err(src, key, f"expected true or false, got {show(v)}")
+        return v
     if t.startswith("int"):
         if isinstance(v, bool) or not isinstance(v, int):
             raise err(src, key, f"expected an integer, got {show(v)}")
@@ -262,106 +266,3 @@ def construct(cls: Any, where: str, *args: Any, **options: Any) -> Any:
         return cls(*args, **options)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{where}: {e}") from None
-
-
-#: sampling.settle: wait for stillness (bounded by settle_s) or a fixed settle_s
-SETTLE_MODES = ("still", "fixed")
-
-
-def check_sampling(s: Any, src: str) -> None:
-    """The ``sampling`` section's ranges (a ``SamplingConfig``), each violation a ConfigError
-    naming the key: counts, times and tolerances finite and in a sensible range; with
-    ``sem_mm``, the floor ``min_samples`` is not above the cap ``samples``."""
-    in_range(src, "sampling.samples", s.samples, 1, 1_000_000)
-    positive(src, "sampling.settle_s", s.settle_s, allow_zero=True, at_most=3600.0)
-    in_range(src, "sampling.robot_reads", s.robot_reads, 1, 1_000_000)
-    if not 0 < s.min_share <= 1:
-        raise err(src, "sampling.min_share", f"must be in (0, 1], got {s.min_share}")
-    positive(src, "sampling.max_frames_factor", s.max_frames_factor, at_most=1000.0)
-    if s.settle not in SETTLE_MODES:
-        raise err(src, "sampling.settle", f"expected 'still' (wait until the tools are "
-                  f"still, at most settle_s) or 'fixed' (wait settle_s), got {show(s.settle)}")
-    positive(src, "sampling.still_window_s", s.still_window_s, at_most=60.0)
-    if s.still_tol_mm is not None:
-        positive(src, "sampling.still_tol_mm", s.still_tol_mm, at_most=10.0)
-    in_range(src, "sampling.min_samples", s.min_samples, 1, 1_000_000)
-    if s.sem_mm is not None:
-        positive(src, "sampling.sem_mm", s.sem_mm, at_most=10.0)
-        if s.min_samples > s.samples:
-            raise err(src, "sampling.min_samples", f"{s.min_samples} is above samples "
-                      f"{s.samples} (the floor of samples by need is above their cap)")
-
-
-#: arms ``mock.kinematics.arm`` names and the error protocols of ``mock.kinematics.errors``
-KINEMATIC_ARMS = ("ur5e", "vs060")
-KINEMATIC_ERRORS = ("paper", "all", "none")
-
-
-def check_kinematics(data: Any, src: str, default_seed: int) -> dict[str, Any] | None:
-    """``mock.kinematics`` (None when absent): {arm: ur5e|vs060, errors: paper|all|none
-    (default paper), seed: int (default the mock's seed)}, checked and completed; a
-    ConfigError names the key."""
-    if data is None:
-        return None
-    if not isinstance(data, Mapping):
-        raise err(src, "mock.kinematics", f"expected a mapping {{arm, errors, seed}}, got "
-                  f"{show(data)}")
-    extra = sorted(str(k) for k in data if k not in ("arm", "errors", "seed"))
-    if extra:
-        raise err(src, f"mock.kinematics.{extra[0]}", "unknown key (expected arm, errors, "
-                  "seed)")
-    arm = data.get("arm")
-    if arm not in KINEMATIC_ARMS:
-        raise err(src, "mock.kinematics.arm", f"expected one of {', '.join(KINEMATIC_ARMS)}, "
-                  f"got {show(arm)}")
-    errors = data.get("errors", "paper")
-    if errors not in KINEMATIC_ERRORS:
-        raise err(src, "mock.kinematics.errors", "expected one of "
-                  f"{', '.join(KINEMATIC_ERRORS)}, got {show(errors)}")
-    seed = data.get("seed", default_seed)
-    if type(seed) is not int:
-        raise err(src, "mock.kinematics.seed", f"expected an integer, got {show(seed)}")
-    in_range(src, "mock.kinematics.seed", seed, 0, INT_BOUND - 1)
-    return {"arm": arm, "errors": errors, "seed": seed}
-
-
-#: ft.options keys that have their own key in the ft section
-FT_RESERVED_OPTIONS = ("host", "port", "counts_per_force", "counts_per_torque", "samples")
-#: what ``mock.ft`` may set: the sensor's noise (σ per force channel N, per torque channel
-#: N·m), its faults, the ATI mock's record rate (Hz), the UR controller's payload
-MOCK_FT_KEYS = ("noise_n", "noise_nm", "faults", "rate_hz", "payload_kg", "payload_cog_mm")
-
-
-def check_ft(ft: Any, src: str) -> Any:
-    """The ``ft`` section (an ``FTConfig``, its driver already checked): port in 0…65535,
-    counts per N and per N·m > 0 and plausible when given, 1 ≤ samples ≤ 1,000,000, no
-    option that has its own key; else a ConfigError naming the key. Returns ``ft``."""
-    if ft.host is not None and not ft.host:
-        raise err(src, "ft.host", "must not be empty (an address, or 'robot' for a sensor "
-                  "in the robot arm)")
-    if ft.port is not None:
-        in_range(src, "ft.port", ft.port, 0, 65535)
-    for key in ("counts_per_force", "counts_per_torque"):
-        v = getattr(ft, key)
-        if v is not None:
-            positive(src, f"ft.{key}", v, at_most=1e12)
-    in_range(src, "ft.samples", ft.samples, 1, 1_000_000)
-    for k in ft.options:
-        if k in FT_RESERVED_OPTIONS:
-            raise err(src, f"ft.options.{k}", f"'{k}' cannot be set through options; set "
-                      f"ft.{k} instead")
-    return ft
-
-
-def check_mock_ft(data: Any, src: str) -> None:
-    """``mock.ft``: a mapping of ``MOCK_FT_KEYS`` (values are checked when the mock is built);
-    ``faults`` a mapping."""
-    if not isinstance(data, Mapping):
-        raise err(src, "mock.ft", f"expected a mapping, got {show(data)}")
-    extra = sorted(str(k) for k in data if k not in MOCK_FT_KEYS)
-    if extra:
-        raise err(src, f"mock.ft.{extra[0]}", f"unknown key (expected one of "
-                  f"{', '.join(MOCK_FT_KEYS)})")
-    if data.get("faults") is not None and not isinstance(data["faults"], Mapping):
-        raise err(src, "mock.ft.faults", f"expected a mapping of fault settings, got "
-                  f"{show(data['faults'])}")

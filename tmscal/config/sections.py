@@ -1,6 +1,7 @@
-"""The sections of a rig config as dataclasses, with the limits the parser enforces on them.
-:mod:`tmscal.config` parses YAML into these (docs/configs.md lists every key). Units as the
-field names say: mm, mm/s, mm/s², deg, s, Hz, N, N·m.
+"""The sections of a rig config as dataclasses. :mod:`tmscal.config` parses YAML into these
+(docs/configs.md lists every key). Units as the field names say: mm, mm/s, mm/s², deg, s, Hz,
+N, N·m. The device sections (robot, tracker, ft) hold the generic keys; what a driver owns is
+in their ``settings`` (:mod:`tmscal.config.settings`).
 """
 
 from __future__ import annotations
@@ -10,26 +11,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .calib.adaptive import AdaptiveSettings
+    from ..calib.adaptive import AdaptiveSettings
+    from .settings import DriverSettings, TrackerSettings
 
-ROBOT_RESERVED_OPTIONS = ("envelope", "speed_mm_s", "accel_mm_s2", "host", "port")
-#: tracker.options keys that have their own key in the tracker section
-TRACKER_RESERVED_OPTIONS = ("port", "tools", "baud", "frame_rate_hz", "reply", "log_wire")
-#: safety keys a config that drives a robot must set (no defaults for a robot)
-SAFETY_KEYS = ("max_offset_mm", "max_rotation_deg", "workspace_min_mm", "workspace_max_mm",
-               "max_speed_mm_s", "max_accel_mm_s2")
-#: plausibility bounds of the safety limits (a larger value is a typo or a unit mistake)
-SAFETY_BOUNDS = {"max_offset_mm": 10_000.0, "max_rotation_deg": 180.0,
-                  "max_speed_mm_s": 5_000.0, "max_accel_mm_s2": 50_000.0}
-COORD_BOUND_MM = 10_000.0   # |workspace coordinate| (mm, base frame)
-TOOL_BOUND_MM = 2_000.0     # |tool point coordinate| (mm, flange frame)
-MAX_TOOL_POINTS = 64
-MAX_CONFIG_BYTES = 1_000_000
+__all__ = ["RobotConfig", "TrackerConfig", "FTConfig", "PlanConfig", "SamplingConfig",
+           "SafetyConfig", "RunConfig", "MockConfig", "RigConfig"]
 
 
 @dataclass
 class RobotConfig:
-    """Robot driver and motion settings. Speeds mm/s, accelerations mm/s²."""
+    """The robot section: a registered robot ``driver``, the controller's ``host`` and
+    ``port`` (None: the driver's default), the motion's speed (mm/s) and acceleration
+    (mm/s²), the driver ``options`` as its settings class checked them, and ``settings``
+    (the driver's own keys; set by the parser)."""
 
     driver: str
     host: str = "127.0.0.1"
@@ -37,23 +31,26 @@ class RobotConfig:
     speed_mm_s: float = 100.0
     accel_mm_s2: float = 500.0
     options: dict[str, Any] = field(default_factory=dict)
+    settings: DriverSettings | None = None
 
 
 @dataclass
 class TrackerConfig:
-    """Tracker driver, port (device path, pty, or socket://host:port) and tools
-    (our name → ROM file path, absolute, or None for a tool already loaded). ``log_wire``:
-    a new file (absolute once parsed) that records the serial traffic (docs/devices.md);
-    ``options`` go to the driver (NDI: ``reset_timeout_s``, ``init_timeout_s`` …)."""
+    """The tracker section: a registered tracker ``driver``, its ``settings`` (the driver's
+    own keys and the tools' values: NDI ``port``, ``baud``, ``reply``, ``log_wire`` and the
+    ROM files, absolute), the frame rate (Hz) and the driver ``options`` as its settings
+    class checked them."""
 
-    driver: str = "ndi"
-    port: str = ""
-    baud: int = 115200
+    driver: str
+    settings: TrackerSettings
     frame_rate_hz: float = 60.0
-    reply: str = "bx"
-    tools: dict[str, str | None] = field(default_factory=dict)
     options: dict[str, Any] = field(default_factory=dict)
-    log_wire: str | None = None
+
+    @property
+    def tools(self) -> dict[str, Any]:
+        """Tool name (our name, e.g. "marker") → the value the driver knows it by (NDI: the
+        ROM file, absolute, or None for a tool already loaded)."""
+        return self.settings.tools
 
 
 @dataclass
@@ -148,22 +145,20 @@ class FTConfig:
     """A force-torque sensor (kinematic self-calibration, docs/selfcal.md): ``driver`` (a
     registered "ft" driver: ``ati`` the ATI Net F/T, ``ur_wrench`` the UR e-Series' built-in
     sensor), ``host`` (its address; "robot" or None: the robot's, for a sensor in the arm),
-    ``port`` (None: the driver's default, UDP 49152 for the Net F/T), the sensor
-    calibration's ``counts_per_force`` (counts per N) and ``counts_per_torque`` (counts per
-    N·m; the Net F/T needs both, there is no default), ``samples`` averaged per reading, and
-    driver ``options`` (docs/devices.md)."""
+    ``port`` (None: the driver's default, UDP 49152 for the Net F/T), ``samples`` averaged
+    per reading, driver ``options`` and ``settings`` (the driver's own keys: the Net F/T's
+    counts per N and per N·m; set by the parser; docs/devices.md)."""
 
     driver: str
     host: str | None = None
     port: int | None = None
-    counts_per_force: float | None = None
-    counts_per_torque: float | None = None
     samples: int = 100
     options: dict[str, Any] = field(default_factory=dict)
+    settings: DriverSettings | None = None
 
 
 def _default_adaptive() -> AdaptiveSettings:
-    from .calib.adaptive import AdaptiveSettings  # numerics: imported when a config is built
+    from ..calib.adaptive import AdaptiveSettings  # numerics: imported when a config is built
 
     return AdaptiveSettings()
 

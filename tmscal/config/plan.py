@@ -1,0 +1,57 @@
+"""The ``plan`` section (where the robot goes: Eq. 14 of Wang et al. 2018 or a sphere around
+P0) and poses written in a config: a 4×4 list in mm or ``{xyz_mm, rpy_deg}``."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .safety import COORD_BOUND_MM
+from .sections import PlanConfig
+from .values import INT_BOUND, build, err, in_range, positive
+
+__all__ = ["pose_from_config", "parse_plan"]
+
+
+def pose_from_config(value: Any, src: str, key: str) -> np.ndarray:
+    """A pose from a config value: a 4×4 list (mm) or {xyz_mm: [..], rpy_deg: [..]} with
+    R = Rz·Ry·Rx (DENSO-style fixed axes)."""
+    from ..geometry import check_pose, matrix_from_denso_p
+    if isinstance(value, Mapping):
+        try:
+            if set(value) - {"xyz_mm", "rpy_deg"}:
+                raise ValueError
+            xyz = [float(x) for x in value["xyz_mm"]]
+            rpy = [float(x) for x in value.get("rpy_deg", [0, 0, 0])]
+            if len(xyz) != 3 or len(rpy) != 3 or not all(map(math.isfinite, xyz + rpy)):
+                raise ValueError
+        except (KeyError, TypeError, ValueError, OverflowError):
+            raise err(src, key, "expected {xyz_mm: [x, y, z], rpy_deg: [rx, ry, rz]}") \
+                from None
+        return matrix_from_denso_p(xyz + rpy)
+    try:
+        return check_pose(value, key)
+    except (ValueError, TypeError, OverflowError) as e:
+        raise err(src, key, f"expected a rigid 4×4 matrix in mm ({e})") from None
+
+
+def parse_plan(data: Any, src: str) -> PlanConfig:
+    """The plan section: kind, pose count, ranges, seed, and start ("current" or a pose)."""
+    plan = build(PlanConfig, data, src, "plan")
+    if plan.kind not in ("eq14", "sphere"):
+        raise err(src, "plan.kind", f"expected 'eq14' or 'sphere', got {plan.kind!r}")
+    in_range(src, "plan.poses", plan.poses, 1, 100_000)
+    positive(src, "plan.radius_mm", plan.radius_mm, allow_zero=True, at_most=COORD_BOUND_MM)
+    positive(src, "plan.rotation_deg", plan.rotation_deg, allow_zero=True, at_most=180.0)
+    in_range(src, "plan.seed", plan.seed, 0, INT_BOUND - 1)
+    if isinstance(plan.start, str):
+        if plan.start != "current":
+            raise err(src, "plan.start", f"expected 'current' or a pose, got {plan.start!r}")
+    else:
+        plan.start = pose_from_config(plan.start, src, "plan.start")
+        if not np.all(np.abs(plan.start[:3, 3]) <= COORD_BOUND_MM):
+            raise err(src, "plan.start", f"position must be within ±{COORD_BOUND_MM:g} mm")
+    return plan

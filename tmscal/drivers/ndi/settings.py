@@ -1,0 +1,174 @@
+"""The NDI tracker's config keys (``tracker: {driver: ndi, ...}``): which ``tracker.port``
+values are allowed (a device path or ``socket://host:port``; no other pyserial URL scheme,
+since some open or write files named in the URL), the serial rate and reply format, the tools'
+ROM files and the ``tracker.log_wire`` trace (which never overwrites an input), and the
+driver's options. Read by the config parser through the driver registry; ``tracker_port_problem``
+is also the driver's own check before a port opens (``wire.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Self
+
+from ...config.settings import Option, TrackerSettings
+from ...config.values import err, show
+from .codes import BAUD_CODES
+
+__all__ = ["NDISettings", "tracker_port_problem", "rom_path", "check_rom_exists",
+           "log_wire_path"]
+
+#: per-command waits the driver takes as options (seconds)
+_WAIT = Option(float, above=0, hi=120)
+
+
+def tracker_port_problem(port: str) -> str | None:
+    """Why ``port`` is not an acceptable tracker port, or None when it is: a device path
+    (``/dev/ttyUSB0``, ``/dev/pts/3``, ``COM3``; no URL scheme) or ``socket://host:port``.
+    Every other pyserial URL scheme (spy://, loop://, rfc2217://, hwgrep://, alt:// …) is
+    refused: some of them open or write files named in the URL."""
+    if not isinstance(port, str) or not port.strip():
+        return "expected a device path or socket://host:port"
+    if "\0" in port or any(c in port for c in "\r\n"):
+        return "contains a control character"
+    if "://" not in port:
+        return None
+    scheme, _, rest = port.partition("://")
+    if scheme.lower() != "socket":
+        return (f"URL scheme {scheme!r} is not allowed; use a device path (e.g. /dev/ttyUSB0) "
+                "or socket://host:port")
+    m = re.fullmatch(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):([0-9]{1,5})", rest)
+    if m is None or not 1 <= int(m.group(2)) <= 65535:
+        return "expected socket://host:port (port 1…65535, no path, query or options)"
+    return None
+
+
+def rom_path(rom: Any, src: str, name: str, base_dir: Path | None,
+             must_exist: bool = True) -> str | None:
+    """The absolute path of tool ``name``'s ROM file (None: a tool already loaded)."""
+    if rom is None:
+        return None
+    if not isinstance(rom, str) or not rom or "\0" in rom:
+        raise err(src, f"tracker.tools.{name}", f"expected a ROM file path, got {show(rom)}")
+    p = Path(rom)
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    if must_exist:
+        check_rom_exists(src, name, str(p))
+    return str(p)
+
+
+def check_rom_exists(src: str, name: str, path: str | None) -> None:
+    """ConfigError naming ``tracker.tools.<name>`` when its ROM file is not there (None: a
+    tool already loaded in the tracker, nothing to check)."""
+    if path is not None and not Path(path).is_file():
+        raise err(src, f"tracker.tools.{name}", f"ROM file not found: {path}")
+
+
+def log_wire_path(raw: Any, port: str, tools: Mapping[str, str | None], src: str,
+                  base_dir: Path | None) -> str:
+    """The absolute path of ``tracker.log_wire`` (``raw``): a new file in an existing
+    directory, not an input (the config, a ROM file of ``tools``), on a serial device
+    ``port``. Whether it exists is checked again when the port opens (it must not: nothing is
+    overwritten)."""
+    if not isinstance(raw, str) or not raw.strip() or any(c in raw for c in "\0\r\n"):
+        raise err(src, "tracker.log_wire", f"expected a file path, got {show(raw)}")
+    p = Path(raw).expanduser()
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    p = p.absolute()
+    inputs = {Path(r).resolve() for r in tools.values() if r}
+    if Path(src).is_file():
+        inputs.add(Path(src).resolve())
+    if p.resolve() in inputs:
+        raise err(src, "tracker.log_wire", f"{p} is an input file; name a new file")
+    if p.is_dir():
+        raise err(src, "tracker.log_wire", f"{p} is a directory; name a new file")
+    if not p.parent.is_dir():
+        raise err(src, "tracker.log_wire", f"directory {p.parent} does not exist")
+    _check_wire_port(port, src)
+    return str(p)
+
+
+def _check_wire_port(port: str, src: str) -> None:
+    if port and "://" in port:
+        raise err(src, "tracker.log_wire", "the wire log records a serial device port "
+                  f"(pyserial's spy://); {port!r} is not one")
+
+
+@dataclass(frozen=True)
+class NDISettings(TrackerSettings):
+    """An NDI tracker (Polaris Vicra/Spectra over serial, Vega over TCP): ``port`` (a
+    device path, a pty, or ``socket://host:port``; "": give it on the command line),
+    ``baud`` (bit/s after the reset, a Combined API COMM rate), ``reply`` ("bx" binary or
+    "tx" text tracking replies), ``log_wire`` (a new file recording the serial traffic,
+    absolute once parsed, or None) and the tools' ROM files (absolute, or None for a tool
+    already loaded). Options: per-reply timeout, retries, reset, the slow commands' waits
+    (s) and the tracking reply option bits (docs/devices.md)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("port", "baud", "reply", "log_wire")
+    ADDRESS_KEY: ClassVar[str] = "port"
+    OPTIONS: ClassVar[Mapping[str, Option]] = {
+        "timeout_s": _WAIT, "retries": Option(int, lo=0, hi=100), "reset": Option(bool, null=True),
+        "reset_timeout_s": _WAIT, "init_timeout_s": _WAIT, "pinit_timeout_s": _WAIT,
+        "tstart_timeout_s": _WAIT, "options": Option(int, lo=0, hi=0xFFFF)}
+
+    port: str = ""
+    baud: int = 115200
+    reply: str = "bx"
+    log_wire: str | None = None
+
+    @classmethod
+    def parse(cls, section: Mapping[str, Any], src: str, base_dir: Path | None,
+              check_files: bool) -> Self:
+        """The NDI keys of ``section``: reply bx or tx, an acceptable port, a COMM baud
+        rate, ROM files (relative paths against ``base_dir``; that they exist is checked
+        unless ``check_files`` is False) and the wire log's path."""
+        s = super().parse(section, src, base_dir, check_files)
+        if s.reply not in ("bx", "tx"):
+            raise err(src, "tracker.reply", f"expected 'bx' or 'tx', got {s.reply!r}")
+        if s.port:
+            problem = tracker_port_problem(s.port)
+            if problem:
+                raise err(src, "tracker.port", f"{show(s.port)}: {problem}")
+        if s.baud not in BAUD_CODES:
+            raise err(src, "tracker.baud", f"expected a COMM rate of the NDI Combined API "
+                      f"({', '.join(map(str, sorted(BAUD_CODES)))}), got {s.baud}")
+        if s.log_wire is not None:
+            s = dataclasses.replace(
+                s, log_wire=log_wire_path(s.log_wire, s.port, s.tools, src, base_dir))
+        return s
+
+    @classmethod
+    def parse_tool(cls, name: str, value: Any, src: str, base_dir: Path | None,
+                   check_files: bool) -> str | None:
+        """Tool ``name``'s ROM file, absolute (None: a tool already loaded)."""
+        return rom_path(value, src, name, base_dir, check_files)
+
+    def kwargs(self) -> dict[str, Any]:
+        """``port``, ``tools`` (ROM files), ``baud``, ``reply``, ``log_wire`` for
+        ``NDITracker``. ConfigError when no port is given or a ROM file is not there (a
+        config loaded with ``check_files=False``)."""
+        if not self.port:
+            raise self.err("port", "no port given (a device such as /dev/ttyUSB0, a pty path, "
+                           "or socket://host:port)")
+        for name, rom in self.tools.items():
+            check_rom_exists(self.src, name, rom)
+        return super().kwargs()
+
+    def address(self) -> str:
+        """The serial device or ``socket://host:port`` URL ("" when the config gives none)."""
+        return self.port
+
+    def with_address(self, text: str) -> Self:
+        """These settings on port ``text`` (checked as ``tracker.port`` is)."""
+        problem = tracker_port_problem(text)
+        if problem:
+            raise self.err("port", f"{show(text)}: {problem}")
+        if self.log_wire is not None:
+            _check_wire_port(text, self.src)
+        return dataclasses.replace(self, port=text)
