@@ -189,6 +189,21 @@ def test_remote_control_off_is_robot_fault_at_open() -> None:
     assert "Remote Control" in err["message"]       # what to do at the pendant
 
 
+def test_dashboard_reply_not_utf8_is_protocol_error_naming_the_command() -> None:
+    """A dashboard reply that is not UTF-8 (ur_rtde cannot hand it to Python) is a
+    ProtocolError naming the command and showing the bytes escaped, not a UnicodeDecodeError;
+    nothing is uploaded."""
+    rig = _rig()
+    with URMock(rig, host="127.0.22.1", clock=FAST,
+                faults=URFaults(non_utf8_dashboard_reply="get serial number")) as mock:
+        err = _open_error(mock, upload_script=True)
+        assert mock.scripts_received == 0
+    assert err["type"] == "ProtocolError" and "DeviceError" in err["mro"], err
+    assert "'get serial number'" in err["message"] and "not UTF-8" in err["message"]
+    assert "\\xff\\xfe" in err["message"] and "\\x80" in err["message"]   # escaped
+    assert err["text"] == "get serial number"
+
+
 def test_powered_off_robot_is_robot_fault_at_open() -> None:
     rig = _rig()
     with URMock(rig, host="127.0.0.28", clock=FAST, robot_mode=ROBOT_MODE_POWER_OFF) as mock:

@@ -90,13 +90,16 @@ class URFaults:
     reconnects are refused (named like the DENSO mock's ``drop_at_request``; the earlier name
     ``drop_connection_at_move`` is still accepted). None disables a fault. (Dropping the
     link while ur_rtde 1.6.5 waits inside a call makes the library hang, or segfault when it
-    can reconnect.)
+    can reconnect.) ``non_utf8_dashboard_reply``: the dashboard answers this command (case
+    and surrounding blanks ignored, e.g. ``"get serial number"``) with its reply wrapped in
+    bytes that are not UTF-8 (``\xff\xfe`` … ``\x80``), as a corrupt or foreign server might.
     """
 
     protective_stop_at_move: int | None = None
     drop_at_move: int | None = None
     power_off_at_move: int | None = None
     drop_connection_at_move: InitVar[int | None] = None
+    non_utf8_dashboard_reply: str | None = None
 
     def __post_init__(self, drop_connection_at_move: int | None) -> None:
         if drop_connection_at_move is None:
