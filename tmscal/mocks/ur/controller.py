@@ -160,6 +160,10 @@ class URController:
         #: fast clock does not wait for it), and of every move, oldest first (bounded)
         self.last_motion_s: float | None = None
         self.motion_log: deque[float] = deque(maxlen=100_000)
+        #: every move command as the control script read it from the RTDE input registers,
+        #: oldest first (bounded): {"command": "moveL", "target": the six pose (m, rad) or
+        #: joint (rad) values, "speed": m/s (rad/s), "accel": m/s² (rad/s²), "async": bool}
+        self.received_moves: deque[dict[str, Any]] = deque(maxlen=100_000)
         self._interrupted: Motion | None = None   # resumed by dashboard "play"
         self._async_wr_count = 0
         self._async_op_id = 0
@@ -471,6 +475,9 @@ class URController:
     def _execute(self, cmd: int, now: float) -> None:
         d = self.in_double
         if cmd in MOVE_CMDS:
+            self.received_moves.append({
+                "command": MOVE_CMDS[cmd], "target": [float(x) for x in d[0:6]],
+                "speed": float(d[6]), "accel": float(d[7]), "async": bool(self.in_int[1])})
             why = self._bad_move(cmd)
             if why is not None:
                 self._runtime_error(why)
