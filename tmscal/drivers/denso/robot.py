@@ -40,6 +40,7 @@ import numpy as np
 from ...errors import ConnectionLost, DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
+from ..robot_lock import host_port
 from .client import DEFAULT_PORT, BCAPClient, close_down
 from .halt import HaltLink
 from .variant import to_variant
@@ -246,6 +247,12 @@ class DensoRobot(Robot):
         self._client = None
         self._robot = self._ctrl = None
         self._service = self._arm = self._motor = False
+
+    def lock_address(self) -> str:
+        """``host:port`` of the controller (and the robot name when not "Arm"): one tmscal
+        per DENSO robot."""
+        where = host_port(self.host, self.port)
+        return where if self.robot_name == "Arm" else f"{where}/{self.robot_name}"
 
     def identity(self) -> dict[str, Any]:
         """Driver, endpoint, provider, robot name and what the controller says about itself."""

@@ -201,6 +201,10 @@ class URRobot(RTDECalls, Robot):
         self._ctl = None
         self._rx = None
 
+    def lock_address(self) -> str:
+        """The controller's host (UR's ports are fixed): one tmscal per UR."""
+        return self.host
+
     def identity(self) -> dict[str, Any]:
         """Driver, host, controller (PolyScope) version, serial number, model, TCP offset."""
         return {"driver": self.name, "host": self.host, **self._identity}
