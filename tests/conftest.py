@@ -10,12 +10,16 @@ changed, in the test's tmp_path).
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from tests import rigs
+from tmscal.drivers.robot_lock import LOCK_DIR_ENV
 from tmscal.sim import SimRig
 
 
@@ -42,6 +46,19 @@ def pytest_addoption(parser) -> None:
 def pytest_configure(config) -> None:
     from tests import fuzz
     fuzz.LONG = bool(config.getoption("--fuzz-long"))
+    # robot locks (tmscal.drivers.robot_lock) of this test session, and of the processes it
+    # starts, in a directory of its own: a suite run elsewhere on the machine at the same time
+    # (same user) does not see them
+    if not os.environ.get(LOCK_DIR_ENV):
+        os.environ[LOCK_DIR_ENV] = tempfile.mkdtemp(prefix="tmscal-test-locks-")
+        config._tmscal_lock_dir = os.environ[LOCK_DIR_ENV]
+
+
+def pytest_unconfigure(config) -> None:
+    d = getattr(config, "_tmscal_lock_dir", None)
+    if d is not None:
+        shutil.rmtree(d, ignore_errors=True)
+        os.environ.pop(LOCK_DIR_ENV, None)
 
 
 def pytest_collection_modifyitems(config, items) -> None:

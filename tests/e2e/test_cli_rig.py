@@ -100,6 +100,24 @@ def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_co
     assert f"X {v[0] * 1000:.2f}  Y {v[1] * 1000:.2f}  Z {v[2] * 1000:.2f} mm" in pendant
 
 
+def test_robot_on_a_ur_whose_dashboard_reply_is_not_utf8_names_it(mock_config):
+    """`tmscal robot` on a UR whose dashboard answers a query with bytes that are not UTF-8:
+    one line naming the command and the bytes (escaped), exit status 1, no traceback."""
+    from tmscal.mocks.rig import spawn_mock_rig
+
+    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.22.4"},
+                      mock={"noise": NOISE_FREE_MOCK,
+                            "robot": {"faults": {"non_utf8_dashboard_reply": "robotmode"}}})
+    with spawn_mock_rig(cfg, transport="tcp") as mp:
+        out = subprocess.run([sys.executable, "-m", "tmscal.cli", "robot", str(cfg),
+                              "--host", mp.endpoints["robot"]], capture_output=True, text=True,
+                             timeout=120)
+    text = out.stdout + out.stderr
+    assert out.returncode == 1, text[-2000:]
+    assert "Traceback" not in text and "UnicodeDecodeError" not in text
+    assert "'robotmode'" in text and "not UTF-8" in text and "\\xff\\xfe" in text
+
+
 def test_robot_needs_only_the_robot_section(tmp_path, mock_config):
     """A real-rig config whose tracker ROM files are not there yet: `tmscal robot` still
     connects (it needs no tracker), while `tmscal track` names the missing ROM."""

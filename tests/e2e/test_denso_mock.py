@@ -424,6 +424,104 @@ def test_stop_raises_when_the_halt_cannot_reach_the_controller(rig: SimRig) -> N
     robot.stop()  # a closed robot: never raises
 
 
+#: how long a test waits for a call that must end within its (much shorter) bound before it
+#: calls it hung: a liveness guard, not a timing check
+HANG_GUARD_S = 30.0
+
+
+def _call_in_thread(fn: Callable[[], object]) -> tuple[threading.Thread, list[BaseException]]:
+    """Run ``fn`` in a daemon thread; what it raises lands in the returned list."""
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            fn()
+        except BaseException as e:  # handed to the test thread
+            errors.append(e)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t, errors
+
+
+def test_stop_is_bounded_when_the_controller_keeps_the_halt_alive_for_ever(rig: SimRig) -> None:
+    """Robot_Halt answered only by S_EXECUTING keep-alives, for ever: the halt's wait is one
+    deadline (halt_timeout_s) that keep-alives do not re-arm, so stop() ends with a
+    DeviceTimeout naming Robot_Halt instead of hanging."""
+    m = DensoMock(rig, clock=FAST, faults=DensoFaults(stuck_functions=("Robot_Halt",)))
+    robot = DensoRobot(port=port_of(m.start()), halt_timeout_s=0.5)
+    try:
+        robot.open()
+        t, errors = _call_in_thread(robot.stop)
+        t.join(HANG_GUARD_S)
+        assert not t.is_alive(), "stop() still waiting: keep-alives extended the halt's bound"
+        assert m.stats["keepalives"] >= 1          # the controller did keep it alive
+        assert len(errors) == 1 and isinstance(errors[0], DeviceTimeout), errors
+        assert "Robot_Halt" in str(errors[0]) and errors[0].code == 0x80000900
+    finally:
+        m.close()       # ends a hung stop() (ConnectionLost) before the robot is closed
+        robot.close()
+
+
+def test_open_is_bounded_when_the_controller_keeps_service_start_alive(rig: SimRig) -> None:
+    """Service_Start answered only by keep-alives: open() raises DeviceTimeout naming it
+    within timeout_s instead of waiting for ever, and leaves nothing open."""
+    m = DensoMock(rig, clock=FAST, faults=DensoFaults(stuck_functions=("Service_Start",)))
+    robot = DensoRobot(port=port_of(m.start()), timeout_s=0.5)
+    try:
+        t, errors = _call_in_thread(robot.open)
+        t.join(HANG_GUARD_S)
+        assert not t.is_alive(), "open() still waiting: keep-alives extended Service_Start"
+        assert m.stats["keepalives"] >= 1
+        assert len(errors) == 1 and isinstance(errors[0], DeviceTimeout), errors
+        assert "Service_Start" in str(errors[0])
+        assert not robot.is_open
+    finally:
+        m.close()
+        robot.close()
+
+
+def test_halt_link_bound_covers_its_reconnect(rig: SimRig) -> None:
+    """A halt whose link must be (re)opened first: connect, Service_Start, Controller_Connect,
+    Controller_GetRobot and Robot_Halt all share one deadline of timeout_s, so a controller
+    stuck in Controller_GetRobot also ends the halt with DeviceTimeout."""
+    from tmscal.drivers.denso.halt import HaltLink
+
+    m = DensoMock(rig, clock=FAST, faults=DensoFaults(stuck_functions=("Controller_GetRobot",)))
+    link = HaltLink("127.0.0.1", port_of(m.start()), "CaoProv.DENSO.VRC", "localhost", "Arm",
+                    timeout_s=0.5)
+    try:
+        t, errors = _call_in_thread(link.halt)
+        t.join(HANG_GUARD_S)
+        assert not t.is_alive(), "halt() still waiting for Controller_GetRobot"
+        assert len(errors) == 1 and isinstance(errors[0], DeviceTimeout), errors
+        assert "Controller_GetRobot" in str(errors[0])
+        assert not link.ready
+    finally:
+        m.close()
+        link.close()
+
+
+def test_keepalives_still_rearm_a_moves_wait(rig: SimRig) -> None:
+    """A Robot_Move may outlast the client's timeout as long as keep-alives come (a long
+    move): 1.2 s of motion with WDT=50 ms keep-alives under a 0.6 s timeout succeeds."""
+    with DensoMock(rig, clock=REAL_TIME, motion_time_s=1.2) as m, \
+            BCAPClient("127.0.0.1", port_of(m.start()), timeout_s=0.6) as c:
+        r = open_robot(c, ",WDT=50")
+        c.take_arm(r)
+        c.motor(r, True)
+        c.robot_move(r, 2, "@E P(510, 0, 400, 180, 0, 0)", "", timeout_s=0.6)
+        assert np.allclose(rig.commanded[:3, 3], [510, 0, 400])
+        assert m.stats["keepalives"] >= 1
+
+
+def test_stuck_functions_fault_refuses_unknown_names() -> None:
+    with pytest.raises(ValueError, match="stuck_functions"):
+        DensoFaults(stuck_functions=("Robot_Hault",))
+    with pytest.raises(ValueError, match="stuck_functions"):
+        DensoFaults(stuck_functions="Robot_Halt")  # type: ignore[arg-type]
+
+
 def test_open_clears_a_latched_error_before_takearm(rig: SimRig) -> None:
     with DensoMock(rig, clock=FAST, faults=DensoFaults(latched_error=0x84204051)) as m, \
             DensoRobot(port=port_of(m.start())) as robot:

@@ -189,6 +189,68 @@ def test_remote_control_off_is_robot_fault_at_open() -> None:
     assert "Remote Control" in err["message"]       # what to do at the pendant
 
 
+def test_dashboard_reply_not_utf8_is_protocol_error_naming_the_command() -> None:
+    """A dashboard reply that is not UTF-8 (ur_rtde cannot hand it to Python) is a
+    ProtocolError naming the command and showing the bytes escaped, not a UnicodeDecodeError;
+    nothing is uploaded."""
+    rig = _rig()
+    with URMock(rig, host="127.0.22.1", clock=FAST,
+                faults=URFaults(non_utf8_dashboard_reply="get serial number")) as mock:
+        err = _open_error(mock, upload_script=True)
+        assert mock.scripts_received == 0
+    assert err["type"] == "ProtocolError" and "DeviceError" in err["mro"], err
+    assert "'get serial number'" in err["message"] and "not UTF-8" in err["message"]
+    assert "\\xff\\xfe" in err["message"] and "\\x80" in err["message"]   # escaped
+    assert err["text"] == "get serial number"
+
+
+_UR_HOLDER = """
+import sys, time
+from tmscal.drivers.ur.robot import URRobot
+robot = URRobot(sys.argv[1], timeout_s=10.0).open()
+print("open", flush=True)
+time.sleep(600)
+"""
+
+
+def test_second_tmscal_cannot_take_over_a_robot_in_use(mock_config: Any) -> None:
+    """While one tmscal process drives the UR (its control script running), `tmscal robot` on
+    the same address is refused, naming the address and that process's pid, before it
+    connects: the first run's script is not replaced (nothing more uploaded) and keeps
+    running."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from tests.child import ROOT
+
+    rig = _rig()
+    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.22.3"})
+    with URMock(rig, host="127.0.22.3", clock=FAST) as mock:
+        holder = subprocess.Popen([sys.executable, "-c", _UR_HOLDER, mock.host], cwd=ROOT,
+                                  env={**os.environ, "PYTHONPATH": str(ROOT)},
+                                  stdout=subprocess.PIPE, text=True)
+        try:
+            assert holder.stdout is not None and holder.stdout.readline().strip() == "open"
+            assert mock.scripts_received == 1 and mock.runtime_state == 2
+            out = subprocess.run([sys.executable, "-m", "tmscal.cli", "robot", str(cfg),
+                                  "--host", mock.host], capture_output=True, text=True,
+                                 timeout=120, cwd=ROOT)
+            text = out.stdout + out.stderr
+            assert out.returncode == 1, text[-2000:]
+            assert "Traceback" not in text
+            assert "127.0.22.3" in text and f"pid {holder.pid}" in text, text[-2000:]
+            assert "in use by another tmscal" in text
+            assert mock.scripts_received == 1        # the first run's script stays
+            assert mock.runtime_state == 2           # and runs
+        finally:
+            holder.send_signal(signal.SIGKILL)
+            holder.wait(30)
+            if holder.stdout is not None:
+                holder.stdout.close()
+
+
 def test_powered_off_robot_is_robot_fault_at_open() -> None:
     rig = _rig()
     with URMock(rig, host="127.0.0.28", clock=FAST, robot_mode=ROBOT_MODE_POWER_OFF) as mock:

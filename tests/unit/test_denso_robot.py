@@ -98,3 +98,24 @@ def test_default_max_linear_accel_is_documented_and_high() -> None:
     assert math.isfinite(DEFAULT_MAX_LINEAR_ACCEL_MM_S2)
     # the default errs on the gentle side: the config's default 500 mm/s² is a few percent
     assert r.accel_percent() == 2.5
+
+
+def test_move_to_sends_speed_as_a_percent_of_the_arms_full_speed() -> None:
+    """What the controller receives (the DENSO mock over b-CAP): SPEED = speed_mm_s /
+    max_linear_speed_mm_s × 100, the configured speed by default, the move's own when given;
+    ExtSpeed's accel = accel_mm_s2 / max_linear_accel_mm_s2 × 100. A unit slip fails here."""
+    from tmscal.geometry import make_pose
+    from tmscal.mocks.clock import FAST
+    from tmscal.mocks.denso import DensoMock
+    from tmscal.sim.rig import TMS_RIG_P0, Noise, SimRig, tms_rig_truth
+
+    rig = SimRig(tms_rig_truth(), noise=Noise.none(), start=TMS_RIG_P0)
+    with DensoMock(rig, clock=FAST, max_linear_speed_mm_s=800.0) as m:
+        port = int(m.start().rpartition(":")[2])
+        with DensoRobot(port=port, speed_mm_s=50.0, accel_mm_s2=600.0,
+                        max_linear_speed_mm_s=800.0, max_linear_accel_mm_s2=12000.0,
+                        watchdog_ms=None) as robot:
+            robot.move_to(TMS_RIG_P0 @ make_pose(t=[10.0, 0.0, 0.0]))
+            robot.move_to(TMS_RIG_P0 @ make_pose(t=[0.0, 20.0, 0.0]), speed_mm_s=200.0)
+        assert m.move_speed_log == [6.25, 25.0]          # 50 / 800, 200 / 800
+        assert m.ext_speed_log == [(100.0, 5.0, 5.0)]    # 600 / 12000

@@ -150,6 +150,101 @@ def test_missing_rom_file_is_a_config_error(mock: PolarisMock, tmp_path: Path) -
     assert not tr.is_open
 
 
+def _rom(size: int, fill: bytes = b"\x5a") -> bytes:
+    """A binary tool definition of ``size`` bytes: ``NDI``, a zero byte, then ``fill``."""
+    return (b"NDI\0" + fill * size)[:size]
+
+
+BAD_ROMS = {
+    "too big": (_rom(1025), "1025 bytes"),
+    "huge": (_rom(4096) * 256, "1048576 bytes"),
+    "empty": (b"", "empty"),
+    "yaml": (b"tracker:\n  port: /dev/ttyUSB0\n", "does not start with 'NDI'"),
+    "text with the magic": (b"NDI tool definition, honest\n", "text file"),
+    "no magic": (b"\x00\x01\x02" * 100, "does not start with 'NDI'"),
+}
+
+
+@pytest.mark.parametrize("kind", list(BAD_ROMS))
+def test_bad_rom_file_refused_before_anything_is_sent(mock: PolarisMock, tmp_path: Path,
+                                                      kind: str) -> None:
+    """A file named as a tool ROM that is no NDI tool definition (over 1024 bytes, empty,
+    text, without the NDI header) is refused with a ConfigError naming the tool and the file
+    before a single byte goes to the tracker."""
+    data, why = BAD_ROMS[kind]
+    bad = tmp_path / "probe.rom"
+    bad.write_bytes(data)
+    tr = NDITracker(mock.start_pty(), {"marker": ROMS["marker"], "probe": str(bad)},
+                    **FAST_OPTS)
+    with pytest.raises(ConfigError) as ei:
+        tr.open()
+    msg = str(ei.value)
+    assert "'probe'" in msg and str(bad) in msg and why in msg
+    assert not tr.is_open
+    assert mock.commands == []          # nothing was sent, not even INIT
+
+
+def test_rom_that_is_not_a_regular_file_is_refused(mock: PolarisMock, tmp_path: Path) -> None:
+    import os
+
+    fifo = tmp_path / "fifo.rom"
+    os.mkfifo(fifo)         # would block a plain open() waiting for a writer
+    for path in (tmp_path, fifo):
+        tr = NDITracker(mock.start_pty(), {"marker": str(path)}, **FAST_OPTS)
+        with pytest.raises(ConfigError, match="not a regular file") as ei:
+            tr.open()
+        assert "'marker'" in str(ei.value)
+    assert mock.commands == []
+
+
+def test_rom_of_exactly_1024_bytes_is_uploaded_whole(mock: PolarisMock, tmp_path: Path) -> None:
+    """The largest tool definition PVWR can write: 16 chunks of 64 bytes, all sent."""
+    rom = tmp_path / "big.rom"
+    rom.write_bytes(_rom(1024))
+    with NDITracker(mock.start_pty(), {"marker": str(rom)}, **FAST_OPTS) as tr:
+        h = tr.handles["marker"]
+    pvwr = [c for c in mock.commands if c.startswith("PVWR")]
+    assert [c[5:11] for c in pvwr] == [f"{h:02X}{a:04X}" for a in range(0, 1024, 64)]
+    sent = bytes.fromhex("".join(c[11:11 + 128] for c in pvwr))
+    assert sent == _rom(1024)
+
+
+def test_rom_upload_to_a_remote_host_is_warned(caplog: pytest.LogCaptureFixture) -> None:
+    """read_roms names a non-loopback socket:// host that would receive the tool
+    definitions; a device path or a loopback address gets no warning."""
+    import logging
+
+    from tmscal.drivers.ndi.rom import read_roms
+    from tmscal.drivers.ndi.wire import remote_host
+
+    with caplog.at_level(logging.WARNING):
+        roms = read_roms(ROMS, "socket://192.0.2.7:8765")
+    assert set(roms) == {"marker", "probe"}
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warned) == 1
+    assert "uploading ROM files to a remote host" in warned[0] and "192.0.2.7" in warned[0]
+    assert "marker" in warned[0] and "probe" in warned[0]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        for port in ("/dev/ttyUSB0", "socket://127.0.0.1:8765", "socket://[::1]:8765",
+                     "socket://localhost:8765", "socket://127.3.4.5:1"):
+            read_roms(ROMS, port)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert remote_host("socket://tracker.lab:8765") == "tracker.lab"
+    assert remote_host("socket://[2001:db8::1]:8765") == "2001:db8::1"
+    assert remote_host("COM3") is None
+
+
+def test_rom_upload_over_loopback_socket_is_not_warned(mock: PolarisMock,
+                                                       caplog: pytest.LogCaptureFixture
+                                                       ) -> None:
+    import logging
+
+    with caplog.at_level(logging.WARNING), NDITracker(mock.start_tcp(), ROMS, **FAST_OPTS):
+        pass
+    assert not [r for r in caplog.records if "remote host" in r.getMessage()]
+
+
 def test_device_error_carries_code_and_meaning(mock: PolarisMock) -> None:
     with NDITracker(mock.start_pty(), ROMS, **FAST_OPTS) as tr:
         with pytest.raises(DeviceError) as ei:

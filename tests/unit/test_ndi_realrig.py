@@ -51,7 +51,7 @@ def test_bx_falls_back_to_tx_with_three_tools(tmp_path: Path,
     """Polaris Spectra Rev 006/007 (the mock's default freeze tag is Rev 007): BX fails with
     three or more tools (scikit-surgerynditracker #53, #67); the driver uses TX and says so."""
     third = tmp_path / "third.rom"
-    third.write_bytes(b"NDI third tool definition")
+    third.write_bytes(b"NDI\0third tool definition" + bytes(40))
     tools = {**ROMS, "third": str(third)}
     faults = PolarisFaults(bx_fails_from_tools=3)
     with PolarisMock(make_rig(), ROMS, clock=FAST, faults=faults, seed=3) as m:

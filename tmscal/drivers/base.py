@@ -37,6 +37,7 @@ from ..errors import (  # noqa: F401  (re-exported: the contract's error types)
 )
 from ..registry import DriverSpec, driver_class  # noqa: F401  (re-exported: the registry)
 from ..timing import Deadline
+from .robot_lock import RobotLock
 
 log = logging.getLogger(__name__)
 
@@ -358,7 +359,13 @@ def _positive_finite(x: Any) -> bool:
 class Robot(_Device):
     """A robot arm. ``flange_pose()`` is base_from_flange 4×4 mm; ``move_to(pose, speed)``
     sends a linear move (speed in mm/s) after checking the safety envelope, and returns only
-    when the controller reports the motion finished; ``stop()`` halts motion."""
+    when the controller reports the motion finished; ``stop()`` halts motion.
+
+    One tmscal process per robot: ``open()`` first takes the lock of the robot's address
+    (:meth:`lock_address`, :class:`~tmscal.drivers.robot_lock.RobotLock`), so a second opener
+    (another ``tmscal acquire`` or ``tmscal robot``, or a second open robot on the same address
+    in this process) gets ``SafetyError`` naming the address and the holder's pid before
+    anything is sent; ``close()`` releases it, and the kernel does when the process ends."""
 
     def __init__(self, envelope: Envelope | None = None, speed_mm_s: float = 100.0,
                  accel_mm_s2: float = 500.0) -> None:
@@ -366,6 +373,38 @@ class Robot(_Device):
         self.envelope = envelope or Envelope()
         self.speed_mm_s = float(speed_mm_s)
         self.accel_mm_s2 = float(accel_mm_s2)
+        self._robot_lock: RobotLock | None = None
+
+    def lock_address(self) -> str | None:
+        """The address that names the physical robot for the one-process-per-robot lock
+        (``host``, ``host:port`` …); None (the default: a simulated or test robot) takes no
+        lock. Drivers of real robots override it."""
+        return None
+
+    def open(self) -> Robot:
+        """Take the robot's lock (``SafetyError`` when another tmscal holds it), then connect
+        and initialise; on failure the lock is released and whatever was opened closed."""
+        if self._opened:
+            return self
+        address = self.lock_address()
+        lock = RobotLock(self.name, address).acquire() if address else None
+        try:
+            super().open()
+        except BaseException:
+            if lock is not None:
+                lock.release()
+            raise
+        self._robot_lock = lock
+        return self
+
+    def close(self) -> None:
+        """Stop and disconnect, then release the robot's lock; safe to call twice."""
+        try:
+            super().close()
+        finally:
+            lock, self._robot_lock = self._robot_lock, None
+            if lock is not None:
+                lock.release()
 
     def flange_pose(self) -> np.ndarray:
         """Current base_from_flange, 4×4 mm, as reported by the controller."""

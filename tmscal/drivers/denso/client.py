@@ -64,13 +64,23 @@ def finite_numbers(v: Variant | None, what: str, min_len: int, max_len: int) -> 
     return vals
 
 
+#: The functions whose wait for a reply each S_EXECUTING keep-alive re-arms: a Robot_Move
+#: lasts as long as its path takes, and the controller's WDT keep-alives say it still runs.
+#: Every other request (Service_Start, Robot_Halt, …) has one overall deadline that
+#: keep-alives cannot extend, so a controller that keeps answering "still executing" cannot
+#: hold a caller (a stop, a connect) beyond its bound.
+KEEPALIVE_REARMS: frozenset[int] = frozenset({Fn.ROBOT_MOVE})
+
+
 class BCAPClient:
     """A b-CAP client over TCP: one request at a time, replies matched by serial.
 
-    ``timeout_s`` is the longest wait for a reply after the request was sent or after the
-    last S_EXECUTING keep-alive for it (the controller sends those while a command runs when
-    Service_Start set ``WDT=<ms>``). Packets with a foreign serial and keep-alives are
-    discarded. Errors as in the module doc; a failed call names the function.
+    ``timeout_s`` bounds the TCP connect and the wait for each reply: for a Robot_Move, the
+    wait after the request was sent or after the last S_EXECUTING keep-alive for it (the
+    controller sends those while a command runs when Service_Start set ``WDT=<ms>``); for
+    every other function (:data:`KEEPALIVE_REARMS`), the whole wait from the request,
+    keep-alives or not. Packets with a foreign serial and keep-alives are discarded. Errors
+    as in the module doc; a failed call names the function.
     """
 
     #: The ``device`` of every error this client raises.
@@ -87,12 +97,14 @@ class BCAPClient:
         self._send_lock = threading.Lock()
 
     # lifecycle
-    def connect(self) -> BCAPClient:
-        """Open the TCP connection (idempotent)."""
+    def connect(self, timeout_s: float | None = None) -> BCAPClient:
+        """Open the TCP connection (idempotent), waiting at most ``timeout_s`` (default the
+        client's ``timeout_s``)."""
         if self._sock is not None:
             return self
+        wait = self.timeout_s if timeout_s is None else timeout_s
         try:
-            s = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
+            s = socket.create_connection((self.host, self.port), timeout=wait)
         except OSError as e:
             raise ConnectionLost(f"b-CAP: cannot connect to {self._where()}: {e}",
                                  device=self.name) from e
@@ -157,14 +169,17 @@ class BCAPClient:
         return serial
 
     def call(self, func: int, *args: Any, timeout_s: float | None = None) -> Variant | None:
-        """Send ``func(*args)`` (Variants or Python values) and wait for its reply. Returns
-        the reply's value (a Variant) or None when the reply carries none."""
+        """Send ``func(*args)`` (Variants or Python values) and wait for its reply, at most
+        ``timeout_s`` (default the client's; re-armed by keep-alives only for the functions in
+        :data:`KEEPALIVE_REARMS`). Returns the reply's value (a Variant) or None when the
+        reply carries none."""
         fname = function_name(func)
         with self._call_lock:
             serial = self._next_serial()
             self._send(encode_packet(serial, int(func), args), fname)
             reply = self._wait_reply(serial, fname,
-                                     self.timeout_s if timeout_s is None else timeout_s)
+                                     self.timeout_s if timeout_s is None else timeout_s,
+                                     rearm=func in KEEPALIVE_REARMS)
         if reply.failed:
             raise self._failure(func, reply.code)
         return reply.args[0] if reply.args else None
@@ -178,9 +193,10 @@ class BCAPClient:
         return cls(f"b-CAP {function_name(func)} failed: 0x{code:08X} ({name})", code=code,
                    text=name, device=self.name)
 
-    def _wait_reply(self, serial: int, fname: str, timeout_s: float) -> Packet:
-        """The reply with ``serial``: foreign serials are discarded and each S_EXECUTING
-        keep-alive restarts the ``timeout_s`` wait."""
+    def _wait_reply(self, serial: int, fname: str, timeout_s: float, rearm: bool) -> Packet:
+        """The reply with ``serial`` within ``timeout_s``: foreign serials are discarded;
+        an S_EXECUTING keep-alive restarts the wait when ``rearm``, and is only discarded
+        otherwise (one overall deadline)."""
         deadline = Deadline(max(timeout_s, 0.0))
         while True:
             try:
@@ -195,7 +211,8 @@ class BCAPClient:
                           fname, pkt.serial, serial)
             elif pkt.code == S_EXECUTING:
                 log.debug("b-CAP %s: S_EXECUTING keep-alive", fname)
-                deadline.restart()
+                if rearm:
+                    deadline.restart()
             else:
                 return pkt
 
@@ -205,7 +222,7 @@ class BCAPClient:
         remaining = deadline.remaining()
         if remaining <= 0:
             raise DeviceTimeout(f"b-CAP {fname}: no reply from {self._where()} within "
-                                f"{deadline.timeout_s:.1f} s", code=E_TIMEOUT,
+                                f"{deadline.timeout_s:g} s", code=E_TIMEOUT,
                                 text=hresult_name(E_TIMEOUT), device=self.name)
         sock = self._sock
         if sock is None:
@@ -227,32 +244,36 @@ class BCAPClient:
         v = self.call(func, *args, timeout_s=timeout_s)
         return None if v is None else v.to_python()
 
-    def _handle(self, func: int, *args: Any) -> int:
-        v = self.call(func, *args)
+    def _handle(self, func: int, *args: Any, timeout_s: float | None = None) -> int:
+        v = self.call(func, *args, timeout_s=timeout_s)
         if v is None or v.vt not in NUMERIC_VTS or isinstance(v.value, float):
             raise invalid_packet(f"expected a handle (I4), got {v!r}",
                                  f"b-CAP {function_name(func)}")
         return int(v.value)
 
     # functions
-    def service_start(self, option: str = "") -> None:
+    def service_start(self, option: str = "", timeout_s: float | None = None) -> None:
         """Service_Start; ``option`` e.g. ``",WDT=400,InvokeTimeout=180000"``."""
-        self.call(Fn.SERVICE_START, option)
+        self.call(Fn.SERVICE_START, option, timeout_s=timeout_s)
 
     def service_stop(self) -> None:
         self.call(Fn.SERVICE_STOP)
 
     def controller_connect(self, name: str = "", provider: str = "CaoProv.DENSO.VRC",
-                           machine: str = "localhost", option: str = "") -> int:
+                           machine: str = "localhost", option: str = "",
+                           timeout_s: float | None = None) -> int:
         """Controller_Connect → controller handle."""
-        return self._handle(Fn.CONTROLLER_CONNECT, name, provider, machine, option)
+        return self._handle(Fn.CONTROLLER_CONNECT, name, provider, machine, option,
+                            timeout_s=timeout_s)
 
     def controller_disconnect(self, handle: int) -> None:
         self.call(Fn.CONTROLLER_DISCONNECT, Variant(VT_I4, handle))
 
-    def controller_get_robot(self, handle: int, name: str = "Arm", option: str = "") -> int:
+    def controller_get_robot(self, handle: int, name: str = "Arm", option: str = "",
+                             timeout_s: float | None = None) -> int:
         """Controller_GetRobot → robot handle."""
-        return self._handle(Fn.CONTROLLER_GETROBOT, Variant(VT_I4, handle), name, option)
+        return self._handle(Fn.CONTROLLER_GETROBOT, Variant(VT_I4, handle), name, option,
+                            timeout_s=timeout_s)
 
     def controller_get_variable(self, handle: int, name: str, option: str = "") -> int:
         """Controller_GetVariable → variable handle."""
@@ -311,12 +332,13 @@ class BCAPClient:
         self.call(Fn.ROBOT_MOVE, Variant(VT_I4, handle), Variant(VT_I4, comp), pose, option,
                   timeout_s=timeout_s)
 
-    def robot_halt(self, handle: int, option: str = "", wait: bool = True) -> None:
+    def robot_halt(self, handle: int, option: str = "", wait: bool = True,
+                   timeout_s: float | None = None) -> None:
         """Robot_Halt; ``wait=False`` sends it without waiting for the reply. A controller
         answers it with E_BUSY_PROC on a connection that runs a move: send it over another
         connection (:class:`~tmscal.drivers.denso.halt.HaltLink`)."""
         if wait:
-            self.call(Fn.ROBOT_HALT, Variant(VT_I4, handle), option)
+            self.call(Fn.ROBOT_HALT, Variant(VT_I4, handle), option, timeout_s=timeout_s)
         else:
             self.send_only(Fn.ROBOT_HALT, Variant(VT_I4, handle), option)
 
@@ -356,4 +378,5 @@ def close_down(client: BCAPClient, steps: list[tuple[str, Any]], what: str) -> N
     client.close()
 
 
-__all__ = ["BCAPClient", "DEFAULT_PORT", "close_down", "finite_numbers"]
+__all__ = ["BCAPClient", "DEFAULT_PORT", "KEEPALIVE_REARMS", "close_down",
+           "finite_numbers"]

@@ -40,6 +40,7 @@ import numpy as np
 from ...errors import ConnectionLost, DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
+from ..robot_lock import host_port
 from .client import DEFAULT_PORT, BCAPClient, close_down
 from .halt import HaltLink
 from .variant import to_variant
@@ -105,11 +106,13 @@ class DensoRobot(Robot):
     every move further); it replaces whatever external speed the pendant or another program
     left on the controller. ``manual_reset``: also send ``ManualReset`` after ClearError at
     open (a COBOTTA's safety-state reset; an RC8/RC8A needs only ClearError). ``halt_timeout_s``:
-    the bound on each wait of the halt connection (connect, reply). ``provider``/``machine``: the
-    CAO provider (``"CaoProv.DENSO.VRC9"`` for RC9) and its machine argument.
-    ``robot_name``: the robot object ("Arm"). ``timeout_s``: the longest wait for any reply,
-    including a move (re-armed by each S_EXECUTING keep-alive). ``watchdog_ms``: WDT for
-    Service_Start (None: no keep-alives). ``fig``: the figure code sent with every pose.
+    the bound on one Robot_Halt over the halt connection, (re)connect included (s; keep-alives
+    do not extend it). ``provider``/``machine``: the CAO provider (``"CaoProv.DENSO.VRC9"``
+    for RC9) and its machine argument. ``robot_name``: the robot object ("Arm").
+    ``timeout_s``: the longest wait for any reply (s): a move's wait is re-armed by each
+    S_EXECUTING keep-alive, any other request's is one deadline that keep-alives cannot
+    extend (Service_Start included). ``watchdog_ms``: WDT for Service_Start (None: no
+    keep-alives). ``fig``: the figure code sent with every pose.
     """
 
     name = "denso"
@@ -245,6 +248,12 @@ class DensoRobot(Robot):
         self._robot = self._ctrl = None
         self._service = self._arm = self._motor = False
 
+    def lock_address(self) -> str:
+        """``host:port`` of the controller (and the robot name when not "Arm"): one tmscal
+        per DENSO robot."""
+        where = host_port(self.host, self.port)
+        return where if self.robot_name == "Arm" else f"{where}/{self.robot_name}"
+
     def identity(self) -> dict[str, Any]:
         """Driver, endpoint, provider, robot name and what the controller says about itself."""
         return {"driver": self.name, "host": self.host, "port": self.port,
@@ -292,8 +301,10 @@ class DensoRobot(Robot):
     def _stop(self) -> None:
         """Robot_Halt over the halt connection (the move's own connection answers anything
         with E_BUSY_PROC while it runs) and check its reply. A dropped halt connection is
-        reopened once (each wait bounded by ``halt_timeout_s``). A failure is logged and
-        raised (``DeviceError`` / ``ConnectionLost`` / ``DeviceTimeout`` with its code)."""
+        reopened once; each attempt is bounded by ``halt_timeout_s`` in all (so ``stop``
+        returns within 2 × ``halt_timeout_s``, whatever keep-alives the controller sends). A
+        failure is logged and raised (``DeviceError`` / ``ConnectionLost`` /
+        ``DeviceTimeout`` with its code)."""
         if self._halt is None:
             self._halt = HaltLink(self.host, self.port, self.provider, self.machine,
                                   self.robot_name, self.halt_timeout_s)

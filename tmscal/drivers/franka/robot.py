@@ -156,6 +156,10 @@ class FrankaRobot(Robot):
         except Exception as e:  # franky's own exception types: best effort at close
             log.warning("franka %s: stop at close failed: %s", self.host, e)
 
+    def lock_address(self) -> str:
+        """The FCI host (libfranka's ports are fixed): one tmscal per arm."""
+        return self.host
+
     def identity(self) -> dict[str, Any]:
         """Driver, host, franky version and the end-effector frames at open (``F_T_NE_mm``,
         ``NE_T_EE_mm``, ``F_T_EE_mm``: 4×4 mm); nothing that changes while the robot moves

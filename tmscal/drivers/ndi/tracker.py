@@ -5,7 +5,8 @@ Session: optional reset by serial break (a serial line only; wait up to ``reset_
 for ``RESET``, then 100 ms; no RESET answer → just INIT), INIT, VER / GETINFO for the identity,
 COMM to the configured rate on a serial line (never over ``socket://``: a networked tracker
 takes no baud change; the host switches after the OKAY), passive tools loaded from .rom files
-(PHRQ, PVWR in 64-byte chunks, PINIT, PENA D) after freeing stale handles, TSTART. INIT,
+(each checked first by :mod:`.rom`: at most 1024 bytes, ``NDI`` header, binary; then PHRQ,
+PVWR in 64-byte chunks, PINIT, PENA D) after freeing stale handles, TSTART. INIT,
 PINIT and TSTART get their own long timeouts. BX falls back to TX on the firmware revisions
 whose BX fails with three or more tools. Every :meth:`NDITracker.read` sends BX (or TX) and
 returns a
@@ -33,12 +34,13 @@ from typing import Any
 
 import serial
 
-from ...errors import ConfigError, ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
+from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
 from ...timing import Deadline
 from ..base import ToolState, Tracker, TrackerFrame
 from . import protocol as p
 from .codes import ErrorCode, HandleStatus, PortStatus, SystemStatus, flag_names
 from .replies import ReplyKind
+from .rom import read_roms
 from .wire import open_port
 
 log = logging.getLogger(__name__)
@@ -190,17 +192,10 @@ class NDITracker(Tracker):
             self.reply = "tx"
 
     def _read_roms(self) -> dict[str, bytes]:
-        """The tool definitions of the tools that have a .rom file (ConfigError if one cannot
-        be read)."""
-        roms: dict[str, bytes] = {}
-        for tool, path in self.rom_paths.items():
-            if path is None:
-                continue
-            try:
-                roms[tool] = path.read_bytes()
-            except OSError as e:
-                raise ConfigError(f"tool {tool!r}: cannot read ROM file {path}: {e}") from e
-        return roms
+        """The tool definitions of the tools that have a .rom file, each checked before
+        anything is sent (:func:`.rom.read_rom`: ``ConfigError`` naming the tool and the
+        file), and a warning when they go to a tracker on another host."""
+        return read_roms(self.rom_paths, self.port)
 
     def _close(self) -> None:
         ser = self._ser

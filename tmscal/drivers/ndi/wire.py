@@ -11,6 +11,7 @@ overwritten, an input file least of all); ``spy://`` wraps a local serial device
 
 from __future__ import annotations
 
+import ipaddress
 import urllib.parse
 from pathlib import Path
 from typing import Any
@@ -20,9 +21,27 @@ import serial
 from ...errors import ConfigError, ConnectionLost
 from .settings import tracker_port_problem
 
-__all__ = ["open_port", "wire_log_problem", "spy_url"]
+__all__ = ["open_port", "wire_log_problem", "spy_url", "remote_host"]
 
 _READ_SLICE_S = 0.05
+
+
+def remote_host(port: str) -> str | None:
+    """The host of a ``socket://host:port`` tracker port when it is not this computer, else
+    None (a device path; a loopback address: 127.0.0.0/8, ::1, ``localhost``). A host name
+    other than ``localhost`` counts as remote (it is not resolved here)."""
+    scheme, sep, rest = port.partition("://")
+    if not sep or scheme.lower() != "socket":
+        return None
+    host = rest.rpartition(":")[0].strip("[]")
+    if host.lower().rstrip(".") == "localhost" or host.lower().endswith(".localhost"):
+        return None
+    try:
+        if ipaddress.ip_address(host).is_loopback:
+            return None
+    except ValueError:
+        pass  # a host name
+    return host
 
 
 def wire_log_problem(port: str, log_file: Path) -> str | None:

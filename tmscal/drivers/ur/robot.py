@@ -201,6 +201,10 @@ class URRobot(RTDECalls, Robot):
         self._ctl = None
         self._rx = None
 
+    def lock_address(self) -> str:
+        """The controller's host (UR's ports are fixed): one tmscal per UR."""
+        return self.host
+
     def identity(self) -> dict[str, Any]:
         """Driver, host, controller (PolyScope) version, serial number, model, TCP offset."""
         return {"driver": self.name, "host": self.host, **self._identity}
@@ -210,7 +214,8 @@ class URRobot(RTDECalls, Robot):
         answer is None) and its state; raise ``RobotFault`` naming ``what``, the cause and
         the fix at the pendant when the robot cannot run the control script: remote control
         off (e-Series ≥ 5.6, script upload only), robot mode not RUNNING, safety status not
-        NORMAL/REDUCED. An unreachable dashboard is logged and left to ur_rtde to report."""
+        NORMAL/REDUCED. An unreachable dashboard is logged and left to ur_rtde to report; a
+        reply that is not UTF-8 raises ``ProtocolError`` naming the command."""
         out: dict[str, Any] = {"controller_version": None, "serial": None, "model": None}
         try:
             import dashboard_client
@@ -218,18 +223,22 @@ class URRobot(RTDECalls, Robot):
             return out
         db = dashboard_client.DashboardClient(self.host)
         try:
-            db.connect()
-            for key, fn in (("controller_version", db.polyscopeVersion),
-                            ("serial", db.getSerialNumber), ("model", db.getRobotModel),
-                            ("robot_mode", db.robotmode), ("safety_status", db.safetystatus)):
+            self._dashboard_ask("connect", db.connect)
+            for key, command, fn in (
+                    ("controller_version", "PolyscopeVersion", db.polyscopeVersion),
+                    ("serial", "get serial number", db.getSerialNumber),
+                    ("model", "get robot model", db.getRobotModel),
+                    ("robot_mode", "robotmode", db.robotmode),
+                    ("safety_status", "safetystatus", db.safetystatus)):
                 try:
-                    out[key] = str(fn()).strip() or None
+                    out[key] = str(self._dashboard_ask(command, fn)).strip() or None
                 except RuntimeError as e:
                     log.debug("ur %s: dashboard %s failed: %s", self.host, key, e)
             if not self.upload_script or not remote_check_applies(out["controller_version"]):
                 out["remote_control"] = None
             else:
-                out["remote_control"] = bool(db.isInRemoteControl())
+                out["remote_control"] = bool(self._dashboard_ask("is in remote control",
+                                                                 db.isInRemoteControl))
         except RuntimeError as e:
             log.warning("ur %s: dashboard server not reachable: %s", self.host, e)
             return out
@@ -242,6 +251,19 @@ class URRobot(RTDECalls, Robot):
         if fault is not None:
             raise fault
         return {k: out[k] for k in ("controller_version", "serial", "model")}
+
+    def _dashboard_ask(self, command: str, fn: Any) -> Any:
+        """``fn()``, ur_rtde's call for dashboard ``command``; a reply that is not UTF-8 (the
+        library cannot hand it to Python: ``UnicodeDecodeError``) raises ``ProtocolError``
+        naming the command and showing the bytes escaped (at most 200)."""
+        try:
+            return fn()
+        except UnicodeDecodeError as e:
+            raw = e.object if isinstance(e.object, bytes) else bytes(e.object)
+            shown = repr(raw[:200]) + (" …" if len(raw) > 200 else "")
+            raise ProtocolError(f"ur {self.host}: the dashboard server's reply to {command!r} "
+                                f"is not UTF-8 text: {shown}", text=command,
+                                device=self.name) from None
 
     def _state_fault(self, what: str, st: dict[str, Any]) -> RobotFault | None:
         """The ``RobotFault`` for a dashboard state (``_dashboard_check``) in which the control

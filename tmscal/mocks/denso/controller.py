@@ -105,6 +105,9 @@ class DensoController:
         self.ext_decel = 100.0
         #: every accepted ExtSpeed as (speed, accel, decel) percent, oldest first (bounded)
         self.ext_speed_log: list[tuple[float, float, float]] = []
+        #: the SPEED percent of every accepted Robot_Move (its option, else Robot_Speed),
+        #: oldest first (bounded)
+        self.move_speed_log: list[float] = []
         self.move_accel: float | None = None   # ACCEL / DECEL of the last move (percent)
         self.move_decel: float | None = None
         self.robot_speed = 100.0
@@ -435,6 +438,8 @@ class DensoController:
                           "the joint limits (out of reach)")
         duration = self._duration(target, pct, accel, decel)
         self.move_accel, self.move_decel = accel, decel
+        with self._lock:
+            self.move_speed_log = [*self.move_speed_log[-999:], pct]
         if p[6] >= 0:
             self.fig = int(p[6])
         return self._run_move(sess, serial, target, duration, mode, "NEXT" in opts,

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import math
 import socket
+import time
 
 from ...drivers.denso.hresult import (
     E_BUSY_PROC,
@@ -94,7 +95,7 @@ class DensoMock(DensoController, MockDevice):
     def _loop(self, sess: Session) -> None:
         while not self._listener.stopping:
             self._advance(sess)
-            wait = _POLL_S
+            wait = min(_POLL_S, self._keep_stuck_alive(sess))
             if sess.job is not None:
                 nxt = sess.job.end
                 if sess.job.serial is not None and sess.job.wdt_s:
@@ -114,6 +115,21 @@ class DensoMock(DensoController, MockDevice):
             sess.framer.feed(data)
             if not self._drain(sess):
                 break
+
+    def _keep_stuck_alive(self, sess: Session) -> float:
+        """Send the keep-alive due for a request left unanswered (the ``stuck_functions``
+        fault); seconds until the next one (``_POLL_S`` when none is pending)."""
+        if sess.stuck is None:
+            return _POLL_S
+        serial, due = sess.stuck
+        now = time.monotonic()
+        if now >= due:
+            sess.reply(serial, S_EXECUTING)
+            with self._lock:
+                self.stats["keepalives"] += 1
+            due = now + self.faults.stuck_keepalive_s
+            sess.stuck = (serial, due)
+        return max(due - now, 0.001)
 
     def _end_session(self, sess: Session) -> None:
         """The connection is gone: a NEXT motion carries on to its end, the arm and the
@@ -195,6 +211,11 @@ class DensoMock(DensoController, MockDevice):
             sess.reply(pkt.serial, E_BUSY_PROC)
             return
         fname = function_name(pkt.code)
+        if fname in self.faults.stuck_functions:
+            log.info("DENSO mock: fault: %s (serial %d) never answered, only kept alive",
+                     fname, pkt.serial)
+            sess.stuck = (pkt.serial, time.monotonic())
+            return
         try:
             result = self.dispatch(sess, pkt.serial, pkt.code, list(pkt.args))
         except Refusal as r:

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ...drivers.denso.hresult import E_EMERGENCY_STOP
-from ...drivers.denso.packet import PacketFramer, encode_packet
+from ...drivers.denso.packet import FUNCTION_NAMES, PacketFramer, encode_packet
 from ...drivers.denso.variant import Variant
 
 #: Values of ``DensoFaults.bad_curpos``.
@@ -36,6 +36,10 @@ class DensoFaults:
     HRESULT the controller holds when the mock starts (one left over from before, e.g. an
     emergency stop that was released): TakeArm, Motor on and Robot_Move are refused with it
     until ``Controller_Execute("ClearError")`` (read once, when the mock is built).
+    ``stuck_functions``: b-CAP function names (``"Robot_Halt"``, ``"Service_Start"`` …) whose
+    requests are never answered: the connection sends an S_EXECUTING keep-alive for the
+    request every ``stuck_keepalive_s`` seconds (wall clock) instead, for as long as it
+    lives, as a controller stuck executing would (read at each request).
     """
 
     fail_move_at: int | None = None
@@ -47,11 +51,21 @@ class DensoFaults:
     bad_curpos: str | None = None
     hold_move_at: int | None = None
     latched_error: int | None = None
+    stuck_functions: tuple[str, ...] = ()
+    stuck_keepalive_s: float = 0.05
 
     def __post_init__(self) -> None:
         if self.bad_curpos is not None and self.bad_curpos not in BAD_CURPOS:
             raise ValueError(f"bad_curpos must be one of {', '.join(BAD_CURPOS)} or None, got "
                              f"{self.bad_curpos!r}")
+        unknown = sorted(set(self.stuck_functions) - set(FUNCTION_NAMES.values()))
+        if isinstance(self.stuck_functions, str) or unknown:
+            raise ValueError(f"stuck_functions must be a tuple of b-CAP function names "
+                             f"({', '.join(sorted(FUNCTION_NAMES.values()))}), got "
+                             f"{self.stuck_functions!r}")
+        if not 0 < self.stuck_keepalive_s <= 10:  # also refuses NaN
+            raise ValueError(f"stuck_keepalive_s must be in (0, 10] s, got "
+                             f"{self.stuck_keepalive_s!r}")
 
 
 @dataclass(eq=False)
@@ -88,6 +102,9 @@ class Session:
     wdt_s: float | None = None
     job: Job | None = None
     framer: PacketFramer = field(default_factory=PacketFramer)
+    #: a request left unanswered (``DensoFaults.stuck_functions``): its serial, and when the
+    #: next keep-alive for it is due (monotonic seconds)
+    stuck: tuple[int, float] | None = None
 
     def reply(self, serial: int, code: int, value: Variant | None = None) -> None:
         """Send one reply packet (in one ``sendall``)."""

@@ -90,13 +90,16 @@ class URFaults:
     reconnects are refused (named like the DENSO mock's ``drop_at_request``; the earlier name
     ``drop_connection_at_move`` is still accepted). None disables a fault. (Dropping the
     link while ur_rtde 1.6.5 waits inside a call makes the library hang, or segfault when it
-    can reconnect.)
+    can reconnect.) ``non_utf8_dashboard_reply``: the dashboard answers this command (case
+    and surrounding blanks ignored, e.g. ``"get serial number"``) with its reply wrapped in
+    bytes that are not UTF-8 (``\xff\xfe`` … ``\x80``), as a corrupt or foreign server might.
     """
 
     protective_stop_at_move: int | None = None
     drop_at_move: int | None = None
     power_off_at_move: int | None = None
     drop_connection_at_move: InitVar[int | None] = None
+    non_utf8_dashboard_reply: str | None = None
 
     def __post_init__(self, drop_connection_at_move: int | None) -> None:
         if drop_connection_at_move is None:
@@ -157,6 +160,10 @@ class URController:
         #: fast clock does not wait for it), and of every move, oldest first (bounded)
         self.last_motion_s: float | None = None
         self.motion_log: deque[float] = deque(maxlen=100_000)
+        #: every move command as the control script read it from the RTDE input registers,
+        #: oldest first (bounded): {"command": "moveL", "target": the six pose (m, rad) or
+        #: joint (rad) values, "speed": m/s (rad/s), "accel": m/s² (rad/s²), "async": bool}
+        self.received_moves: deque[dict[str, Any]] = deque(maxlen=100_000)
         self._interrupted: Motion | None = None   # resumed by dashboard "play"
         self._async_wr_count = 0
         self._async_op_id = 0
@@ -468,6 +475,9 @@ class URController:
     def _execute(self, cmd: int, now: float) -> None:
         d = self.in_double
         if cmd in MOVE_CMDS:
+            self.received_moves.append({
+                "command": MOVE_CMDS[cmd], "target": [float(x) for x in d[0:6]],
+                "speed": float(d[6]), "accel": float(d[7]), "async": bool(self.in_int[1])})
             why = self._bad_move(cmd)
             if why is not None:
                 self._runtime_error(why)

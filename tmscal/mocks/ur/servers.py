@@ -216,7 +216,13 @@ class URMock(URController, MockDevice):
                 self.dashboard_log.append(line)
                 reply, hang_up = self._dashboard.reply(line)
                 log.debug("UR mock dashboard: %r -> %r", line, reply)
-                conn.sendall(reply.encode() + b"\n")
+                data = reply.encode()
+                bad = self.faults.non_utf8_dashboard_reply
+                if bad is not None and line.lower() == bad.strip().lower():
+                    log.info("UR mock dashboard: fault: %r answered with bytes that are not "
+                             "UTF-8", line)
+                    data = b"\xff\xfe" + data + b"\x80"
+                conn.sendall(data + b"\n")
                 if hang_up:
                     return
             if len(buf) > MAX_DASHBOARD_LINE:
