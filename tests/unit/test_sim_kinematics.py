@@ -152,7 +152,7 @@ def test_config_kinematics_builds_the_arm(tmp_path) -> None:
     np.testing.assert_allclose(rig.reported_flange(), TMS_RIG_P0, atol=1e-6)
 
 
-@pytest.mark.parametrize("bad, key", [({"arm": "ur10"}, "mock.kinematics.arm"),
+@pytest.mark.parametrize("bad, key", [({"arm": "ur30"}, "mock.kinematics.arm"),
                                       ({"arm": "ur5e", "errors": "some"},
                                        "mock.kinematics.errors"),
                                       ({"arm": "ur5e", "seed": -1}, "mock.kinematics.seed"),

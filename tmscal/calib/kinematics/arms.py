@@ -30,9 +30,10 @@ Mock placement (``mount``, ``home_q``): where the mock rig puts the arm so that 
 around it (±100 mm, ±10°) lie inside the reach, like a robot's base placed for the task:
 ``mount`` is rig frame ← robot base (4×4 mm, exact, part of the controller's setup) and
 ``home_q`` (rad) a configuration near that start with the tool down, elbow up, that seeds the
-first inverse kinematics. An arm whose reach does not hold the plan at any sensible mount
-(the COBOTTA's 342 mm) keeps one anyway; the mock rig then refuses the start pose with a
-ConfigError naming ``mock.kinematics``.
+first inverse kinematics. Every arm here reaches P0 so placed, and every pose of a 60-pose
+Eq. 14 plan around it except the COBOTTA (342 mm from shoulder to wrist: about half of the
+plan is out of its reach; the mock refuses those moves as a controller would). A start pose
+(``plan.start``) out of an arm's reach is a ConfigError naming ``mock.kinematics``.
 """
 
 from __future__ import annotations
@@ -111,7 +112,8 @@ class ArmSpec:
 
 
 def _ur(name: str, model: str, d1: float, a2: float, a3: float, d4: float, d5: float,
-        d6: float, generation: str | None, serial: str, mount_x: float = 0.0) -> ArmSpec:
+        d6: float, generation: str | None, serial: str,
+        mount_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> ArmSpec:
     """A UR arm from its six published lengths (metres in UR's table, mm here)."""
     dh = [[0.0, d1, 0.0, _H], [0.0, 0.0, a2, 0.0], [0.0, 0.0, a3, 0.0],
           [0.0, d4, 0.0, _H], [0.0, d5, 0.0, -_H], [0.0, d6, 0.0, 0.0]]
@@ -120,7 +122,7 @@ def _ur(name: str, model: str, d1: float, a2: float, a3: float, d4: float, d5: f
     return ArmSpec(arm=arm, vendor="Universal Robots", model=model, source=UR_SOURCE,
                    controller_model=model.rstrip("e") if generation == "e-Series" else model,
                    generation=generation, mock_serial=serial,
-                   mount=make_pose(np.eye(3), [mount_x, 0.0, 0.0]),
+                   mount=make_pose(np.eye(3), mount_xyz),
                    home_q=(math.pi, -_H, _H, -_H, -_H, 0.0))
 
 
@@ -135,16 +137,18 @@ def _franka(name: str, model: str, lo: list[float], hi: list[float]) -> ArmSpec:
     arm = Arm(name=name, dh=_FRANKA_DH, convention="modified", flange=_FRANKA_FLANGE,
               joint_limits_rad=np.column_stack([lo, hi]))
     return ArmSpec(arm=arm, vendor="Franka", model=model, source=FRANKA_SOURCE,
-                   controller_model=name, home_q=(0.0, 0.3, 0.0, -2.0, 0.0, 2.3, math.pi / 4))
+                   controller_model=name, home_q=(0.0, -0.11, 0.0, -2.28, 0.0, 2.17, 0.0))
 
 
 _SPECS: tuple[ArmSpec, ...] = (
     # Universal Robots CB3 (PolyScope 3.x) and e-Series (PolyScope 5.x)
-    _ur("ur3", "UR3", 151.9, -243.65, -213.25, 112.35, 85.35, 81.9, "CB3", "2015330001"),
+    # the UR3s' 500 mm reach: the base stands 200 mm nearer P0, on a 100 mm pedestal
+    _ur("ur3", "UR3", 151.9, -243.65, -213.25, 112.35, 85.35, 81.9, "CB3", "2015330001",
+        (200.0, 0.0, 100.0)),
     _ur("ur5", "UR5", 89.159, -425.0, -392.25, 109.15, 94.65, 82.3, "CB3", "2016351864"),
     _ur("ur10", "UR10", 127.3, -612.0, -572.3, 163.941, 115.7, 92.2, "CB3", "2016301779"),
     _ur("ur3e", "UR3e", 151.85, -243.55, -213.2, 131.05, 85.35, 92.1, "e-Series",
-        "20185300000"),
+        "20185300000", (200.0, 0.0, 100.0)),
     _ur("ur5e", "UR5e", 162.5, -425.0, -392.2, 133.3, 99.7, 99.6, "e-Series", "20185500000"),
     _ur("ur10e", "UR10e", 180.7, -612.7, -571.55, 174.15, 119.85, 116.55, "e-Series",
         "20185000000"),
@@ -173,8 +177,8 @@ _SPECS: tuple[ArmSpec, ...] = (
                                            [0.3141593, 2.443461], [-2.96706, 2.96706],
                                            [-1.658063, 2.356194], [-2.96706, 2.96706]])),
         vendor="DENSO", model="COBOTTA", source=DENSO_SOURCE, controller_model="COBOTTA",
-        approximate=True, mount=make_pose(np.eye(3), [350.0, 0.0, 0.0]),
-        home_q=(0.0, 0.3, 1.6, 0.0, 1.24, 0.0)),
+        approximate=True, mount=make_pose(np.eye(3), [350.0, 0.0, 100.0]),
+        home_q=(0.3, -0.21, 1.85, 0.0, 1.51, -2.84)),
     _franka("fr3", "FR3", [-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159],
             [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159]),
     _franka("panda", "Panda", [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
