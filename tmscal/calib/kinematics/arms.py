@@ -31,8 +31,8 @@ around it (±100 mm, ±10°) lie inside the reach, like a robot's base placed fo
 ``mount`` is rig frame ← robot base (4×4 mm, exact, part of the controller's setup) and
 ``home_q`` (rad) a configuration near that start with the tool down, elbow up, that seeds the
 first inverse kinematics. Every arm here reaches P0 so placed, and every pose of a 60-pose
-Eq. 14 plan around it except the COBOTTA (342 mm from shoulder to wrist: about half of the
-plan is out of its reach; the mock refuses those moves as a controller would). A start pose
+Eq. 14 plan around it except the COBOTTA (342 mm from shoulder to wrist: 55 of 60; the mock
+refuses the others as a controller would, and the acquisition stops there). A start pose
 (``plan.start``) out of an arm's reach is a ConfigError naming ``mock.kinematics``.
 """
 
@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ConfigError
-from ...geometry import make_pose
+from ...geometry import make_pose, rot_z
 from .model import Arm
 
 __all__ = ["ArmSpec", "ARMS", "ARM_NAMES", "arm_by_name", "spec_by_name", "find_arm",
@@ -177,8 +177,10 @@ _SPECS: tuple[ArmSpec, ...] = (
                                            [0.3141593, 2.443461], [-2.96706, 2.96706],
                                            [-1.658063, 2.356194], [-2.96706, 2.96706]])),
         vendor="DENSO", model="COBOTTA", source=DENSO_SOURCE, controller_model="COBOTTA",
-        approximate=True, mount=make_pose(np.eye(3), [350.0, 0.0, 100.0]),
-        home_q=(0.3, -0.21, 1.85, 0.0, 1.51, -2.84)),
+        # beside P0 (turned −90° about z, on a 200 mm pedestal): the wrist then works in the
+        # middle of its ±170° J6 range
+        approximate=True, mount=make_pose(rot_z(-_H), [500.0, 200.0, 200.0]),
+        home_q=(0.22, 0.28, 1.93, 0.0, 0.93, 1.8)),
     _franka("fr3", "FR3", [-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159],
             [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159]),
     _franka("panda", "Panda", [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
