@@ -70,3 +70,12 @@ def test_denso_arm(type_name, arm):
 ])
 def test_franka_arm_from_urdf(urdf, arm):
     assert arm_from_urdf(urdf) == arm
+
+
+def test_the_franka_mock_takes_only_the_arm_franky_sim_simulates():
+    from tmscal.mocks.franka import FrankaMock
+    from tmscal.sim import TMS_RIG_P0, Noise, SimRig, make_arm, tms_rig_truth
+
+    rig = SimRig(tms_rig_truth(), noise=Noise(), start=TMS_RIG_P0, arm=make_arm("ur5e", "none", 0))
+    with pytest.raises(ValueError, match="franky-sim simulates an FR3.*not ur5e"):
+        FrankaMock(rig, host="127.20.20.10")
