@@ -104,12 +104,6 @@ class ArmSpec:
         """The registry name (lower case)."""
         return self.arm.name
 
-    @property
-    def reach_mm(self) -> float:
-        """An upper bound on the distance from the base origin to the flange (mm): the sum of
-        the DH lengths and the flange offset."""
-        return float(np.abs(self.arm.dh[:, 1:3]).sum() + np.linalg.norm(self.arm.flange[:3, 3]))
-
 
 def _ur(name: str, model: str, d1: float, a2: float, a3: float, d4: float, d5: float,
         d6: float, generation: str | None, serial: str,
