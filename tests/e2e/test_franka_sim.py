@@ -29,6 +29,7 @@ import pytest
 
 from tmscal.acquisition.devices import make_robot, make_tracker
 from tmscal.acquisition.run import acquire
+from tmscal.calib.kinematics import arm_by_name, forward
 from tmscal.config import load_config
 from tmscal.drivers.franka.robot import COMMUNICATION_TEXT
 from tmscal.errors import RobotFault, SafetyError
@@ -187,10 +188,17 @@ def test_acquire_records_franka_poses(rig, tmp_path):
     s = read_session(out)
     robot = s.header["devices"]["robot"]
     assert robot["driver"] == "franka" and robot["F_T_EE_mm"][2][3] == pytest.approx(103.4)
+    # franky-sim's controller sends its FR3's URDF: the session says which arm it was
+    assert robot["arm"] == "fr3"
     assert len(s.poses) == 2
     truth = build_sim_rig(load_config(cfg_path)).truth  # noise-free rig: A = Z · B · X⁻¹
+    fr3 = arm_by_name("fr3")
     for pose in s.poses:  # up to the creep allowed while sampling (still_tol_mm 0.1)
         assert close_to(truth.Z @ pose.B @ invert(truth.X), pose.A, 0.2, 0.05), pose.index
+        # every pose has the seven joint angles, read when the arm was still: the FR3's
+        # published kinematics put the flange there
+        assert pose.joints_rad is not None and len(pose.joints_rad) == 7, pose.index
+        assert close_to(forward(fr3, np.array(pose.joints_rad)), pose.A, 0.2, 0.05), pose.index
 
 
 def test_demo_recovers_the_truth_through_franky_and_franky_sim(tmp_path):

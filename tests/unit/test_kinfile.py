@@ -271,3 +271,34 @@ def test_identify_without_spreads_needs_sigma(tmp_path):
                                   str(tmp_path / "k.yaml"), "--sigma", "0.05", "0.01"])
     assert r.exit_code == 0, r.output
     assert "from --sigma" in r.output
+
+
+def test_modified_dh_and_flange_round_trip(tmp_path):
+    """A Franka arm (modified DH, the flange 107 mm past the last DH frame) keeps its
+    convention and flange through the file: the same flange poses after reading."""
+    from tmscal.calib.selfcal.model import NOMINAL, forward
+    arm = _arm(base=NOMINAL["fr3"])
+    f = tmp_path / "fr3.yaml"
+    f.write_text(kinematics_yaml(arm))
+    back = load_arm(f)
+    assert back.convention == "modified"
+    np.testing.assert_allclose(back.flange, arm.flange, atol=1e-12)
+    q = np.random.default_rng(1).uniform(-1.0, 1.0, (5, 7))
+    np.testing.assert_allclose(forward(back, q), forward(arm, q), atol=1e-9)
+
+
+def test_a_file_without_convention_or_flange_is_standard_dh():
+    doc = _doc()
+    doc.pop("convention")
+    doc.pop("flange")
+    kf = parse_kinematics(doc, SRC)
+    assert kf.model.convention == "standard"
+    np.testing.assert_array_equal(kf.model.flange, np.eye(4))
+
+
+@pytest.mark.parametrize("key, value", [("convention", "craig"), ("flange", [[1, 0], [0, 1]])])
+def test_bad_convention_or_flange_names_the_key(key, value):
+    doc = _doc()
+    doc[key] = value
+    with pytest.raises(CalibrationError, match=f"kin.yaml: key '{key}"):
+        parse_kinematics(doc, SRC)

@@ -37,6 +37,16 @@ def dh_by_hand(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
     return Rz @ Tz @ Tx @ Rx
 
 
+def mdh_by_hand(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
+    """Modified DH (Craig 1989): Rx(α) Tx(a) Rz(θ) Tz(d) as four matrices multiplied."""
+    Rz, Tz, Tx, Rx = np.eye(4), np.eye(4), np.eye(4), np.eye(4)
+    Rz[:3, :3] = rot_z(theta)
+    Tz[2, 3] = d
+    Tx[0, 3] = a
+    Rx[:3, :3] = rot_x(alpha)
+    return Rx @ Tx @ Rz @ Tz
+
+
 def random_q(model: ArmModel, m: int, rng: np.random.Generator) -> np.ndarray:
     lim = model.joint_limits_rad
     return rng.uniform(lim[:, 0], lim[:, 1], (m, model.n_joints))
@@ -78,12 +88,13 @@ def test_forward_is_the_product_of_dh_matrices(name):
     q = random_q(model, 5, rng)
     got = forward(model, q)
     frames = joint_frames(model, q)
+    by_hand = dh_by_hand if model.convention == "standard" else mdh_by_hand
     for k in range(len(q)):
         T = model.base.copy()
         for i, (th0, d, a, al) in enumerate(model.dh):
-            T = T @ dh_by_hand(q[k, i] + th0, d, a, al)
+            T = T @ by_hand(q[k, i] + th0, d, a, al)
             np.testing.assert_allclose(frames[k, i + 1], T, atol=1e-9)
-        np.testing.assert_allclose(got[k], T, atol=1e-9)
+        np.testing.assert_allclose(got[k], T @ model.flange, atol=1e-9)
     assert forward(model, q[0]).shape == (4, 4)
 
 

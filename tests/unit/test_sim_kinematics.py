@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tests.rigs import NOISE_FREE_MOCK, write_config
+from tmscal.calib.kinematics import ARM_NAMES
 from tmscal.calib.selfcal.model import NOMINAL, forward
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
@@ -152,7 +153,7 @@ def test_config_kinematics_builds_the_arm(tmp_path) -> None:
     np.testing.assert_allclose(rig.reported_flange(), TMS_RIG_P0, atol=1e-6)
 
 
-@pytest.mark.parametrize("bad, key", [({"arm": "ur10"}, "mock.kinematics.arm"),
+@pytest.mark.parametrize("bad, key", [({"arm": "ur30"}, "mock.kinematics.arm"),
                                       ({"arm": "ur5e", "errors": "some"},
                                        "mock.kinematics.errors"),
                                       ({"arm": "ur5e", "seed": -1}, "mock.kinematics.seed"),
@@ -190,3 +191,16 @@ def test_without_kinematics_nothing_changes(tmp_path) -> None:
         np.testing.assert_array_equal(rig.reported_flange(), cmd)
         np.testing.assert_array_equal(rig.observe("marker", 3), by_hand.observe("marker", 3))
         np.testing.assert_array_equal(rig.true_flange(), by_hand.true_flange())
+
+
+@pytest.mark.parametrize("arm", ARM_NAMES)
+def test_every_registered_arm_is_placed_to_reach_the_mock_start_and_plan(arm: str) -> None:
+    """The registry's mock placement (mount, home) puts the shipped P0 inside every arm's
+    reach, and the 60 poses of an Eq. 14 plan around it (±100 mm, ±10°) too, except the
+    COBOTTA's (342 mm from shoulder to wrist: at least 50 of them)."""
+    rig = SimRig(tms_rig_truth(), noise=Noise(), rng=np.random.default_rng(0), start=TMS_RIG_P0,
+                 arm=make_arm(arm, "none", 0))
+    np.testing.assert_allclose(rig.reported_flange(), TMS_RIG_P0, atol=1e-6)
+    poses = eq14_poses(TMS_RIG_P0, 60, np.random.default_rng(1))
+    reached = sum(rig.reach(P) is not None for P in poses)
+    assert reached >= (50 if arm == "cobotta" else 60), reached

@@ -243,14 +243,13 @@ def plan_selfcal(model: Any, q0: np.ndarray, p0: np.ndarray, envelope: Envelope,
 # --- the run ---------------------------------------------------------------------------------
 
 def nominal_arm(arm: str, where: Any = "--arm") -> Any:
-    """The nominal ``ArmModel`` named ``arm`` (``tmscal.calib.selfcal.model.NOMINAL``);
-    ConfigError naming ``where`` and the known names otherwise."""
+    """The nominal ``ArmModel`` of the registered arm named ``arm`` (the arm registry,
+    ``tmscal.calib.kinematics.ARMS``); ConfigError naming ``where`` and the known names
+    otherwise."""
+    from ..calib.kinematics import spec_by_name
     from ..calib.selfcal.model import NOMINAL
 
-    if arm not in NOMINAL:
-        raise ConfigError(f"{where}: unknown arm {arm!r}; expected one of: "
-                          f"{', '.join(sorted(NOMINAL))}")
-    return NOMINAL[arm]
+    return NOMINAL[spec_by_name(arm, str(where)).name]
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,25 @@ import click
 from .app import _Finite, _print_json, handle_errors, main
 
 
+class ArmName(click.Choice):
+    """``--arm``: a registered arm's name (``tmscal.calib.kinematics.ARM_NAMES``; docs/
+    kinematics.md). The names are read when the option is parsed or its help shown, not when
+    the CLI starts: importing ``tmscal.calib`` loads the solvers."""
+
+    def __init__(self) -> None:
+        super().__init__((), case_sensitive=True)
+
+    @property  # type: ignore[override]
+    def choices(self) -> tuple[str, ...]:
+        from ..calib.kinematics.arms import ARM_NAMES
+
+        return ARM_NAMES
+
+    @choices.setter
+    def choices(self, value: Any) -> None:  # click.Choice.__init__ sets it: the registry's
+        pass
+
+
 @main.group()
 def selfcal() -> None:
     """Kinematic self-calibration from a wrist force-torque sensor (Joubair et al. 2016).
@@ -72,8 +91,9 @@ def _print_table(res: Any) -> None:
 
 
 @selfcal.command()
-@click.option("--arm", type=click.Choice(["ur5e", "vs060"]), default="ur5e", show_default=True,
-              help="Nominal arm model: Universal Robots UR5e or DENSO VS-060 (standard DH).")
+@click.option("--arm", type=ArmName(), default="ur5e", show_default=True,
+              help="Nominal arm model, by its registered name (docs/kinematics.md): "
+                   "Universal Robots ur3…ur20, DENSO vs060 or cobotta, Franka fr3 or panda.")
 @click.option("--errors", type=click.Choice(["paper", "all"]), default="paper",
               show_default=True,
               help="Which parameters of the true arm carry errors (±2 mm, ±1°): 'paper' — the "

@@ -52,8 +52,9 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
               help="Continue an interrupted session: the plan is in its header; the "
                    "configurations already recorded are skipped.")
 @click.option("--arm", default=None,
-              help="The arm's nominal model: ur5e or vs060 (default: the config's "
-                   "mock.kinematics.arm on a mock rig; required at a real one).")
+              help="The arm's nominal model, a registered name such as ur5e, vs060 or fr3 "
+                   "(docs/kinematics.md; default: the config's mock.kinematics.arm on a mock "
+                   "rig; required at a real one).")
 @click.option("--k", "k", type=click.IntRange(1, 10000), default=60, show_default=True,
               help="Configurations to visit, chosen by DETMAX (maximal det JᵀJ, i.e. O1).")
 @click.option("--pool", type=click.IntRange(1, 100000), default=5000, show_default=True,
@@ -101,8 +102,8 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     cfg = load_config(config, check_files=False)  # no tracker needed
     name = _arm_name(arm, cfg)
     if name is None and not resume:
-        raise click.BadParameter("name the arm's nominal model (ur5e or vs060)",
-                                 param_hint="--arm")
+        raise click.BadParameter("name the arm's nominal model (a registered name such as "
+                                 "ur5e or vs060; docs/kinematics.md)", param_hint="--arm")
     if dry_run:
         _dry_run(cfg, name, k, pool, seed, span_deg, robot_host)
         return
@@ -234,8 +235,9 @@ def _print_fit(model0: Any, fit: Any, ident: Any, sigma: np.ndarray, scale: floa
               help="Kinematics file (YAML) to write: the calibrated arm model, for "
                    "tmscal solve --kinematics.")
 @click.option("--arm", default=None,
-              help="The nominal model to start from: ur5e or vs060 (default: the one the "
-                   "session was acquired with).")
+              help="The nominal model to start from, a registered name such as ur5e or "
+                   "vs060 (docs/kinematics.md; default: the one the session was acquired "
+                   "with).")
 @click.option("--sigma", type=(_Finite(0, lo_open=True), _Finite(0, lo_open=True)),
               default=None, metavar="FORCE_N TORQUE_NM",
               help="Noise of the averaged wrench per force and torque channel (default: from "
@@ -271,7 +273,8 @@ def identify(session_file: Path, output: Path, arm: str | None,
     name = arm or (head.get("arm") if isinstance(head, dict) else None)
     if name is None:
         raise click.BadParameter(f"{session_file} does not name its arm; name the nominal "
-                                 "model (ur5e or vs060)", param_hint="--arm")
+                                 "model (a registered name such as ur5e or vs060)",
+                                 param_hint="--arm")
     model0 = nominal_arm(name, "--arm" if arm else f"{session_file}: header 'selfcal.arm'")
     q, w, sem, idx = _session_data(session)
     if q.shape[1] != model0.n_joints:

@@ -12,17 +12,19 @@ from .plan import pose_from_config
 from .sections import MockConfig
 from .values import INT_BOUND, build, construct, err, in_range, show
 
-__all__ = ["KINEMATIC_ARMS", "KINEMATIC_ERRORS", "MOCK_FT_KEYS", "parse_mock",
+__all__ = ["KINEMATIC_ERRORS", "MOCK_FT_KEYS", "parse_mock",
            "check_kinematics", "check_mock_ft"]
 
 
-#: arms ``mock.kinematics.arm`` names and the error protocols of ``mock.kinematics.errors``
-KINEMATIC_ARMS = ("ur5e", "vs060")
+#: the error protocols of ``mock.kinematics.errors`` (its arms are the arm registry's,
+#: ``tmscal.calib.kinematics.ARM_NAMES``, imported when a config names one: importing
+#: ``tmscal.calib`` loads the solvers)
 KINEMATIC_ERRORS = ("paper", "all", "none")
 
 
 def check_kinematics(data: Any, src: str, default_seed: int) -> dict[str, Any] | None:
-    """``mock.kinematics`` (None when absent): {arm: ur5e|vs060, errors: paper|all|none
+    """``mock.kinematics`` (None when absent): {arm: a registered arm (``tmscal.calib.
+    kinematics.ARM_NAMES``: ur5e, vs060, fr3, …), errors: paper|all|none
     (default paper), seed: int (default the mock's seed)}, checked and completed; a
     ConfigError names the key."""
     if data is None:
@@ -34,9 +36,11 @@ def check_kinematics(data: Any, src: str, default_seed: int) -> dict[str, Any] |
     if extra:
         raise err(src, f"mock.kinematics.{extra[0]}", "unknown key (expected arm, errors, "
                   "seed)")
+    from ..calib.kinematics.arms import ARM_NAMES
+
     arm = data.get("arm")
-    if arm not in KINEMATIC_ARMS:
-        raise err(src, "mock.kinematics.arm", f"expected one of {', '.join(KINEMATIC_ARMS)}, "
+    if arm not in ARM_NAMES:
+        raise err(src, "mock.kinematics.arm", f"expected one of {', '.join(ARM_NAMES)}, "
                   f"got {show(arm)}")
     errors = data.get("errors", "paper")
     if errors not in KINEMATIC_ERRORS:

@@ -9,16 +9,22 @@ kg); the model inside the code is in mm and radians::
     format: tmscal-kinematics
     version: 1
     arm: ur5e                      # the nominal model the parameters were identified from
+    convention: standard           # optional: standard (default) or modified DH
     joints:                        # standard DH, T_i = Rz(θ_i + θ0) Tz(d) Tx(a) Rx(α)
       - {theta_offset_deg: 0.0, d_mm: 162.5, a_mm: 0.0, alpha_deg: 90.0,
          min_deg: -360.0, max_deg: 360.0}
       - …
     base: [[…], [ …], [ …], [0, 0, 0, 1]]   # world ← base, 4×4 mm (world z up)
+    flange: [[…], …]                         # optional: last DH frame ← flange (default I)
     flange_from_sensor: [[…], …]             # the F/T sensor's mounting, 4×4 mm
     tool: {mass_kg: 1.2, cog_mm: [0, 0, 60]} # the tool's centre of gravity, sensor frame
     bias: {force_n: [0, 0, 0], torque_nm: [0, 0, 0]}   # the sensor's offsets
     identification: {…}            # optional: what was identified, σ, residuals (below)
     session: {path: …, sha256: …}  # optional: the session it was identified on
+
+``convention`` and ``flange`` (docs/kinematics.md: modified DH is Craig's, T_i = Rx(α) Tx(a)
+Rz(θ_i + θ0) Tz(d)) are always written; a file without them (older ones) is standard DH with
+the flange at the last DH frame.
 
 ``identification`` (written by ``selfcal identify``, optional when reading): ``parameters``
 (names of the identified parameters, in :meth:`ArmModel.parameter_names` order),
@@ -64,8 +70,9 @@ _COG_MM = 2_000.0
 _FORCE_N = 100_000.0
 _TORQUE_NM = 10_000.0
 _JOINT_KEYS = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg", "min_deg", "max_deg")
-_TOP_KEYS = ("format", "version", "created", "arm", "units", "joints", "base",
-             "flange_from_sensor", "tool", "bias", "identification", "session", "provenance")
+_TOP_KEYS = ("format", "version", "created", "arm", "convention", "units", "joints", "base",
+             "flange", "flange_from_sensor", "tool", "bias", "identification", "session",
+             "provenance")
 
 
 @dataclass
@@ -107,7 +114,8 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
                    session: dict[str, Any] | None = None,
                    provenance: dict[str, Any] | None = None) -> dict[str, Any]:
     """The kinematics document (plain types) of ``model`` (an ``ArmModel``: DH rows
-    [θ0 rad, d mm, a mm, α rad], base = world ← base and flange_from_sensor 4×4 mm, tool mass
+    [θ0 rad, d mm, a mm, α rad] in its convention, base = world ← base, flange = last DH frame
+    ← flange and flange_from_sensor 4×4 mm, tool mass
     kg and centre of gravity mm in the sensor frame, bias [f0 N, τ0 N·m], joint limits rad),
     with the optional ``identification`` (see the module docstring), ``session`` ({path,
     sha256}) and ``provenance`` entries."""
@@ -122,10 +130,12 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
         "format": FORMAT, "version": VERSION,
         "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "arm": str(model.name),
+        "convention": str(getattr(model, "convention", "standard")),
         "units": {"length": "mm", "angle": "deg", "force": "N", "torque": "N·m",
                   "mass": "kg"},
         "joints": joints,
         "base": _floats(model.base),
+        "flange": _floats(getattr(model, "flange", np.eye(4))),
         "flange_from_sensor": _floats(model.flange_from_sensor),
         "tool": {"mass_kg": float(model.tool_mass_kg), "cog_mm": _floats(model.tool_cog_mm)},
         "bias": {"force_n": bias[:3].tolist(), "torque_nm": bias[3:].tolist()},
@@ -241,10 +251,16 @@ def _fields(doc: Any, src: str) -> dict[str, Any]:
     name = _header(doc, src)
     dh, lim = _joints(doc.get("joints"), src)
     base = _matrix(doc.get("base"), src, "base", rigid=True)
+    convention = doc.get("convention", "standard")
+    if convention not in ("standard", "modified"):
+        raise _bad(src, "convention", f"expected standard or modified, got {_show(convention)}")
+    flange = np.eye(4) if doc.get("flange") is None else \
+        _matrix(doc.get("flange"), src, "flange", rigid=True)
     mount = _matrix(doc.get("flange_from_sensor"), src, "flange_from_sensor", rigid=True)
     tool = _mapping(doc.get("tool"), src, "tool", ("mass_kg", "cog_mm"))
     bias = _mapping(doc.get("bias"), src, "bias", ("force_n", "torque_nm"))
-    return {"name": name, "dh": dh, "base": base, "flange_from_sensor": mount,
+    return {"name": name, "dh": dh, "base": base, "convention": convention, "flange": flange,
+            "flange_from_sensor": mount,
             "tool_mass_kg": _num(tool["mass_kg"], src, "tool.mass_kg", _MASS_KG, lo=0.0),
             "tool_cog_mm": _vec(tool["cog_mm"], src, "tool.cog_mm", 3, _COG_MM),
             "bias": np.concatenate([_vec(bias["force_n"], src, "bias.force_n", 3, _FORCE_N),

@@ -28,40 +28,36 @@ Frames: an ArmModel's ``base`` is world ← robot base (world z up: a tilted mou
 the gravity the wrist sensor reads, not the flange pose in the robot's own frame), so a
 controller computes base_from_flange = base⁻¹ · forward(model, q), the DH chain, as
 ``tmscal selfcal acquire`` and ``tmscal solve --kinematics`` do. The frame the mock controller
-reports in, the rig's robot base frame (the frame of A and Z), is ``mount`` · robot base:
-identity for the UR5e; for the VS-060, whose 605 mm shoulder-to-wrist reach leaves the shipped
-mock P0 (flange at (500, 0, 400) mm, tool down) near its edge, the robot base stands at
-(150, 0, 0) mm in the rig's frame, like a DENSO work coordinate system, which puts P0 and the
-Eq. 14 poses around it well inside the reach (:data:`ARM_MOUNTS`). The mount is exact and part
-of the controller's setup, not a hidden error.
+reports in, the rig's robot base frame (the frame of A and Z), is ``mount`` · robot base, from
+the arm's registry entry (``tmscal.calib.kinematics.ARMS``, which says why each arm stands
+where it does): identity for the UR5e; for the VS-060, whose 605 mm shoulder-to-wrist reach
+leaves the shipped mock P0 (flange at (500, 0, 400) mm, tool down) near its edge, the robot
+base stands at (150, 0, 0) mm in the rig's frame, like a DENSO work coordinate system, which
+puts P0 and the Eq. 14 poses around it well inside the reach (:data:`ARM_MOUNTS`). The mount
+is exact and part of the controller's setup, not a hidden error. Any registered arm can be
+the mock's; one that cannot reach the start pose is refused (:class:`Unreachable`).
 """
 
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..calib.kinematics import ARM_NAMES, ARMS
 from ..calib.selfcal.model import NOMINAL, ArmModel, forward, jacobian, perturb
-from ..geometry import invert, make_pose, rotvec_from_matrix
+from ..geometry import invert, rotvec_from_matrix
 
 __all__ = ["ArmPair", "Unreachable", "inverse", "reach", "make_arm", "ARM_MOUNTS", "HOME_Q",
            "IK_TOL_MM", "IK_TOL_RAD"]
 
 #: rig frame ← robot base for each arm, 4×4 mm: where the mock controller's reporting frame
-#: puts the arm (module docstring)
-ARM_MOUNTS: dict[str, np.ndarray] = {
-    "ur5e": np.eye(4),
-    "vs060": make_pose(np.eye(3), [150.0, 0.0, 0.0]),
-}
+#: puts the arm (module docstring; the registry entry's ``mount``)
+ARM_MOUNTS: dict[str, np.ndarray] = {name: spec.mount for name, spec in ARMS.items()}
 #: a joint configuration (rad) near the mock P0 with the tool pointing down, elbow up: the
-#: seed of the first inverse kinematics
-HOME_Q: dict[str, tuple[float, ...]] = {
-    "ur5e": (math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0),
-    "vs060": (0.0, 0.5, 1.5, 0.0, 1.14, 0.0),
-}
+#: seed of the first inverse kinematics (the registry entry's ``home_q``)
+HOME_Q: dict[str, tuple[float, ...]] = {name: spec.home_q for name, spec in ARMS.items()}
 #: inverse kinematics converges when the flange is this close to the target (mm, rad)
 IK_TOL_MM = 1e-7
 IK_TOL_RAD = 1e-9
@@ -176,7 +172,8 @@ def reach(model: ArmModel, target: np.ndarray, q_now: np.ndarray | None,
     nearest solution, as a controller's move keeps its configuration), then from the arm's
     home, then from ``_EXTRA_SEEDS`` fixed configurations spread over the joint ranges (a
     target far from both, e.g. a self-calibration pose); None when none converges."""
-    span = float(np.abs(model.dh[:, 1:3]).sum())   # no flange is farther from the base
+    # no flange is farther from the base
+    span = float(np.abs(model.dh[:, 1:3]).sum() + np.linalg.norm(model.flange[:3, 3]))
     if np.linalg.norm(np.asarray(target)[:3, 3] - model.base[:3, 3]) > span:
         return None
     seeds = ([] if q_now is None else [np.asarray(q_now, dtype=np.float64)]) \
@@ -191,7 +188,7 @@ def reach(model: ArmModel, target: np.ndarray, q_now: np.ndarray | None,
     return None
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=16)
 def _identifiable_names(arm: str) -> tuple[str, ...]:
     """Names of the nominal ``arm``'s parameters the gravity wrench identifies, from the
     Jacobian over ``_IDENT_CONFIGS`` random configurations within the joint limits (a fixed
@@ -211,11 +208,12 @@ def _geometric_names(model: ArmModel) -> list[str]:
 
 
 def make_arm(arm: str, errors: str, seed: int) -> ArmPair:
-    """The arm of a mock rig: the nominal ``arm`` ("ur5e" or "vs060"), mounted at
-    ``ARM_MOUNTS[arm]``, and its true model with the hidden ``errors`` ("paper", "all" or
-    "none"; module docstring) drawn from ``np.random.default_rng(seed)``."""
+    """The arm of a mock rig: the nominal ``arm`` (a registered name,
+    ``tmscal.calib.kinematics.ARM_NAMES``), mounted at ``ARM_MOUNTS[arm]``, and its true
+    model with the hidden ``errors`` ("paper", "all" or "none"; module docstring) drawn from
+    ``np.random.default_rng(seed)``."""
     if arm not in NOMINAL:
-        raise ValueError(f"unknown arm {arm!r}; expected one of {', '.join(NOMINAL)}")
+        raise ValueError(f"unknown arm {arm!r}; expected one of {', '.join(ARM_NAMES)}")
     nominal = NOMINAL[arm]
     if errors == "none":
         names: list[str] = []

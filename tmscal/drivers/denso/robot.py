@@ -41,6 +41,7 @@ from ...errors import ConnectionLost, DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
 from ..base import Envelope, Robot
 from ..robot_lock import host_port
+from .arm import denso_arm
 from .client import DEFAULT_PORT, BCAPClient, close_down
 from .halt import HaltLink
 from .variant import to_variant
@@ -159,6 +160,7 @@ class DensoRobot(Robot):
         self._arm = False
         self._motor = False
         self._controller_info: dict[str, Any] = {}
+        self._type_name: str | None = None
 
     @property
     def client(self) -> BCAPClient:
@@ -174,6 +176,7 @@ class DensoRobot(Robot):
         self._ctrl = c.controller_connect("", self.provider, self.machine, "")
         self._robot = c.controller_get_robot(self._ctrl, self.robot_name, "")
         self._controller_info = self._read_controller_info()
+        self._type_name = self._read_type_name()
         self._clear_errors()
         c.take_arm(self._robot)
         self._arm = True
@@ -223,6 +226,20 @@ class DensoRobot(Robot):
                 log.debug("DENSO controller variable %s not readable: %s", var, e)
         return info
 
+    def _read_type_name(self) -> str | None:
+        """The robot's ``@TYPE_NAME`` (best effort: None when it cannot be read)."""
+        assert self._client is not None and self._robot is not None
+        try:
+            h = self._client.robot_get_variable(self._robot, "@TYPE_NAME", "")
+            try:
+                v = self._client.variable_get_value(h)
+            finally:
+                self._client.variable_release(h)
+        except DeviceError as e:
+            log.debug("DENSO robot variable @TYPE_NAME not readable: %s", e)
+            return None
+        return v if isinstance(v, str) else None
+
     def _close(self) -> None:
         halt, self._halt = self._halt, None
         if halt is not None:
@@ -255,10 +272,13 @@ class DensoRobot(Robot):
         return where if self.robot_name == "Arm" else f"{where}/{self.robot_name}"
 
     def identity(self) -> dict[str, Any]:
-        """Driver, endpoint, provider, robot name and what the controller says about itself."""
+        """Driver, endpoint, provider, robot name, what the controller says about itself, the
+        robot's ``@TYPE_NAME`` (``type_name``) and the registered arm it names (``arm``:
+        ``vs060``, ``cobotta``; None when it names none; ``tmscal.drivers.denso.arm``)."""
         return {"driver": self.name, "host": self.host, "port": self.port,
                 "provider": self.provider, "machine": self.machine,
-                "robot_name": self.robot_name, "controller": dict(self._controller_info)}
+                "robot_name": self.robot_name, "controller": dict(self._controller_info),
+                "type_name": self._type_name, "arm": denso_arm(self._type_name)}
 
     def _flange_pose(self) -> np.ndarray:
         """base_from_flange 4×4 mm from CurPos (P-type). A CurPos reply that is not 6 or 7

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import logging
+import re
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -44,7 +45,7 @@ from .frames import base_from_flange, dynamics_factors, ee_target, matrix_m
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FrankaRobot", "fault_from_exception", "COMMUNICATION_TEXT"]
+__all__ = ["FrankaRobot", "fault_from_exception", "arm_from_urdf", "COMMUNICATION_TEXT"]
 
 _JOIN_SLICE_S = 0.05  # how long one wait for the running motion lasts before stop() is checked
 #: the reflex franky/libfranka report when the 1 kHz control loop was not held
@@ -143,6 +144,7 @@ class FrankaRobot(Robot):
             state = self._robot.state
         self._check_state("open")
         self._identity = self._convert(lambda: _identity_of(state), "end-effector frame")
+        self._identity["arm"] = self._arm()
         log.info("franka %s: connected (flange to end effector F_T_EE: %s mm)", self.host,
                  [round(v, 1) for v in np.asarray(self._identity["F_T_EE_mm"])[:3, 3]])
 
@@ -161,10 +163,23 @@ class FrankaRobot(Robot):
         return self.host
 
     def identity(self) -> dict[str, Any]:
-        """Driver, host, franky version and the end-effector frames at open (``F_T_NE_mm``,
-        ``NE_T_EE_mm``, ``F_T_EE_mm``: 4×4 mm); nothing that changes while the robot moves
-        (the joint angles: ``joint_positions()``), so a reconnect finds the same identity."""
+        """Driver, host, franky version, the end-effector frames at open (``F_T_NE_mm``,
+        ``NE_T_EE_mm``, ``F_T_EE_mm``: 4×4 mm) and ``arm`` (``fr3`` or ``panda``: the robot
+        the URDF the controller sends names, :func:`arm_from_urdf`; None when it sends none);
+        nothing that changes while the robot moves (the joint angles: ``joint_positions()``),
+        so a reconnect finds the same identity."""
         return {"driver": self.name, "host": self.host, **self._identity}
+
+    def _arm(self) -> str | None:
+        """The registered arm the controller's robot model names (libfranka's
+        ``getRobotModel``, franky's ``Robot.model_urdf``); None when it cannot tell."""
+        try:
+            urdf = self._robot.model_urdf
+        except Exception as e:  # franky's own types: an FCI without the command, an old build
+            log.info("franka %s: the controller sends no robot model (%s); arm unknown",
+                     self.host, e)
+            return None
+        return arm_from_urdf(urdf)
 
     def joint_positions(self) -> list[float]:
         """The seven joint angles now (rad), for the session or a check."""
@@ -291,6 +306,20 @@ class FrankaRobot(Robot):
         raise RobotFault(f"franka {self.host}: {what} refused: robot in {mode} with errors "
                          f"{errors}: clear them in Desk, or allow recovery with robot.options: "
                          "{auto_recover: true}", text=mode, device=self.name)
+
+
+_ROBOT_NAME = re.compile(r"<robot\b[^>]*?\bname\s*=\s*[\"']([^\"']{1,100})[\"']")
+
+
+def arm_from_urdf(urdf: Any) -> str | None:
+    """The registered Franka arm (``fr3``, ``panda``) the robot description ``urdf`` (the
+    text libfranka's ``getRobotModel`` returns) names in its ``<robot name="…">``; None when
+    it names none of them. An FR3's controller sends its own URDF (``<robot name="fr3">``;
+    franky-sim sends its FR3's); a controller that sends none leaves the arm unknown."""
+    from ...calib.kinematics import find_arm
+
+    m = _ROBOT_NAME.search(urdf) if isinstance(urdf, str) else None
+    return None if m is None else find_arm("Franka", m.group(1))
 
 
 def _identity_of(state: Any) -> dict[str, Any]:

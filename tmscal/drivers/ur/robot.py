@@ -36,6 +36,7 @@ from ...errors import (
 from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
 from ...timing import Deadline
 from ..base import Envelope, Robot
+from .arm import ur_arm
 from .calls import RTDECalls
 from .states import (
     MODE_ACTION,
@@ -157,6 +158,9 @@ class URRobot(RTDECalls, Robot):
         # serves it to the External Control URCap and skips the remote-control check
         flags = F.FLAG_UPLOAD_SCRIPT if self.upload_script else F.FLAG_USE_EXT_UR_CAP
         self._identity = self._dashboard_check("connect")
+        self._identity["arm"] = ur_arm(self._identity.get("model"),
+                                       self._identity.get("controller_version"),
+                                       self._identity.get("serial"))
         with self._translated("connect"):
             self._rx = rtde_receive.RTDEReceiveInterface(self.host, freq, RECEIVE_VARIABLES)
             if not self.upload_script:
@@ -206,7 +210,9 @@ class URRobot(RTDECalls, Robot):
         return self.host
 
     def identity(self) -> dict[str, Any]:
-        """Driver, host, controller (PolyScope) version, serial number, model, TCP offset."""
+        """Driver, host, controller (PolyScope) version, serial number, model, ``arm`` (the
+        registered arm the dashboard's answers name, ``tmscal.drivers.ur.arm``: ``ur5e``,
+        ``ur10``, …; None when they do not tell), TCP offset."""
         return {"driver": self.name, "host": self.host, **self._identity}
 
     def _dashboard_check(self, what: str) -> dict[str, Any]:

@@ -12,7 +12,8 @@ What it models (enough for tmscal's driver and DENSO's own b-CAP clients):
   ``"@E P(x, y, z, rx, ry, rz, fig)"`` or VARIANT array ``[[x, …, fig], "P", "@E"]``; options
   ``SPEED=<percent>``, ``ACCEL=<percent>``, ``DECEL=<percent>`` and ``NEXT``), Robot_Halt,
   Robot_Speed, Robot_GetVariable
-  (``@CURRENT_POSITION``, ``@CURRENT_ANGLE``), Robot_Release, Variable_GetValue / PutValue /
+  (``@CURRENT_POSITION``, ``@CURRENT_ANGLE``, ``@TYPE_NAME``: the model of the rig's DENSO arm),
+  Robot_Release, Variable_GetValue / PutValue /
   Release (controller ``@VERSION``, ``@MODE`` and user variables ``I1``, ``F2``, ``D3``,
   ``S4``, ``P5`` …).
 * Handles per connection (released when the connection closes, with the arm); the motor and

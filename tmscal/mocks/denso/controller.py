@@ -63,11 +63,24 @@ DEFERRED = object()
 SETTLE_S = 0.05
 
 _CONTROLLER_VARIABLES = ("@VERSION", "@MODE")
-_ROBOT_VARIABLES = ("@CURRENT_POSITION", "@CURRENT_ANGLE")
+_ROBOT_VARIABLES = ("@CURRENT_POSITION", "@CURRENT_ANGLE", "@TYPE_NAME")
+#: ``@TYPE_NAME`` of a mock whose rig has no DENSO arm (a real controller always names one)
+NO_ARM_TYPE_NAME = "tmscal b-CAP mock (no DENSO arm)"
 _USER_VAR = re.compile(r"^([IFDSPJV])(\d+)$", re.IGNORECASE)
 
 
 Handler = Callable[[Session, int, list[Variant]], Any]
+
+
+def _type_name(rig: SimRig) -> str:
+    """The robot's ``@TYPE_NAME``: the model name of the rig's DENSO arm (the arm registry's:
+    ``VS-060``, ``COBOTTA``), else ``NO_ARM_TYPE_NAME``."""
+    from ...calib.kinematics import ARMS
+
+    arm = rig.arm_nominal
+    spec = ARMS.get(arm.name) if arm is not None else None
+    return spec.controller_model if spec is not None and spec.vendor == "DENSO" \
+        else NO_ARM_TYPE_NAME
 
 
 class DensoController:
@@ -89,7 +102,11 @@ class DensoController:
                         ("max_linear_accel_mm_s2", max_linear_accel_mm_s2)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {v}")
+        if rig.arm_nominal is not None and rig.arm_nominal.n_joints != 6:
+            raise ValueError(f"the DENSO driver reads six arm axes; mock.kinematics.arm "
+                             f"{rig.arm_nominal.name} has {rig.arm_nominal.n_joints}")
         self.rig = rig
+        self.type_name = _type_name(rig)
         self.clock = clock
         self.max_linear_speed_mm_s = float(max_linear_speed_mm_s)
         self.max_linear_accel_mm_s2 = float(max_linear_accel_mm_s2)
@@ -320,6 +337,7 @@ class DensoController:
 
     def _var_value(self, name: str) -> Variant:
         fixed = {"@CURRENT_ANGLE": self._cur_jnt(),
+                 "@TYPE_NAME": Variant(VT_BSTR, self.type_name),
                  "@VERSION": Variant(VT_BSTR, "tmscal DENSO b-CAP mock 1.0"),
                  "@MODE": Variant(VT_I4, 3)}
         if name == "@CURRENT_POSITION":

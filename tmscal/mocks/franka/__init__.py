@@ -27,6 +27,9 @@ FR3 and produces no controller errors (no reflexes, no joint-limit or
 communication-constraint checks): ``FrankaFaults`` has no faults to inject.
 
 ``mock.clock`` must be ``real``: libfranka's control loop runs at 1 kHz of wall-clock time.
+``mock.kinematics`` may name only ``fr3`` (the arm franky-sim simulates, docs/kinematics.md):
+the rig then puts the flange where the TRUE arm is at the joints that reach franky-sim's
+flange, so the tracker sees the hidden errors and the controller reports the nominal arm.
 """
 
 from __future__ import annotations
@@ -156,6 +159,10 @@ class FrankaMock(MockDevice):
                  faults: FrankaFaults | None = None, initial_q: Sequence[float] | None = None,
                  update_every: int = 5) -> None:
         loopback_family(host, "franka mock host")
+        if rig.arm_nominal is not None and rig.arm_nominal.name != "fr3":
+            raise ValueError(f"franky-sim simulates an FR3: mock.kinematics.arm must be fr3 (its "
+                             f"hidden errors then move the flange the tracker sees) or absent, "
+                             f"not {rig.arm_nominal.name}")
         if clock.fast:
             raise ValueError("the franka mock runs franky-sim, whose 1 kHz control loop needs "
                              "wall-clock time: set mock.clock: real")

@@ -56,6 +56,34 @@ MAX_SCRIPT_BYTES = 4_000_000
 
 
 
+#: the controller software a mock answers for a CB3 arm, and for an e-Series one (or none)
+CB3_VERSION = (3, 15, 8, 106339)
+E_SERIES_VERSION = (5, 11, 0, 108249)
+
+
+def _identity(rig: SimRig, version: tuple[int, int, int, int] | None, serial: str | None,
+              model: str | None) -> tuple[tuple[int, ...], str, str]:
+    """(version, serial, model) a controller of the rig's arm answers (the arm registry's
+    entry for a UR arm; a UR5e's without one), the given ones kept. ValueError for an arm
+    whose joints RTDE cannot report (not six)."""
+    from ...calib.kinematics import ARMS
+
+    arm = rig.arm_nominal
+    if arm is not None and arm.n_joints != 6:
+        raise ValueError(f"the UR mock reports six joints (RTDE actual_q); mock.kinematics.arm "
+                         f"{arm.name} has {arm.n_joints}")
+    spec = ARMS.get(arm.name) if arm is not None else None
+    if spec is None or spec.vendor != "Universal Robots":
+        spec = ARMS["ur5e"]
+        default_serial = "20185500001"
+    else:
+        default_serial = spec.mock_serial or ""
+    cb3 = spec.generation == "CB3"
+    return (tuple(version) if version is not None else CB3_VERSION if cb3 else E_SERIES_VERSION,
+            default_serial if serial is None else serial,
+            spec.controller_model if model is None else model)
+
+
 class URMock(URController, MockDevice):
     """A Universal Robots controller (RTDE 30004, dashboard 29999, script 30003) serving ``rig``.
 
@@ -75,10 +103,15 @@ class URMock(URController, MockDevice):
     version:
         Controller software version (major, minor, bugfix, build) reported on RTDE and by the
         dashboard's ``PolyscopeVersion``. ≥ 5.6 makes ur_rtde query version and serial.
+        None: as the rig's arm's controller would (``mock.kinematics``: a CB3 arm 3.15.8,
+        an e-Series one 5.11.0; no UR arm: 5.11.0).
     serial:
-        Serial number reported by ``get serial number``.
+        Serial number reported by ``get serial number`` (None: the arm registry's for the
+        rig's UR arm, ``ArmSpec.mock_serial``; otherwise a UR5e's, 20185500001).
     model:
-        Robot model reported by ``get robot model``.
+        Robot model reported by ``get robot model`` (None: the rig's UR arm's, as its
+        controller answers it: ``UR5`` for a UR5 and a UR5e alike; otherwise ``UR5``).
+        A rig whose arm is not a six-joint arm is refused (RTDE reports six joints).
     program_running:
         True (default): a control program is already running at start (runtime_state 2,
         ready), as it must be for clients using ``flags=0``; with the default upload flag
@@ -99,14 +132,15 @@ class URMock(URController, MockDevice):
     """
 
     def __init__(self, rig: SimRig, host: str = "127.0.0.2", clock: Clock = REAL_TIME,
-                 faults: URFaults = URFaults(), version: tuple[int, int, int, int] = (
-                     5, 11, 0, 108249),
-                 serial: str = "20185500001", model: str = "UR5",
+                 faults: URFaults = URFaults(),
+                 version: tuple[int, int, int, int] | None = None,
+                 serial: str | None = None, model: str | None = None,
                  program_running: bool = True, robot_mode: int = ROBOT_MODE_RUNNING,
                  remote_control: bool = True, urcap_port: int | None = None,
                  urcap_host: str = "127.0.0.1", play_when_ready: bool = False) -> None:
         loopback_family(host, "URMock host")  # refuses a non-loopback host at once
         loopback_family(urcap_host, "URMock urcap_host")
+        version, serial, model = _identity(rig, version, serial, model)
         if len(version) != 4:
             raise ValueError(f"version must be (major, minor, bugfix, build), got {version!r}")
         super().__init__(rig, clock=clock, faults=faults,

@@ -1,0 +1,228 @@
+"""The serial-arm model: a Denavit–Hartenberg chain (standard or modified), a base and a flange,
+joint limits, and batched forward kinematics. Pure numerics, no I/O; docs/kinematics.md.
+
+Frames and units (mm, rad; poses 4×4 float64):
+
+* ``base`` is world ← robot base (DH frame 0). The world is the rig's frame (for self-
+  calibration: z up, gravity (0, 0, −g)); with ``base`` = identity the world IS the robot's
+  base frame, the frame the controller reports in.
+* joint i (1…n) moves its row ``dh[i-1] = [θ0_i rad, d_i mm, a_i mm, α_i rad]`` by the joint
+  value q_i (rad):
+
+  - ``"standard"`` DH (Denavit and Hartenberg 1955; Universal Robots, DENSO here):
+    T_i = Rz(q_i + θ0_i) · Tz(d_i) · Tx(a_i) · Rx(α_i);
+  - ``"modified"`` DH (Craig 1989; Franka here): T_i = Rx(α_i) · Tx(a_i) · Rz(q_i + θ0_i) ·
+    Tz(d_i), where row i holds the a and α Craig writes a_{i−1}, α_{i−1} (the ones that come
+    before joint i).
+
+* ``flange`` is DH frame n ← mechanical flange (the controller's flange frame, UR's
+  ``tool0``, Franka's F): it makes the DH convention and the controller's flange agree.
+
+So the flange in the world is ``forward(arm, q)`` = base · T_1 ⋯ T_n · flange, and in the robot's
+own base frame (what a controller reports, the tmscal A) ``base_from_flange(arm, q)`` =
+T_1 ⋯ T_n · flange.
+
+The geometric parameter vector (``Arm.geometry_vector``, names ``Arm.geometry_names``), in this
+one order: per joint i = 1…n ``theta0_i`` rad, ``d_i`` mm, ``a_i`` mm, ``alpha_i`` rad (the DH
+row); ``base_roll/pitch/yaw`` rad and ``base_x/y/z`` mm (base = Trans(xyz) · Rz(yaw) Ry(pitch)
+Rx(roll)); ``flange_roll/pitch/yaw`` rad and ``flange_x/y/z`` mm (the same form for
+``flange``). 4n + 12 parameters. Their pose Jacobian: :mod:`.jacobian`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ...geometry import rot_x, rot_y, rot_z
+
+__all__ = ["Arm", "CONVENTIONS", "forward", "base_from_flange", "joint_frames",
+           "pose_from_rpy", "rpy_from_matrix", "dh_matrices", "check_joints"]
+
+#: the DH conventions an arm's table may be written in (module docstring)
+CONVENTIONS = ("standard", "modified")
+_POSE_NAMES = ("roll", "pitch", "yaw", "x", "y", "z")
+_POSE_UNITS = ("rad",) * 3 + ("mm",) * 3
+
+
+def pose_from_rpy(rpy: Any, xyz: Any) -> np.ndarray:
+    """4×4 pose (mm) Trans(xyz) · Rz(yaw) · Ry(pitch) · Rx(roll) from ``rpy`` = (roll, pitch,
+    yaw) rad and ``xyz`` mm (fixed axes, roll applied first)."""
+    r, p, y = (float(v) for v in rpy)
+    T = np.eye(4)
+    T[:3, :3] = rot_z(y) @ rot_y(p) @ rot_x(r)
+    T[:3, 3] = np.asarray(xyz, dtype=float)
+    return T
+
+
+def rpy_from_matrix(R: Any) -> np.ndarray:
+    """(roll, pitch, yaw) rad of a rotation R = Rz(yaw) Ry(pitch) Rx(roll) (3×3 or the 3×3 block
+    of a 4×4); pitch in [−π/2, π/2]. At pitch = ±π/2 (gimbal lock) roll is set to 0."""
+    R = np.asarray(R, dtype=float)[:3, :3]
+    pitch = math.asin(max(-1.0, min(1.0, -R[2, 0])))
+    if abs(R[2, 0]) < 1.0 - 1e-12:
+        return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
+    return np.array([0.0, pitch, math.atan2(-R[0, 1], R[1, 1])])
+
+
+def _pose6(T: np.ndarray) -> np.ndarray:
+    return np.concatenate([rpy_from_matrix(T), T[:3, 3]])
+
+
+@dataclass(frozen=True)
+class Arm:
+    """A serial arm's geometry (module docstring; docs/kinematics.md).
+
+    ``name``: the arm's name (a registry name such as ``"ur5e"``, or any label); ``dh``: (n, 4)
+    rows [θ0 rad, d mm, a mm, α rad] in ``convention`` ("standard" or "modified"); ``base``:
+    4×4 mm, world ← robot base; ``flange``: 4×4 mm, DH frame n ← the controller's flange;
+    ``joint_limits_rad``: (n, 2) [low, high] rad (None: ±2π each)."""
+
+    name: str
+    dh: np.ndarray
+    base: np.ndarray = field(default_factory=lambda: np.eye(4))
+    joint_limits_rad: np.ndarray | None = None
+    convention: str = "standard"
+    flange: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def __post_init__(self) -> None:
+        dh = np.array(self.dh, dtype=float)
+        if dh.ndim != 2 or dh.shape[1] != 4 or len(dh) == 0 or not np.all(np.isfinite(dh)):
+            raise ValueError(f"dh must be a finite (n, 4) array, got shape {dh.shape}")
+        if self.convention not in CONVENTIONS:
+            raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got "
+                             f"{self.convention!r}")
+        lim = self.joint_limits_rad
+        lim = np.tile([-2 * math.pi, 2 * math.pi], (len(dh), 1)) if lim is None \
+            else np.array(lim, dtype=float)
+        if lim.shape != (len(dh), 2) or not np.all(np.isfinite(lim)) \
+                or np.any(lim[:, 0] > lim[:, 1]):
+            raise ValueError(f"joint_limits_rad must be finite, ({len(dh)}, 2), with low ≤ high")
+        for key in ("base", "flange"):
+            arr = np.array(getattr(self, key), dtype=float)
+            if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
+                raise ValueError(f"{key} must be a finite 4×4 array")
+            object.__setattr__(self, key, arr)
+        object.__setattr__(self, "dh", dh)
+        object.__setattr__(self, "joint_limits_rad", lim)
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n."""
+        return len(self.dh)
+
+    # --- the geometric parameter vector ------------------------------------------------------
+
+    def geometry_names(self) -> list[str]:
+        """Names of the geometric parameters, in their one order (module docstring)."""
+        per = [f"{k}_{i + 1}" for i in range(self.n_joints)
+               for k in ("theta0", "d", "a", "alpha")]
+        return per + [f"base_{k}" for k in _POSE_NAMES] + [f"flange_{k}" for k in _POSE_NAMES]
+
+    def geometry_units(self) -> list[str]:
+        """Unit of each geometric parameter: "rad" or "mm"."""
+        return ["rad", "mm", "mm", "rad"] * self.n_joints + list(_POSE_UNITS) * 2
+
+    def geometry_vector(self) -> np.ndarray:
+        """The geometric parameters (4n + 12,), in the order of :meth:`geometry_names`."""
+        return np.concatenate([self.dh.ravel(), _pose6(self.base), _pose6(self.flange)])
+
+    def with_geometry(self, p: Any) -> Any:
+        """A copy with the geometric parameters ``p`` (order of :meth:`geometry_names`); every
+        other field (of a subclass too) is kept."""
+        p = np.asarray(p, dtype=float)
+        k = 4 * self.n_joints
+        if p.shape != (k + 12,):
+            raise ValueError(f"p must have {k + 12} entries, got shape {p.shape}")
+        return replace(self, dh=p[:k].reshape(-1, 4),
+                       base=pose_from_rpy(p[k:k + 3], p[k + 3:k + 6]),
+                       flange=pose_from_rpy(p[k + 6:k + 9], p[k + 9:k + 12]))
+
+    # --- plain types ---------------------------------------------------------------------------
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain lists and strings (for YAML/JSON): name, convention, dh, base, flange,
+        joint_limits_rad — the keys of :meth:`from_dict`."""
+        return {"name": self.name, "convention": self.convention, "dh": self.dh.tolist(),
+                "base": self.base.tolist(), "flange": self.flange.tolist(),
+                "joint_limits_rad": self.joint_limits_rad.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Arm:
+        """The arm :meth:`to_dict` wrote (``convention`` and ``flange`` optional: standard,
+        identity). Raises ValueError naming a missing or bad key."""
+        try:
+            return cls(name=d["name"], dh=d["dh"], base=d["base"],
+                       joint_limits_rad=d["joint_limits_rad"],
+                       convention=d.get("convention", "standard"),
+                       flange=d.get("flange", np.eye(4)))
+        except KeyError as e:
+            raise ValueError(f"arm: missing key {e.args[0]!r}") from None
+        except TypeError as e:
+            raise ValueError(f"arm: {e}") from None
+
+
+def check_joints(arm: Arm, q: Any) -> np.ndarray:
+    """q (…, n) as a float array; ValueError when its last axis is not the arm's n joints."""
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 0 or q.shape[-1] != arm.n_joints:
+        raise ValueError(f"q must have {arm.n_joints} joint values on its last axis, "
+                         f"got shape {q.shape}")
+    return q
+
+
+def dh_matrices(dh: np.ndarray, q: np.ndarray, convention: str = "standard") -> np.ndarray:
+    """(…, n, 4, 4) joint transforms T_i (module docstring) of the DH rows ``dh`` (n, 4) for
+    joint values q (…, n) rad; lengths in mm."""
+    th = q + dh[:, 0]
+    d, a, al = dh[:, 1], dh[:, 2], dh[:, 3]
+    ct, st = np.cos(th), np.sin(th)
+    ca, sa = np.broadcast_to(np.cos(al), th.shape), np.broadcast_to(np.sin(al), th.shape)
+    d, a = np.broadcast_to(d, th.shape), np.broadcast_to(a, th.shape)
+    T = np.zeros(th.shape + (4, 4))
+    if convention == "standard":   # Rz(θ) Tz(d) Tx(a) Rx(α)
+        T[..., 0, 0], T[..., 0, 1], T[..., 0, 2], T[..., 0, 3] = ct, -st * ca, st * sa, a * ct
+        T[..., 1, 0], T[..., 1, 1], T[..., 1, 2], T[..., 1, 3] = st, ct * ca, -ct * sa, a * st
+        T[..., 2, 1], T[..., 2, 2], T[..., 2, 3] = sa, ca, d
+    elif convention == "modified":  # Rx(α) Tx(a) Rz(θ) Tz(d)
+        T[..., 0, 0], T[..., 0, 1], T[..., 0, 3] = ct, -st, a
+        T[..., 1, 0], T[..., 1, 1], T[..., 1, 2], T[..., 1, 3] = st * ca, ct * ca, -sa, -sa * d
+        T[..., 2, 0], T[..., 2, 1], T[..., 2, 2], T[..., 2, 3] = st * sa, ct * sa, ca, ca * d
+    else:
+        raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got "
+                         f"{convention!r}")
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def joint_frames(arm: Arm, q: Any) -> np.ndarray:
+    """World ← frame i for i = 0…n, shape (…, n + 1, 4, 4) mm, for joint values q (…, n) rad:
+    frame 0 is the base (``arm.base``), frame i the DH frame after joint i (frame n is the
+    last DH frame; the flange is frame n · ``arm.flange``)."""
+    q = check_joints(arm, q)
+    T = dh_matrices(arm.dh, q, arm.convention)
+    out = np.empty(q.shape[:-1] + (arm.n_joints + 1, 4, 4))
+    out[..., 0, :, :] = arm.base
+    for i in range(arm.n_joints):
+        out[..., i + 1, :, :] = out[..., i, :, :] @ T[..., i, :, :]
+    return out
+
+
+def base_from_flange(arm: Arm, q: Any) -> np.ndarray:
+    """Robot base ← flange (…, 4, 4) mm for joint values q (…, n) rad: T_1 ⋯ T_n · flange,
+    without ``arm.base`` (what the controller reports: the tmscal A)."""
+    q = check_joints(arm, q)
+    T = dh_matrices(arm.dh, q, arm.convention)
+    out = np.broadcast_to(np.eye(4), q.shape[:-1] + (4, 4)).copy()
+    for i in range(arm.n_joints):
+        out = out @ T[..., i, :, :]
+    return out @ arm.flange
+
+
+def forward(arm: Arm, q: Any) -> np.ndarray:
+    """World ← flange (…, 4, 4) mm for joint values q (…, n) rad: base · T_1 ⋯ T_n · flange
+    (equal to :func:`base_from_flange` when ``arm.base`` is the identity)."""
+    return arm.base @ base_from_flange(arm, q)
