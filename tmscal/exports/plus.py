@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import datetime as _dt
 from typing import Any
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from .calibfile import CalibrationFile
+from .escape import xml_attr, xml_comment
 
 __all__ = ["FRAMES", "TOOL_IDS", "matrix_text", "render"]
 
@@ -60,10 +60,10 @@ def _port_attrs(tracker: dict[str, Any]) -> list[str]:
     port = tracker.get("port")
     if isinstance(port, str) and port.startswith("socket://"):
         host, _, num = port.removeprefix("socket://").rpartition(":")
-        return [f"NetworkHostname={quoteattr(host)}", f"NetworkPort={quoteattr(num)}"]
-    out = [f"SerialPort={quoteattr(str(port) if port else 'CHECK: the tracker port')}"]
+        return [f"NetworkHostname={xml_attr(host)}", f"NetworkPort={xml_attr(num)}"]
+    out = [f"SerialPort={xml_attr(str(port) if port else 'CHECK: the tracker port')}"]
     if tracker.get("baud"):
-        out.append(f"BaudRate={quoteattr(str(tracker['baud']))}")
+        out.append(f"BaudRate={xml_attr(str(tracker['baud']))}")
     return out
 
 
@@ -75,12 +75,12 @@ def _device(cf: CalibrationFile) -> list[str]:
     attrs = ['Id="TrackerDevice"', 'Type="NDITracker"', *_port_attrs(tracker),
              'ToolReferenceFrame="Tracker"']
     if tracker.get("frame_rate_hz"):
-        attrs.insert(2, f"AcquisitionRate={quoteattr(str(tracker['frame_rate_hz']))}")
+        attrs.insert(2, f"AcquisitionRate={xml_attr(str(tracker['frame_rate_hz']))}")
     lines = ["    <Device " + "\n      ".join(attrs) + " >", "      <DataSources>"]
     for b in bodies:
         rom = tools.get(b) or f"CHECK: the {b} tool's ROM file"
         lines.append(f'        <DataSource Type="Tool" Id="{TOOL_IDS[b]}" '
-                     f"RomFile={quoteattr(rom)} />")
+                     f"RomFile={xml_attr(rom)} />")
     lines += ["      </DataSources>", "      <OutputChannels>",
               '        <OutputChannel Id="TrackerStream" >']
     lines += [f'          <DataSource Id="{TOOL_IDS[b]}" />' for b in bodies]
@@ -94,12 +94,12 @@ def render(cf: CalibrationFile) -> str:
     date = _date(cf.created)
     known = ("as the session's rig config wrote them (relative to its folder)" if cf.tools
              else "placeholders: fill in CHECK")
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f"<!-- tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 "
-             "numbers row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
-             "(flange_from_marker), CoilCentreToFlange = Y (flange_from_probe), "
-             "TrackerToRobotBase = Z (base_from_tracker). Error: hold-out translation error, "
-             f"mm. Tool ROM files and port: {known}. -->",
+    note = (f"tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 numbers "
+            "row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
+            "(flange_from_marker), CoilCentreToFlange = Y (flange_from_probe), "
+            "TrackerToRobotBase = Z (base_from_tracker). Error: hold-out translation error, "
+            f"mm. Tool ROM files and port: {known}.")
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- {xml_comment(note)} -->",
              '<PlusConfiguration version="2.1">',
              '  <DataCollection StartupDelaySec="1.0" >',
              '    <DeviceSet Name="tmscal: NDI tracker and the robot calibration" '
@@ -111,6 +111,6 @@ def render(cf: CalibrationFile) -> str:
         if M is None:
             continue
         lines.append(f'    <Transform From="{a}" To="{b}" Matrix="{matrix_text(M)}" '
-                     f'Error="{_error(cf.doc, k)}" Date="{date}" />')
+                     f'Error={xml_attr(_error(cf.doc, k))} Date={xml_attr(date)} />')
     lines += ["  </CoordinateDefinitions>", "</PlusConfiguration>", ""]
     return "\n".join(lines)
