@@ -191,3 +191,29 @@ def test_the_helpers_by_character_class():
         assert p.tags == ["p"] and "".join(p.text) == visible(s)
     assert ET.fromstring(f"<a b={xml_attr('tab	here')}/>").get("b") == "tab\there"
     assert visible("a\nb", newlines=True) == "a\nb" and visible("a\nb") == r"a\x0ab"
+
+
+def test_report_of_a_hostile_stored_calibration_is_clean(calib, tmp_path):
+    """`report --calib`: the calibration's method (in the <pre> tables and the text above
+    them), its file name, session path and date come from the file."""
+    doc = yaml.safe_load(calib.read_text())
+    doc["method"] = f"qr36 {MARKUP} {CONTROLS}"
+    doc["session"] = {"path": f"/data/{CONTROLS}.jsonl", "sha256": "0" * 64}  # held out
+    doc["created"] = f"2024 {MARKUP}"
+    bad = tmp_path / "rlo\u202ec.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "r.html"
+    run("report", calib.parent / "s.jsonl", "--calib", bad, "-o", out)
+    page = out.read_text(encoding="utf-8")
+    _clean(page)
+    assert MARKUP not in page
+    p = _Text()
+    p.feed(page)
+    assert "b" not in p.tags
+    text = "".join(p.text)
+    shown = r"esc\x1b[31m bel\x07 rlo\u202eevil"
+    # the tables name the method in capitals: the escapes made after
+    method = "QR36 " + MARKUP.upper() + r" ESC\x1b[31M BEL\x07 RLO\u202eEVIL"
+    assert f"errors: the stored {method} calibration" in text  # the <pre> error table
+    assert f"/data/{shown}.jsonl" in text and f"2024 {MARKUP}" in text
+    assert r"rlo\u202ec.yaml" in text

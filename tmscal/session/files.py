@@ -117,8 +117,9 @@ class Session:
 
 
 def _open_regular(p: Path, flags: int, what: str) -> int:
-    """os.open for a regular file only: a FIFO, device or directory is refused without
-    blocking (checked before opening, opened non-blocking, and checked again after)."""
+    """os.open of an existing regular file only (reading, resuming; new files are made by
+    ``outputs.new_temp``): a FIFO, device or directory is refused without blocking (checked
+    before opening, opened non-blocking, and checked again after)."""
     try:
         st = os.stat(p)
     except FileNotFoundError:
@@ -129,10 +130,7 @@ def _open_regular(p: Path, flags: int, what: str) -> int:
         kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
         raise SessionError(f"{p}: {kind}; a session is a regular file")
     try:
-        fd = os.open(p, flags | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0), 0o644)
-    except FileExistsError:
-        raise SessionError(f"{p}: already exists; refusing to overwrite "
-                           "(choose another name, or resume it)") from None
+        fd = os.open(p, flags | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as e:
         if e.errno == errno.ENXIO:
             raise SessionError(f"{p}: not a regular file; a session is a regular file") \
