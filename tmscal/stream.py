@@ -1,7 +1,8 @@
 """Live OpenIGTLink streaming of the tracked coil through a calibration (``tmscal stream``).
 
-An OpenIGTLink server (the ``pyigtl`` package) that a navigation program such as 3D Slicer's
-OpenIGTLinkIF module connects to as a client. For every distinct tracker frame it sends one
+An OpenIGTLink server (messages packed by the ``pyigtl`` package) that navigation programs
+such as 3D Slicer's OpenIGTLinkIF module connect to as clients, several at once, each with its
+own limits (:class:`StreamServer`). For every distinct tracker frame it sends one
 TRANSFORM message per name in :data:`TRANSFORMS` (docs/streaming.md):
 
 ==================== ============================================================
@@ -27,19 +28,22 @@ This module has no CLI: :mod:`tmscal.cli.stream` parses the options and shows th
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import select
 import socket
 import socketserver
+import struct
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pyigtl
-from pyigtl.comm import OpenIGTLinkBase
 
 from .calib import Calibration
 from .drivers.base import Tracker, TrackerFrame
@@ -47,13 +51,30 @@ from .drivers.base import Tracker, TrackerFrame
 log = logging.getLogger(__name__)
 
 __all__ = ["TRANSFORMS", "MAX_NAME_BYTES", "DEFAULT_PORT", "frame_transforms", "StreamServer",
-           "StreamStats", "stream_frames"]
+           "StreamStats", "stream_frames", "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S",
+           "MAX_BODY_BYTES"]
 
 #: OpenIGTLink's registered TCP port, the default of Slicer's OpenIGTLinkIF and PlusServer
 DEFAULT_PORT = 18944
 
 #: the OpenIGTLink header's device name field is 20 bytes
 MAX_NAME_BYTES = 20
+
+#: the OpenIGTLink header (version 1 and 2): 58 bytes
+HEADER_BYTES = 58
+
+#: per-client limits (docs/streaming.md): clients served at once; frames queued for a client
+#: that reads more slowly than the tracker sends (then its oldest are dropped); seconds a
+#: client may take no data while frames wait before it is disconnected; the largest message
+#: body a client may send (its header announcing more closes the connection); the kernel
+#: send buffer asked for each client (about 150 frames: a slow client lags by little)
+MAX_CLIENTS = 8
+QUEUE_FRAMES = 64
+STALL_S = 10.0
+MAX_BODY_BYTES = 1 << 20
+SOCKET_BUFFER_BYTES = 64 * 1024
+
+_POLL_S = 0.05
 
 #: device name → what it is (frames and formula); the order in which each frame is sent
 TRANSFORMS: dict[str, str] = {
@@ -101,53 +122,243 @@ def _family(host: str) -> socket.AddressFamily:
     return socket.AF_INET if socket.AF_INET in fams or not fams else socket.AF_INET6
 
 
+class _Refused(Exception):
+    """A client broke a per-client limit; its connection is closed (the message says why)."""
+
+
+class _Client:
+    """One connected client's state, shared by its handler thread and the stream loop: a
+    bounded queue of frames to send (each the packed TRANSFORM messages of one tracker
+    frame; the oldest dropped when it is full), when it last accepted data, and a pipe that
+    wakes its handler when a frame is queued (or the server stops)."""
+
+    def __init__(self, peer: str, queue_frames: int) -> None:
+        self.peer = peer
+        self.queue: deque[bytes] = deque(maxlen=queue_frames)
+        self.lock = threading.Lock()
+        self.dropped = 0
+        self.progress = time.monotonic()
+        self.closed = False
+        self.wake_r, self.wake_w = os.pipe()
+        for fd in (self.wake_r, self.wake_w):
+            os.set_blocking(fd, False)
+
+    def offer(self, frame: bytes) -> None:
+        with self.lock:
+            if len(self.queue) == self.queue.maxlen:
+                self.dropped += 1  # the deque drops the oldest frame
+            self.queue.append(frame)
+            self._wake()
+
+    def wake(self) -> None:
+        with self.lock:
+            self._wake()
+
+    def _wake(self) -> None:  # under the lock: never a write to a closed (reused) fd
+        if not self.closed:
+            with contextlib.suppress(OSError):  # the pipe is full: a wake-up is pending
+                os.write(self.wake_w, b"!")
+
+    def woken(self) -> None:
+        with contextlib.suppress(OSError):
+            os.read(self.wake_r, 4096)
+
+    def close(self) -> None:
+        with self.lock:
+            self.closed = True
+            for fd in (self.wake_r, self.wake_w):
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+
+    def take(self) -> bytes | None:
+        with self.lock:
+            return self.queue.popleft() if self.queue else None
+
+    def waiting(self) -> bool:
+        with self.lock:
+            return bool(self.queue)
+
+
 class _Handler(socketserver.BaseRequestHandler):
-    """One connected client: send what is queued, read (and drop) what the client sends. A
-    client that hangs up or sends garbage ends this connection only, with one log line; the
-    server then waits for the next client."""
+    """One connected client, in its own thread: sends its queued frames as fast as it takes
+    them (never blocking: select and non-blocking sends), and reads and drops what it
+    sends, refusing a message whose header announces a body above the server's
+    ``max_body_bytes`` before reading any of it. A client that accepts nothing for
+    ``stall_s`` seconds while frames wait is disconnected. A client that hangs up, sends
+    garbage or breaks a limit ends its own connection only, with one log line."""
 
     def handle(self) -> None:
         srv: StreamServer = self.server  # type: ignore[assignment]
-        peer = f"{self.client_address[0]}:{self.client_address[1]}"
-        with srv.lock_outgoing_messages:
-            srv.outgoing_messages.clear()  # nothing stale from before this client
-        srv.peer = peer
-        srv._connected = True
-        self.request.settimeout(0.01)
+        sock: socket.socket = self.request
+        client = srv._claim(self.client_address)
+        peer = client.peer
+        sock.setblocking(False)
+        with contextlib.suppress(OSError):  # a small kernel queue: a slow client lags less
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, srv.socket_buffer_bytes)
         log.info("OpenIGTLink client %s connected", peer)
+        why = "disconnected"
         try:
-            while not srv.communication_thread_stop_requested:
-                while srv._receive_message_from_socket(self.request):
-                    pass
-                while srv._send_queued_message_from_socket(self.request):
-                    pass
+            self._serve(srv, sock, client)
+        except _Refused as e:
+            why = str(e)
+            log.warning("OpenIGTLink client %s: %s; connection closed", peer, e)
         except Exception as e:  # a peer on the network: any failure ends its connection
-            log.info("OpenIGTLink client %s disconnected (%s)", peer, e)
+            why = f"disconnected ({e})"
         finally:
-            srv._connected = False
-            srv.peer = None
-            srv.clients += 1
+            srv._remove(client)
+            log.info("OpenIGTLink client %s %s (%d frames dropped for it)", peer, why,
+                     client.dropped)
+
+    def _serve(self, srv: StreamServer, sock: socket.socket, client: _Client) -> None:
+        pending = b""
+        incoming = _Incoming(srv.max_body_bytes)
+        while not srv._stopping.is_set():
+            if not pending:
+                pending = client.take() or b""
+                if not pending:
+                    client.progress = time.monotonic()  # nothing waits for it
+            r, w, _ = select.select([sock, client.wake_r], [sock] if pending else [], [],
+                                    _POLL_S)
+            if client.wake_r in r:
+                client.woken()
+            if sock in r:
+                data = sock.recv(65536)
+                if not data:
+                    return  # the client hung up
+                incoming.feed(data)
+            if w and pending:
+                try:
+                    n = sock.send(pending)
+                except BlockingIOError:
+                    n = 0
+                if n:
+                    pending = pending[n:]
+                    client.progress = time.monotonic()
+            if pending and time.monotonic() - client.progress > srv.stall_s:
+                raise _Refused(f"took no data for {srv.stall_s:g} s (not reading?)")
 
 
-class StreamServer(pyigtl.OpenIGTLinkServer):  # type: ignore[misc]
-    """``pyigtl.OpenIGTLinkServer`` bound to ``host`` (pyigtl's own chooses 127.0.0.1 or the
-    address of a network interface), without the SIGINT/SIGTERM handlers pyigtl installs (the
-    caller owns Ctrl-C), and quiet when a client hangs up. One client at a time (a second one
-    waits until the first disconnects). ``port`` 0 picks a free port; ``port`` and ``host``
-    are then what was bound. Whether ``host`` may be off loopback is the caller's decision
-    (:func:`tmscal.net.is_loopback`). Use as a context manager, or ``start()`` and ``stop()``."""
+class _Incoming:
+    """What a client sends, parsed only as far as the OpenIGTLink header (58 bytes; the
+    body size is the big-endian uint64 at byte 42) and dropped: a body announced above
+    ``max_body`` bytes is refused at its header, before any of it is read or kept."""
+
+    def __init__(self, max_body: int) -> None:
+        self.max_body = max_body
+        self.head = b""
+        self.skip = 0  # body bytes still to drop
+
+    def feed(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            if self.skip:
+                n = min(self.skip, len(view))
+                self.skip -= n
+                view = view[n:]
+                continue
+            need = HEADER_BYTES - len(self.head)
+            self.head += bytes(view[:need])
+            view = view[need:]
+            if len(self.head) == HEADER_BYTES:
+                (size,) = struct.unpack_from(">Q", self.head, 42)
+                if size > self.max_body:
+                    raise _Refused(f"sent a message announcing a {size:,}-byte body (the "
+                                   f"limit is {self.max_body:,})")
+                self.skip, self.head = size, b""
+
+
+class StreamServer(socketserver.ThreadingTCPServer):
+    """An OpenIGTLink server bound to ``host`` that serves several clients at once, each in
+    its own thread with its own limits (docs/streaming.md): at most ``max_clients`` (more are
+    closed at once, with a log line); per client a queue of ``queue_frames`` frames (when a
+    client reads more slowly than frames come, its oldest frames are dropped, not the other
+    clients'), a kernel send buffer of about ``socket_buffer_bytes``, disconnection after
+    ``stall_s`` seconds in which it took no data while frames waited, and disconnection
+    when a message it sends announces a body above ``max_body_bytes`` (refused at its
+    header, never read). ``port`` 0 picks a free port; ``port`` and ``host`` are then what
+    was bound. Whether ``host`` may be off loopback is the caller's decision
+    (:func:`tmscal.net.is_loopback`). Installs no signal handlers (the caller owns Ctrl-C).
+    Use as a context manager, or ``start()`` and ``stop()``."""
 
     allow_reuse_address = True
+    daemon_threads = True
 
-    def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT) -> None:
-        OpenIGTLinkBase.__init__(self)
+    def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *,
+                 max_clients: int = MAX_CLIENTS, queue_frames: int = QUEUE_FRAMES,
+                 stall_s: float = STALL_S, max_body_bytes: int = MAX_BODY_BYTES,
+                 socket_buffer_bytes: int = SOCKET_BUFFER_BYTES) -> None:
+        if max_clients < 1 or queue_frames < 1 or stall_s <= 0 or max_body_bytes < 0:
+            raise ValueError("max_clients and queue_frames must be ≥ 1, stall_s > 0 and "
+                             "max_body_bytes ≥ 0")
         self.address_family = _family(host)
-        socketserver.TCPServer.__init__(self, (host, port), _Handler)
+        super().__init__((host, port), _Handler)
         self.host, self.port = self.server_address[0], int(self.server_address[1])
-        self._previous_signal_handlers: dict[int, Any] = {}
-        self.peer: str | None = None
+        self.max_clients, self.queue_frames = max_clients, queue_frames
+        self.stall_s, self.max_body_bytes = stall_s, max_body_bytes
+        self.socket_buffer_bytes = socket_buffer_bytes
         self.clients = 0  # connections that have ended
+        self.refused = 0  # connections closed at once: too many clients
+        self._dropped_ended = 0
+        self._active: dict[Any, _Client] = {}  # by client address
+        self._lock = threading.Lock()
+        self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
+
+    # --- the clients ---------------------------------------------------------------------------
+
+    def verify_request(self, request: Any, client_address: Any) -> bool:
+        """Admit a connection (its slot taken here, in the accepting thread, so that no
+        burst of connections gets past the limit), or refuse (close) one beyond
+        ``max_clients``."""
+        peer = f"{client_address[0]}:{client_address[1]}"
+        with self._lock:
+            full = len(self._active) >= self.max_clients or self._stopping.is_set()
+            if full:
+                self.refused += 1
+            else:
+                self._active[client_address] = _Client(peer, self.queue_frames)
+        if full:
+            log.warning("OpenIGTLink client %s refused: %d clients already connected (the "
+                        "limit)", peer, self.max_clients)
+        return not full
+
+    def _claim(self, client_address: Any) -> _Client:
+        with self._lock:
+            return self._active[client_address]
+
+    def _remove(self, client: _Client) -> None:
+        with self._lock:
+            self._active = {k: c for k, c in self._active.items() if c is not client}
+            self.clients += 1
+            self._dropped_ended += client.dropped
+        client.close()
+
+    def _snapshot(self) -> list[_Client]:
+        with self._lock:
+            return list(self._active.values())
+
+    @property
+    def peers(self) -> list[str]:
+        """The connected clients, "host:port" each, in the order they connected."""
+        return [c.peer for c in self._snapshot()]
+
+    @property
+    def peer(self) -> str | None:
+        """The connected clients as one string ("host:port, host:port"), None without."""
+        return ", ".join(self.peers) or None
+
+    @property
+    def dropped(self) -> int:
+        """Frames dropped so far for slow clients (connected now or gone), summed over
+        them."""
+        with self._lock:
+            return self._dropped_ended + sum(c.dropped for c in self._active.values())
+
+    def is_connected(self) -> bool:
+        """True while at least one client is connected."""
+        return bool(self._snapshot())
+
+    # --- running -------------------------------------------------------------------------------
 
     def start(self) -> None:
         """Accept clients in a background thread."""
@@ -156,15 +367,15 @@ class StreamServer(pyigtl.OpenIGTLinkServer):  # type: ignore[misc]
         self._thread.start()
 
     def stop(self) -> None:
-        """Disconnect the client and close the listening socket (safe twice)."""
-        if self._thread is None:
-            self.server_close()
-            return
-        self.communication_thread_stop_requested = True
-        self.shutdown()
-        self.server_close()
-        self._thread.join(5.0)
-        self._thread = None
+        """Disconnect every client and close the listening socket (safe twice)."""
+        self._stopping.set()
+        for c in self._snapshot():
+            c.wake()
+        if self._thread is not None:
+            self.shutdown()
+            self._thread.join(5.0)
+            self._thread = None
+        self.server_close()  # joins the client threads, which end at the wake-up
 
     def __enter__(self) -> StreamServer:
         self.start()
@@ -174,18 +385,23 @@ class StreamServer(pyigtl.OpenIGTLinkServer):  # type: ignore[misc]
         self.stop()
 
     def send_transforms(self, transforms: Mapping[str, np.ndarray], timestamp: float) -> int:
-        """Queue one TRANSFORM message per item (device name → 4×4 mm) for the connected
-        client; nothing is queued without a client. Returns the number queued."""
-        if not self.is_connected():
+        """Queue one TRANSFORM message per item (device name → 4×4 mm), as one frame, for
+        every connected client; nothing is queued without a client. Returns the number of
+        messages in the frame (0 without a client)."""
+        clients = self._snapshot()
+        if not clients:
             return 0
-        n = 0
+        parts = []
         for name, M in transforms.items():
             if len(name.encode("utf-8")) > MAX_NAME_BYTES:
                 raise ValueError(f"device name {name!r} is longer than {MAX_NAME_BYTES} bytes")
             msg = pyigtl.TransformMessage(np.asarray(M, dtype=float), timestamp=timestamp,
                                           device_name=name)
-            n += bool(self.send_message(msg, wait=False))
-        return n
+            parts.append(msg.pack())
+        frame = b"".join(parts)
+        for c in clients:
+            c.offer(frame)
+        return len(parts)
 
 
 @dataclass

@@ -279,3 +279,43 @@ def test_resume_can_extend_the_plan(tmp_path, mock_config):
     s = read_session(out)
     plan = make_plan("eq14", np.asarray(s.header["plan"]["p0"]), 9, 1, 100.0, 10.0)
     np.testing.assert_allclose(np.stack([p.commanded for p in s.poses]), plan, atol=1e-9)
+
+
+@pytest.mark.e2e
+def test_resume_reacquires_a_damaged_middle_line(tmp_path, mock_config):
+    """A complete run whose MIDDLE line (pose 4 of 10) was damaged afterwards: `tmscal acquire
+    --resume` acquires pose 4 again (at its planned pose) and nothing else, and the session
+    then holds every planned index exactly once among its valid lines. (A resume that started
+    after the highest index recorded would end "complete" with a hole at 4.)"""
+    cfg_path = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           plan={"poses": 10}, sampling={"samples": 3})
+    out = tmp_path / "s.jsonl"
+
+    def tmscal(*args: str) -> subprocess.CompletedProcess:
+        r = subprocess.run([sys.executable, "-m", "tmscal.cli", "acquire", str(run_cfg), "-o",
+                            str(out), *args], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        return r
+
+    with spawn_mock_rig(cfg_path, transport="tcp") as mp:
+        run_cfg = point_config(cfg_path, mp.endpoints)
+        tmscal()
+        lines = out.read_bytes().split(b"\n")
+        assert json.loads(lines[5])["index"] == 4  # line 1 is the header
+        lines[5] = lines[5][: len(lines[5]) // 2]  # a torn write in the middle
+        out.write_bytes(b"\n".join(lines))
+        damaged = read_session(out)
+        assert sorted(damaged.indices()) == [0, 1, 2, 3, 5, 6, 7, 8, 9]
+        assert [no for no, _ in damaged.damaged] == [6]
+        r = tmscal("--resume")
+    assert "10 poses recorded" in r.stdout
+    s = read_session(out)
+    valid = [p.index for p in s.poses]
+    assert sorted(valid) == list(range(10))  # every planned index, exactly once
+    assert valid[-1] == 4  # the damaged pose, acquired again and appended
+    assert [no for no, _ in s.damaged] == [6]  # the damaged line itself is left as it was
+    plan = make_plan("eq14", np.asarray(s.header["plan"]["p0"]), 10, 1, 100.0, 10.0)
+    np.testing.assert_allclose(s.poses[-1].commanded, plan[4], atol=1e-9)
+    for a, b in zip(damaged.poses, s.poses[:9], strict=True):  # the others untouched
+        assert a.index == b.index
+        np.testing.assert_array_equal(a.B, b.B)

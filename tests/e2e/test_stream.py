@@ -254,3 +254,146 @@ def test_only_usable_tools_are_sent_and_z_applies_to_the_probe():
         assert set(got) == {"CoilToRobotBase", "CoilToTracker", "TrackerToRobotBase"}
         expected = truth.Z[:3, :3] @ C[:3, 3] + truth.Z[:3, 3]
         assert np.allclose(got["CoilToRobotBase"][:3, 3], expected, atol=1e-9)
+
+
+# --- several clients, each with its own limits (issue 22, item 8) -----------------------------
+
+def _drain_until_closed(sock: socket.socket, guard_s: float) -> bool:
+    """Read (and drop) what the server sent until it closes the connection (True) or the
+    guard expires with the connection still open (False)."""
+    deadline = Deadline(guard_s)
+    sock.settimeout(0.5)
+    while not deadline.expired():
+        try:
+            if not sock.recv(1 << 20):
+                return True
+        except TimeoutError:
+            continue
+        except ConnectionResetError:
+            return True
+    return False
+
+
+def _still_open(sock: socket.socket) -> bool:
+    """True when the server has not closed ``sock``: everything it sent so far is read
+    without reaching the end of the stream."""
+    sock.setblocking(False)
+    try:
+        while True:
+            try:
+                if not sock.recv(1 << 20):
+                    return False
+            except BlockingIOError:
+                return True
+            except ConnectionResetError:
+                return False
+    finally:
+        sock.setblocking(True)
+
+
+def test_a_client_that_never_reads_does_not_starve_another(polaris, calib_file):
+    """A connects first and never reads; B, connecting after it, receives its frames while A
+    is still connected (one client at a time would keep B waiting until A is dropped)."""
+    cfg, mr = polaris()
+    proc, port = _start_stream(cfg, calib_file, mr.endpoints["tracker"])
+    a = socket.create_connection(("127.0.0.1", port), timeout=10)
+    try:
+        time.sleep(0.5)  # A is the connected client before B arrives
+        msgs = _read_all(port, 40, timeout_s=60.0)  # B: ten frames
+        assert {m.device_name for m in msgs} == NAMES
+        assert _still_open(a), "A was dropped before B was served"
+    finally:
+        a.close()
+        code, out, err = _stop(proc)
+    assert code == 0, err
+
+
+def test_a_client_announcing_a_huge_body_is_closed_and_the_server_keeps_serving(
+        polaris, calib_file):
+    """A client sends a STRING header announcing a 3 GB body, then keeps sending body bytes:
+    the server closes it at the header (it never reads the body), and serves the next
+    client. A server that read the body would keep taking the bytes (up to the 256 MB this
+    test sends)."""
+    cfg, mr = polaris()
+    proc, port = _start_stream(cfg, calib_file, mr.endpoints["tracker"])
+    c = socket.create_connection(("127.0.0.1", port), timeout=10)
+    try:
+        head = struct.pack(">H12s20sIIQQ", 1, b"STRING", b"hostile", 0, 0, 3_000_000_000, 0)
+        chunk = b"\0" * 65536
+        closed, sent = False, 0
+        deadline = Deadline(60.0)
+        try:
+            c.sendall(head)
+            while sent < 256 * 2**20 and not deadline.expired():
+                c.sendall(chunk)
+                sent += len(chunk)
+        except (BrokenPipeError, ConnectionResetError):
+            closed = True
+        closed = closed or _drain_until_closed(c, 30.0)
+        assert closed and sent < 256 * 2**20, f"the server took {sent:,} body bytes"
+        msgs = _read_all(port, 20, timeout_s=60.0)  # the server still serves
+        assert {m.device_name for m in msgs} == NAMES
+    finally:
+        c.close()
+        code, out, err = _stop(proc)
+    assert code == 0, err
+
+
+def test_clients_beyond_the_limit_are_closed_at_once(polaris, calib_file):
+    cfg, mr = polaris()
+    proc, port = _start_stream(cfg, calib_file, mr.endpoints["tracker"], "--max-clients", "2")
+    first = [socket.create_connection(("127.0.0.1", port), timeout=10) for _ in range(2)]
+    try:
+        for s in first:  # both admitted: each receives frames
+            s.settimeout(30)
+            assert s.recv(58)
+        extra = socket.create_connection(("127.0.0.1", port), timeout=10)
+        assert _drain_until_closed(extra, 30.0)
+        extra.close()
+        assert all(_still_open(s) for s in first)
+    finally:
+        for s in first:
+            s.close()
+        code, out, err = _stop(proc)
+    assert code == 0, err
+
+
+# --- the coil through a calibration with a tracker distortion (issue 22, item 4b) -------------
+
+def test_coil_to_robot_base_follows_the_placement_rule_under_a_tracker_scale(calib_file,
+                                                                             tmp_path):
+    """The mock tracker scales positions by 1.001 (0.1 %) and the calibration says so (its
+    distortion D = 1.001 I): CoilToRobotBase is Z applied to the undistorted probe pose
+    (positions D⁻¹ t, an isotropic scale leaves rotations; Calibration.placement), not
+    Z · C as measured, which is 1.5 mm off at 1.5 m from the tracker."""
+    doc = yaml.safe_load(calib_file.read_text())
+    doc["distortion"] = {"model": "scale", "matrix": (1.001 * np.eye(3)).tolist(),
+                         "scale_percent": 0.1}
+    calib = tmp_path / "scaled.yaml"
+    calib.write_text(yaml.safe_dump(doc))
+    Z = np.asarray(doc["Z"], dtype=float)
+    cfg = write_config(tmp_path, "mock-polaris.yaml",
+                       mock={"clock": "real", "seed": 1,
+                             "noise": {"fiducial_sigma_mm": 0.05, "tracker_scale": 1.001},
+                             "tracker": {"model": "spectra"}})
+    mr = start_mock_rig(load_config(cfg), tracker_transport="tcp")
+    try:
+        proc, port = _start_stream(cfg, calib, mr.endpoints["tracker"])
+        try:
+            msgs = _read_all(port, 200)
+        finally:
+            code, _, err = _stop(proc)
+        coil_in_base = mr.rig.true_flange() @ mr.rig.truth.Y
+    finally:
+        mr.close()
+    assert code == 0, err
+    pairs = 0
+    for frame in _by_time(msgs).values():
+        if "CoilToRobotBase" in frame and "CoilToTracker" in frame:
+            pairs += 1
+            C = frame["CoilToTracker"].copy()
+            assert np.linalg.norm(C[:3, 3]) > 1000  # far enough for 0.1 % to be > 1 mm
+            C[:3, 3] /= 1.001
+            assert _close(frame["CoilToRobotBase"], Z @ C, F32_MM, F32_ROT)
+            assert _close(frame["CoilToRobotBase"], coil_in_base, 2.0, 0.5)
+    assert pairs >= 10

@@ -6,13 +6,13 @@ reading, JSON output. The commands register themselves on ``main`` from their ow
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import logging
 import os
 import sys
-import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -50,17 +50,12 @@ def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` only once it is complete (temp file + rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def _write_atomic(path: Path, text: str, force: bool = False) -> None:
+    """Write an output file whole or not at all, mode 0666 & ~umask, never over a file
+    another tmscal process holds locked, over an existing one only with ``force``
+    (``tmscal.session.outputs.write_output``; call ``check_outputs`` first)."""
+    from ..session.outputs import write_output
+    write_output(path, text, overwrite=force)
 
 
 def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
@@ -70,6 +65,18 @@ def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
         fn(*args, **kwargs)
     except ImportError as e:
         raise MissingExtraError("--plot", "plot", str(e)) from None
+
+
+@contextlib.contextmanager
+def _output_files(outputs: dict[str, Path], force: bool) -> Iterator[dict[str, str]]:
+    """Temporary paths (same folder and suffix) to write the output files ``outputs``
+    {key: path} to, e.g. by matplotlib; once the block has written them all, each is put in
+    place by the rule of ``_write_atomic``; if it raises, none is."""
+    from ..session.outputs import output_path
+
+    with contextlib.ExitStack() as stack:
+        yield {k: str(stack.enter_context(output_path(p, overwrite=force)))
+               for k, p in outputs.items()}
 
 
 def _json_default(o: Any) -> Any:
@@ -144,7 +151,8 @@ def _same_file(a: Path, b: Path) -> bool:
 def check_outputs(outputs: dict[str, Path | None], inputs: list[Path], force: bool) -> None:
     """The one rule for every file a command writes (``-o``, ``--plot``, ``--report``): an
     existing file is refused unless ``--force``; an input of the command is never written
-    over, even with ``--force``; two outputs may not be the same file. Raises
+    over, even with ``--force``; nor is a file another tmscal process holds locked (a
+    session being recorded); two outputs may not be the same file. Raises
     ``click.BadParameter`` naming the option."""
     seen: dict[Path, str] = {}
     for opt, out in outputs.items():
@@ -163,6 +171,20 @@ def check_outputs(outputs: dict[str, Path | None], inputs: list[Path], force: bo
         if out.exists() and not force:
             raise click.BadParameter(f"{out} already exists; add --force to overwrite it",
                                      param_hint=opt)
+        if out.exists():
+            _check_not_locked(out, opt)
+
+
+def _check_not_locked(out: Path, opt: str) -> None:
+    """--force never replaces a file another tmscal process holds locked (a session being
+    recorded): refused here, before any work, and again when the file is put in place."""
+    from ..errors import SessionError
+    from ..session.outputs import check_not_locked
+
+    try:
+        check_not_locked(out)
+    except SessionError as e:
+        raise click.BadParameter(str(e), param_hint=opt) from None
 
 
 def _read_session(path: Path, strict: bool) -> Any:

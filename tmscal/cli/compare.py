@@ -12,6 +12,7 @@ from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,
+    _output_files,
     _plot,
     _print_json,
     _read_session,
@@ -87,10 +88,11 @@ def compare(session_file: Path, methods: str | None, n_text: str | None, folds: 
     written = []
     if plot is not None:
         plot.mkdir(parents=True, exist_ok=True)
-        paths = {k: str(v) for k, v in outputs.items() if v is not None}
-        _plot(plot_compare, res, {k.split("(")[1].rstrip(")"): p for k, p in paths.items()},
-              title=session_file.name)
-        written = [p for k, p in paths.items() if res["truth"] or "truth" not in k]
+        files = {k.split("(")[1].rstrip(")"): v for k, v in outputs.items()
+                 if v is not None and (res["truth"] or "truth" not in k)}
+        with _output_files(files, force) as tmp:
+            _plot(plot_compare, res, tmp, title=session_file.name)
+        written = [str(v) for v in files.values()]
     if as_json:
         from ..session import json_safe
         _print_json(json_safe(res))

@@ -51,7 +51,7 @@ def export(calib_file: Path, fmt: str, output: Path, handeye2: bool, frames: tup
     check_outputs({"--output": output}, [calib_file], force)
     cf = read_calibration(calib_file)
     opts = {"version": 2 if handeye2 else 1, "frames": names} if fmt == "easy-handeye" else {}
-    _write_atomic(output, render(fmt, cf, **opts))
+    _write_atomic(output, render(fmt, cf, **opts), force)
     click.echo(f"wrote {output} ({fmt}{' 2' if handeye2 else ''}) from {calib_file}")
     for note in _notes(fmt, cf, output.suffix.lower()):
         click.echo(f"note: {note}")

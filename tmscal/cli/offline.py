@@ -14,6 +14,7 @@ from .app import (
     INPUT_FILE,
     STRICT_HELP,
     _Finite,
+    _output_files,
     _plot,
     _print_json,
     _read_session,
@@ -98,8 +99,6 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
     from ..sim import simulate as run_sim
 
     check_outputs({"--output": output}, [], force)
-    if force and output.exists():
-        output.unlink()
     rng = np.random.default_rng(seed)
     noise = Noise(fiducial_sigma, robot_rot_sigma, robot_trans_sigma,
                   tracker_scale=tuple(tracker_scale), tracker_shear=tuple(tracker_shear))
@@ -246,11 +245,13 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
         from ..exports.calibfile import provenance
         _write_atomic(output, calibration_yaml(
             res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
-            parameters=cal.extra.get("parameters"), provenance=provenance(session.header)))
+            parameters=cal.extra.get("parameters"), provenance=provenance(session.header)),
+            force)
     if plot is not None:
-        _plot(plot_residuals, pose_residuals(session, cal), res.n_solve, str(plot),
-              f"{session_file.name}: {res.method.upper()} per-pose errors",
-              outliers=res.outliers)
+        with _output_files({"plot": plot}, force) as tmp:
+            _plot(plot_residuals, pose_residuals(session, cal), res.n_solve, tmp["plot"],
+                  f"{session_file.name}: {res.method.upper()} per-pose errors",
+                  outliers=res.outliers)
     pred = _adaptive_prediction(session)
     if as_json:
         out = res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]}
@@ -357,7 +358,8 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
         res = study_session(session, ms, n_max=n_max, orthonormal=orthonormal,
                             progress=bar.update)
     if plot is not None:
-        _plot(plot_study, res, str(plot), title=f"{session_file.name}: convergence")
+        with _output_files({"plot": plot}, force) as tmp:
+            _plot(plot_study, res, tmp["plot"], title=f"{session_file.name}: convergence")
     if as_json:
         _print_json(res)
     else:

@@ -67,5 +67,5 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
                                calib=calib, folds=folds, progress=stage, solves=bar.update)
         except ImportError as e:
             raise MissingExtraError("tmscal report", "plot", str(e)) from None
-    _write_atomic(output, page)
+    _write_atomic(output, page, force)
     click.echo(f"wrote {output} ({len(page.encode()) / 1e6:.1f} MB)")

@@ -435,8 +435,9 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
     cfg_path = config or _default_demo_config()
     check_adaptive_flags(adaptive, False, Path(), poses, overrides)
     check_outputs({"--output": output}, [cfg_path], force)
-    if output is not None and force and output.exists():
-        output.unlink()
+    if output is not None and force:
+        from ..session.outputs import remove_output
+        remove_output(output)  # refused if another tmscal holds it (a session being recorded)
     cfg = load_config(cfg_path)
     truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
     tmp = None

@@ -310,6 +310,6 @@ def identify(session_file: Path, output: Path, arm: str | None,
                            session={"path": str(session_file),
                                     "sha256": sha256_of(session_file)},
                            provenance=provenance(session.header))
-    _write_atomic(output, text)
+    _write_atomic(output, text, force)
     click.echo(f"wrote {output} (the calibrated arm model; tmscal solve SESSION "
                f"--kinematics {output})")

@@ -33,7 +33,8 @@ class _Status:
         from .live import fit
 
         rate = f"{st.rate_hz:.1f} Hz" if st.rate_hz else "… Hz"
-        client = f"client {st.peer}" if st.peer else "no client"
+        client = (("clients " if ", " in st.peer else "client ") + st.peer if st.peer
+                  else "no client")
         unseen = [f"{t} unseen {st.unseen[t] / st.frames:.0%}" for t in self.tools
                   if st.frames and st.unseen[t]]
         return fit([f"frames {st.frames}", rate, client, f"sent {st.sent}", *unseen],
@@ -88,13 +89,17 @@ def _check_host(host: str, allow_remote: bool) -> None:
 @click.option("--rate", "rate_hz", type=_Finite(0, 1000, lo_open=True), default=None,
               metavar="HZ",
               help="Send at most HZ frames a second (default: every tracker frame).")
+@click.option("--max-clients", type=click.IntRange(1, 1000), default=8, show_default=True,
+              help="Clients served at once (each with its own queue; a client beyond this is "
+                   "closed at once).")
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many tracker frames (default: until Ctrl-C).")
 @click.option("--tracker-port", default=None,
               help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
 @handle_errors
 def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: bool,
-           rate_hz: float | None, frames: int | None, tracker_port: str | None) -> None:
+           rate_hz: float | None, max_clients: int, frames: int | None,
+           tracker_port: str | None) -> None:
     """Stream the tracked coil to 3D Slicer (or any OpenIGTLink client) as live TRANSFORM
     messages, through a stored calibration; the robot is not needed.
 
@@ -106,6 +111,10 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
       TrackerToRobotBase  robot base ← tracker: Z of the calibration
     A tool that is missing or out of the tracker's volume is not sent for that frame (the
     client keeps its last pose); the status line on stderr counts those frames.
+
+    Several clients are served at once, each with its own limits: a client that reads
+    slowly loses its oldest frames (not the others'), one that takes nothing for 10 s is
+    disconnected, and so is one that sends a message over 1 MiB.
 
     In Slicer: OpenIGTLinkIF, add a connector, type Client, this host and port, Active.
     Ctrl-C stops (docs/streaming.md)."""
@@ -130,7 +139,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     stop.install()
     status = _Status(sys.stderr, tools)
     try:
-        server = StreamServer(host, port)
+        server = StreamServer(host, port, max_clients=max_clients)
     except OSError as e:
         raise click.BadParameter(f"cannot listen on {host}:{port}: {e.strerror or e}",
                                  param_hint="--port/--host") from None

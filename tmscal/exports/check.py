@@ -14,6 +14,7 @@ import textwrap
 from typing import Any
 
 from ..errors import CalibrationError
+from ..escape import visible
 from ..session import Session
 from ..solving.outliers import find_outliers
 from ..solving.solve import pose_residuals, truth_errors_of
@@ -81,12 +82,13 @@ def format_check(res: dict[str, Any]) -> str:
     c, s, e = res["calibration"], res["session"], res["errors"]
     st = c.get("errors") or {}
     src = c["session"]
-    head = [f"stored {c['method'].upper()} calibration {c['file']} checked on {s['path']} "
-            "(no fitting)",
-            f"  calibration: solved on {c['n_poses']} poses of {src.get('path', '?')} "
-            f"(sha256 {str(src.get('sha256', '?'))[:12]}…), written {c['created'] or '?'}"
-            + (f" by tmscal {c['versions'].get('tmscal')}" if c.get("versions") else "")
-            + f", {c['applied']} matrices applied",
+    head = [visible(f"stored {c['method'].upper()} calibration {c['file']} checked on "
+                    f"{s['path']} (no fitting)"),
+            visible(f"  calibration: solved on {c['n_poses']} poses of "
+                    f"{src.get('path', '?')} (sha256 {str(src.get('sha256', '?'))[:12]}…), "
+                    f"written {c['created'] or '?'}"
+                    + (f" by tmscal {c['versions'].get('tmscal')}" if c.get("versions") else "")
+                    + f", {c['applied']} matrices applied"),
             f"  this session: {s['n_poses']} usable poses ({', '.join(s['bodies'])})"
             + (f", {s['n_skipped']} skipped at acquisition" if s["n_skipped"] else "")]
     if res["same_session"]:
@@ -112,7 +114,7 @@ def format_check(res: dict[str, Any]) -> str:
     lines.append(_row("total  e_t, θ_t", e["e_t_mm"], e["theta_t_deg"],
                       stored("e_t_mm", "theta_t_deg")))
     if c.get("errors_on"):
-        lines.append(f"  (stored: the calibration's own errors, {c['errors_on']})")
+        lines.append(visible(f"  (stored: the calibration's own errors, {c['errors_on']})"))
     t = res["truth"]
     if t:
         lines.append("")

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..escape import visible
 from ..geometry import quaternion_from_matrix
 from .calibfile import CalibrationFile
 
@@ -59,8 +60,9 @@ def render(cf: CalibrationFile, version: int = 1, name: str = "tmscal_eye_on_bas
                               "move_group": "manipulator"},
                "transform": {"translation": dict(zip(("x", "y", "z"), t, strict=True)),
                              "rotation": dict(zip(("x", "y", "z", "w"), q, strict=True))}}
-    head = (f"# tmscal {cf.calibration.method} calibration {cf.path.name}: eye-on-base, the "
-            "tracker in the robot base\n"
-            f"# (Z = base_from_tracker = {f['robot_base_frame']} <- "
-            f"{f['tracking_base_frame']}), translation in metres, quaternion x y z w\n")
+    head = (visible(f"# tmscal {cf.calibration.method} calibration {cf.path.name}: "
+                    "eye-on-base, the tracker in the robot base") + "\n"
+            + visible(f"# (Z = base_from_tracker = {f['robot_base_frame']} <- "
+                      f"{f['tracking_base_frame']}), translation in metres, quaternion x y z w")
+            + "\n")
     return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=False)

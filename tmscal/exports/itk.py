@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..calib import Calibration
+from ..escape import visible
 from .calibfile import CalibrationFile
 
 __all__ = ["LPS", "itk_matrix", "render"]
@@ -53,7 +54,7 @@ def render(cf: CalibrationFile) -> str:
     src = cf.session.get("path", "?")
     return "\n".join([
         "#Insight Transform File V1.0",
-        f"# tmscal {cal.method} calibration {cf.path.name} (session {src}), units mm",
+        visible(f"# tmscal {cal.method} calibration {cf.path.name} (session {src}), units mm"),
         "# Z = base_from_tracker (robot base <- NDI tracker), frames taken as RAS; stored as ITK",
         "# does: LPS, resampling direction = C Z^-1 C, C = diag(-1,-1,1). Load in 3D Slicer: the",
         "# transform node's to-parent maps tracker points into the robot base (docs/exports.md).",

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import datetime as _dt
 from typing import Any
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -31,6 +30,7 @@ from ..config import settings_class
 from ..config.settings import TrackerSettings
 from ..drivers.ndi.settings import NDISettings
 from ..errors import ConfigError
+from ..escape import xml_attr, xml_comment
 from .calibfile import CalibrationFile
 
 __all__ = ["FRAMES", "TOOL_IDS", "matrix_text", "render", "recorded_tracker", "rom_files"]
@@ -102,10 +102,10 @@ def _port_attrs(settings: NDISettings | None) -> list[str]:
     port = settings.port if settings is not None else ""
     if port.startswith("socket://"):
         host, _, num = port.removeprefix("socket://").rpartition(":")
-        return [f"NetworkHostname={quoteattr(host)}", f"NetworkPort={quoteattr(num)}"]
-    out = [f"SerialPort={quoteattr(port or 'CHECK: the tracker port')}"]
+        return [f"NetworkHostname={xml_attr(host)}", f"NetworkPort={xml_attr(num)}"]
+    out = [f"SerialPort={xml_attr(port or 'CHECK: the tracker port')}"]
     if settings is not None:
-        out.append(f"BaudRate={quoteattr(str(settings.baud))}")
+        out.append(f"BaudRate={xml_attr(str(settings.baud))}")
     return out
 
 
@@ -116,16 +116,16 @@ def _device(cf: CalibrationFile, driver: str | None,
     roms = _roms(driver, settings)
     bodies = ["marker", "probe"] if cf.calibration.Y is not None else ["marker"]
     if roms is None:
-        kind = [f"Type={quoteattr(f'CHECK: the PLUS device of tracker driver {driver!r}')}"]
+        kind = [f"Type={xml_attr(f'CHECK: the PLUS device of tracker driver {driver!r}')}"]
     else:
         ndi = settings if isinstance(settings, NDISettings) else None
         kind = ['Type="NDITracker"', *_port_attrs(ndi)]
     attrs = ['Id="TrackerDevice"', *kind, 'ToolReferenceFrame="Tracker"']
     if tracker.get("frame_rate_hz"):
-        attrs.insert(2, f"AcquisitionRate={quoteattr(str(tracker['frame_rate_hz']))}")
+        attrs.insert(2, f"AcquisitionRate={xml_attr(str(tracker['frame_rate_hz']))}")
     lines = ["    <Device " + "\n      ".join(attrs) + " >", "      <DataSources>"]
     for b in bodies:
-        rom = "" if roms is None else " RomFile=" + quoteattr(
+        rom = "" if roms is None else " RomFile=" + xml_attr(
             roms.get(b) or f"CHECK: the {b} tool's ROM file")
         lines.append(f'        <DataSource Type="Tool" Id="{TOOL_IDS[b]}"{rom} />')
     lines += ["      </DataSources>", "      <OutputChannels>",
@@ -145,12 +145,12 @@ def render(cf: CalibrationFile) -> str:
              else "placeholders: fill in CHECK" if roms is not None
              else f"none: the session's tracker (driver {driver!r}) is not an NDI and has no "
                   "ROM files; set its PLUS device and tool sources (CHECK)")
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f"<!-- tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 "
-             "numbers row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
-             "(flange_from_marker), CoilCentreToFlange = Y (flange_from_probe), "
-             "TrackerToRobotBase = Z (base_from_tracker). Error: hold-out translation error, "
-             f"mm. Tool ROM files and port: {known}. -->",
+    note = (f"tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 numbers "
+            "row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
+            "(flange_from_marker), CoilCentreToFlange = Y (flange_from_probe), "
+            "TrackerToRobotBase = Z (base_from_tracker). Error: hold-out translation error, "
+            f"mm. Tool ROM files and port: {known}.")
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- {xml_comment(note)} -->",
              '<PlusConfiguration version="2.1">',
              '  <DataCollection StartupDelaySec="1.0" >',
              '    <DeviceSet Name="tmscal: NDI tracker and the robot calibration" '
@@ -162,6 +162,6 @@ def render(cf: CalibrationFile) -> str:
         if M is None:
             continue
         lines.append(f'    <Transform From="{a}" To="{b}" Matrix="{matrix_text(M)}" '
-                     f'Error="{_error(cf.doc, k)}" Date="{date}" />')
+                     f'Error={xml_attr(_error(cf.doc, k))} Date={xml_attr(date)} />')
     lines += ["  </CoordinateDefinitions>", "</PlusConfiguration>", ""]
     return "\n".join(lines)

@@ -4,7 +4,9 @@ to a lab notebook (docs/report.md).
 The page has no external resource and no script: the figures are PNG (matplotlib's Agg
 backend, extra ``plot``) embedded as base64 ``data:`` URLs, the style is inline, and a
 Content-Security-Policy forbids anything else. Everything that comes from the session or the
-calibration file (names, identities, skip reasons) is HTML-escaped.
+calibration file (names, identities, skip reasons) is HTML-escaped, with control characters
+and bidirectional overrides shown as visible escapes (``\x1b``, ``\u202e``;
+``tmscal.escape``).
 
 The tables are the text of :mod:`tmscal.report.text` (what ``tmscal solve`` and ``tmscal
 study`` print) and two of the figures are :mod:`tmscal.report.plots`' (the convergence study,
@@ -19,7 +21,6 @@ from __future__ import annotations
 import base64
 import dataclasses
 import datetime as _dt
-import html
 import os
 import tempfile
 from collections import Counter
@@ -32,6 +33,7 @@ import numpy as np
 from .. import __version__
 from ..calib import Calibration, solve
 from ..errors import CalibrationError
+from ..escape import html_text
 from ..session import Session, skip_cause
 from ..solving.outliers import find_outliers
 from ..solving.solve import (
@@ -71,11 +73,13 @@ Progress = Callable[[str], None]
 
 
 def _e(v: Any) -> str:
-    return html.escape(str(v), quote=True)
+    """Text from anywhere (a session, a calibration file) as HTML text or attribute value:
+    controls and bidi overrides made visible, markup characters escaped."""
+    return html_text(v)
 
 
 def _pre(body: str) -> str:
-    return f"<pre>{_e(body)}</pre>"
+    return f"<pre>{html_text(body, newlines=True)}</pre>"
 
 
 def _table(rows: list[list[Any]], head: list[str] | None = None) -> str:

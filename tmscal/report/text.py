@@ -1,7 +1,9 @@
 """Human-readable tables and the calibration YAML export (the plots are in
 :mod:`tmscal.report.plots`, re-exported here).
 
-Units: mm and degrees, named in every column header.
+Units: mm and degrees, named in every column header. Text that comes from a file (a method
+or distortion model name of a calibration file, its notes) is shown with control characters
+and bidirectional overrides as visible escapes (``tmscal.escape.visible``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from ..escape import visible
 from .plots import plot_residuals, plot_study
 
 if TYPE_CHECKING:
@@ -107,7 +110,7 @@ def _pct(v: float) -> str:
 def distortion_text(d: dict[str, Any]) -> str:
     """The tracker distortion a solver found, in one line: "tracker scale +0.080 %" for an
     isotropic scale, per-axis percentages, or the 3×3 matrix of an affine model."""
-    model = str(d.get("model", "?"))
+    model = visible(d.get("model", "?"))
     if model == "none":
         return "tracker distortion: none (a rigid tracker model)"
     if model == "scale" and "scale_percent" in d:
@@ -132,14 +135,14 @@ def _uncertainty_rows(res: SolveResult) -> list[str]:
             if isinstance(v, dict) and "sigma" in v and "p95" in v]
     if rows:
         where = u.get("target_note")
-        lines.append(f"  {'predicted uncertainty (' + res.method + ')':<{_W}}"
+        lines.append(f"  {'predicted uncertainty (' + visible(res.method) + ')':<{_W}}"
                      f"{'1-σ':>15}{'95 %':>15}")
         for k, v in rows:
             name, _, unit = k.rpartition("_")
-            label = f"{name.replace('_', ' ')} ({unit})"
+            label = visible(f"{name.replace('_', ' ')} ({unit})")
             lines.append(_row(label, float(v["sigma"]), float(v["p95"])))
         if where:
-            lines.append(f"  (at {where}; from the solver's linearised covariance)")
+            lines.append(f"  (at {visible(where)}; from the solver's linearised covariance)")
     if res.distortion:
         lines.append(f"  {distortion_text(res.distortion)}")
     return lines
@@ -197,7 +200,7 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
     """The ``tmscal solve`` human output: what was solved, the error table (mean ± SD over
     folds when cross-validated), the errors against the truth (simulated sessions), the
     outlier poses, a legend defining each number, and the calibration matrices."""
-    lines = [f"{res.method.upper()} calibration solved on {res.n_solve} poses "
+    lines = [f"{visible(res.method.upper())} calibration solved on {res.n_solve} poses "
              f"({res.applied} matrices applied; see legend)", _errors_on_text(res)]
     if res.n_skipped:
         lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SessionError
+from .outputs import fsync_dir, install, new_temp
 from .records import (
     PoseRecord,
     _Bad,
@@ -116,8 +117,9 @@ class Session:
 
 
 def _open_regular(p: Path, flags: int, what: str) -> int:
-    """os.open for a regular file only: a FIFO, device or directory is refused without
-    blocking (checked before opening, opened non-blocking, and checked again after)."""
+    """os.open of an existing regular file only (reading, resuming; new files are made by
+    ``outputs.new_temp``): a FIFO, device or directory is refused without blocking (checked
+    before opening, opened non-blocking, and checked again after)."""
     try:
         st = os.stat(p)
     except FileNotFoundError:
@@ -128,10 +130,7 @@ def _open_regular(p: Path, flags: int, what: str) -> int:
         kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
         raise SessionError(f"{p}: {kind}; a session is a regular file")
     try:
-        fd = os.open(p, flags | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0), 0o644)
-    except FileExistsError:
-        raise SessionError(f"{p}: already exists; refusing to overwrite "
-                           "(choose another name, or resume it)") from None
+        fd = os.open(p, flags | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as e:
         if e.errno == errno.ENXIO:
             raise SessionError(f"{p}: not a regular file; a session is a regular file") \
@@ -239,24 +238,18 @@ def _lock(fd: int, p: Path) -> None:
         raise SessionError(f"{p}: cannot lock the session file ({e.strerror or e})") from None
 
 
+def _unlink_quietly(p: Path) -> None:
+    try:
+        os.unlink(p)
+    except OSError:
+        pass
+
+
 def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
         n = os.write(fd, view)
         view = view[n:]
-
-
-def _fsync_dir(p: Path) -> None:
-    try:
-        dfd = os.open(p.parent, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(dfd)
-    except OSError:
-        pass
-    finally:
-        os.close(dfd)
 
 
 class SessionWriter:
@@ -279,26 +272,47 @@ class SessionWriter:
     def create(cls, path: str | os.PathLike[str], header: Mapping[str, Any],
                overwrite: bool = False) -> SessionWriter:
         """Start a new session file with ``header`` (validated as the reader will); fsynced.
-        Without ``overwrite`` the file is created exclusively (O_EXCL): an existing file,
-        even one created a moment ago by another process, is refused."""
+
+        The header is written whole or not at all: to a new file beside ``path`` (mode
+        0666 & ~umask), locked, fsynced, and only then given the name ``path``
+        (``tmscal.session.outputs.install``); a failure (a full disk) leaves nothing at
+        ``path``. Without ``overwrite`` an existing file, even one created a moment ago by
+        another process, is refused; with it the existing file is replaced only if no other
+        tmscal process holds it locked."""
         p = Path(path)
         line = _header_line(header, f"{p}: header")
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise SessionError(f"{p}: cannot write session file ({e.strerror or e})") from None
-        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | (0 if overwrite else os.O_EXCL)
-        fd = _open_regular(p, flags, "write session file")
-        _lock(fd, p)
         try:
-            if overwrite:
-                os.ftruncate(fd, 0)  # only now that the lock is ours
+            st = os.stat(p)
+        except OSError:
+            st = None
+        if st is not None:
+            if not stat.S_ISREG(st.st_mode):
+                kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+                raise SessionError(f"{p}: {kind}; a session is a regular file")
+            if not overwrite:
+                raise SessionError(f"{p}: already exists; refusing to overwrite it "
+                                   "(choose another name, or resume it)")
+        fd, tmp = new_temp(p, os.O_WRONLY | os.O_APPEND)
+        try:
+            _lock(fd, p)  # before the file has its name: it is never seen unlocked
+        except SessionError:
+            _unlink_quietly(tmp)
+            raise
+        try:
             _write_all(fd, line)
             os.fsync(fd)
-        except OSError as e:
+            install(tmp, p, overwrite, hint="choose another name, or resume it")
+        except (OSError, SessionError) as e:
             os.close(fd)
+            _unlink_quietly(tmp)
+            if isinstance(e, SessionError):
+                raise
             raise SessionError(f"{p}: cannot write session file ({e.strerror or e})") from None
-        _fsync_dir(p)
+        fsync_dir(p)
         return cls(p, fd, Session(header=json.loads(line), poses=[], path=p,
                                   good_bytes=len(line)))
 
