@@ -222,30 +222,39 @@ class IGTLTracker(Tracker):
 
     def _take_messages(self, buf: bytearray, frames: FrameAssembler, arrival: float) -> None:
         """Every complete message at the start of ``buf``, removed from it."""
-        while len(buf) >= wire.HEADER_SIZE:
-            try:
-                header = wire.parse_header(bytes(buf[:wire.HEADER_SIZE]))
-            except ProtocolError as e:
-                raise self._protocol_error(e) from None
-            end = wire.HEADER_SIZE + header.body_size
-            if len(buf) < end:
-                return
-            body = bytes(buf[wire.HEADER_SIZE:end])
-            del buf[:end]
-            with self._cond:
-                self._seen[header.type] += 1
-            if header.type != "TRANSFORM":
-                continue
-            try:
-                t = wire.decode_transform(header, body)
-            except ProtocolError as e:
-                raise self._protocol_error(e) from None
-            self._note(t)
-            delivered = frames.feed(t, arrival)
-            if delivered:
+        pos = 0
+        try:
+            while len(buf) - pos >= wire.HEADER_SIZE:
+                header = self._header(buf, pos)
+                end = pos + wire.HEADER_SIZE + header.body_size
+                if len(buf) < end:
+                    return
+                body_at, pos = pos + wire.HEADER_SIZE, end
                 with self._cond:
-                    self._latest = delivered[-1]
-                    self._cond.notify_all()
+                    self._seen[header.type] += 1
+                if header.type == "TRANSFORM":
+                    self._take_transform(header, bytes(buf[body_at:end]), frames, arrival)
+        finally:
+            del buf[:pos]
+
+    def _header(self, buf: bytearray, pos: int) -> wire.Header:
+        try:
+            return wire.parse_header(bytes(buf[pos:pos + wire.HEADER_SIZE]))
+        except ProtocolError as e:
+            raise self._protocol_error(e) from None
+
+    def _take_transform(self, header: wire.Header, body: bytes, frames: FrameAssembler,
+                        arrival: float) -> None:
+        try:
+            t = wire.decode_transform(header, body)
+        except ProtocolError as e:
+            raise self._protocol_error(e) from None
+        self._note(t)
+        delivered = frames.feed(t, arrival)
+        if delivered:
+            with self._cond:
+                self._latest = delivered[-1]
+                self._cond.notify_all()
 
     def _protocol_error(self, e: ProtocolError) -> ProtocolError:
         return ProtocolError(f"{self._where}: {e}", code=e.code, text=e.text, device=self.name)
