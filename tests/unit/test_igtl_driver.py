@@ -77,15 +77,19 @@ def test_read_waits_for_a_new_frame_instead_of_repeating_one() -> None:
     assert len(set(numbers)) == 30
 
 
-def test_identity_tells_what_the_source_sent() -> None:
+def test_identity_tells_what_the_source_sent_and_survives_a_reconnect() -> None:
     with served(faults=IGTLFaults(extra_messages=True)) as m, tracker(m) as t:
         list(t.distinct_frames(5, timeout_s=10))
         ident = t.identity()
-    assert ident["driver"] == "igtl" and ident["host"] == "127.0.0.1"
-    assert ident["port"] == m.port and ident["tools"] == TOOLS
-    # the driver's version-2 GET_STATUS made the PlusServer-like mock answer in version 2
-    assert ident["header_version"] == 2 and ident["transform_status"]
-    assert ident["message_types"]["STATUS"] >= 5 and ident["message_types"]["STRING"] >= 5
+        received = t.received()
+        t.close()
+        t.open()
+        again = t.identity()
+    assert ident == {"driver": "igtl", "host": "127.0.0.1", "port": m.port, "tools": TOOLS,
+                     # the driver's version-2 GET_STATUS made the mock answer in version 2
+                     "header_version": 2, "transform_status": True}
+    assert again == ident
+    assert received["STATUS"] >= 5 and received["STRING"] >= 5 and received["TRANSFORM"] >= 10
 
 
 def test_without_asking_for_metadata_a_source_answers_in_version_1() -> None:
@@ -199,10 +203,20 @@ def test_garbage_bytes_are_a_protocol_error_naming_the_source() -> None:
     assert "not an OpenIGTLink stream" in str(e.value)
 
 
-def test_a_corrupted_message_is_a_protocol_error() -> None:
-    with served(faults=IGTLFaults(crc_error_prob=1.0)) as m, tracker(m) as t:
+def test_a_corrupted_message_is_a_protocol_error_from_open() -> None:
+    with served(faults=IGTLFaults(crc_error_prob=1.0)) as m:
+        t = tracker(m)
+        with pytest.raises(ProtocolError, match=f"igtl 127.0.0.1:{m.port}: .*CRC mismatch"):
+            t.open()   # open waits for the first TRANSFORM: this one is corrupt
+        assert not t.is_open
+
+
+def test_an_occasional_corrupted_message_is_a_protocol_error() -> None:
+    with served(faults=IGTLFaults(crc_error_prob=0.05), seed=1) as m:
         with pytest.raises(ProtocolError, match="CRC mismatch"):
-            t.read()
+            with tracker(m) as t:
+                for _ in range(10_000):
+                    t.read()
 
 
 def test_a_refused_connection_is_connection_lost_naming_host_and_port() -> None:

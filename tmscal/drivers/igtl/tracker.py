@@ -103,9 +103,11 @@ class IGTLTracker(Tracker):
         self._returned: int | None = None  # the frame number read() returned last
         self._failure: DeviceError | None = None
         self._next_frame = 0  # frame numbers never repeat over reconnects
-        self._seen: Counter[str] = Counter()  # message types received
+        self._seen: Counter[str] = Counter()  # message types received, this connection
+        self._first = threading.Event()  # the connection's first TRANSFORM (or failure)
+        #: what the source has shown over the driver's life (identity; kept over reconnects)
         self._header_version: int | None = None
-        self._metadata_keys: set[str] = set()
+        self._transform_status = False
         self._status_logged: dict[str, str | None] = {}
 
     # --- lifecycle ---------------------------------------------------------------------------
@@ -113,6 +115,8 @@ class IGTLTracker(Tracker):
         self._stop.clear()
         with self._cond:
             self._latest, self._failure, self._returned = None, None, None
+            self._seen.clear()
+        self._first.clear()
         self._status_logged.clear()
         self._sock = self._connect()
         if self.ask_metadata:
@@ -124,6 +128,13 @@ class IGTLTracker(Tracker):
         self._thread = threading.Thread(target=self._reader, args=(self._sock,), daemon=True,
                                         name=f"igtl-reader-{self.host}:{self.port}")
         self._thread.start()
+        if not self._first.wait(self.timeout_s):
+            log.warning("%s: no TRANSFORM within %g s of connecting (are %s among the "
+                        "source's transform names, and is any of them valid?)", self._where,
+                        self.timeout_s, sorted(self.device_names.values()))
+        with self._cond:
+            if self._failure is not None:
+                raise self._failure
         log.info("%s: connected, tools %s", self._where, self.device_names)
 
     def _connect(self) -> socket.socket:
@@ -157,17 +168,21 @@ class IGTLTracker(Tracker):
             sock.close()
 
     def identity(self) -> dict[str, Any]:
-        """{"driver", "host", "port", "tools" (tool → device name), and what the source has
-        shown so far: "header_version" (of its TRANSFORMs), "transform_status" (whether they
-        carry PlusServer's ``TransformStatus``), "metadata_keys", "message_types" (type →
-        count)}. OpenIGTLink has no identity query; a PlusServer shows as ``STATUS``
-        keep-alives and ``TransformStatus`` metadata."""
+        """{"driver", "host", "port", "tools" (tool → device name), "header_version" (the
+        highest of the source's TRANSFORMs so far; None before the first), "transform_status"
+        (whether they carry PlusServer's ``TransformStatus``)}. OpenIGTLink has no identity
+        query; ``open()`` waits up to ``timeout_s`` for the first TRANSFORM so that these are
+        known, and they are kept over reconnects. :meth:`received` counts what arrived."""
         with self._cond:
             return {"driver": self.name, "host": self.host, "port": self.port,
                     "tools": dict(self.device_names), "header_version": self._header_version,
-                    "transform_status": "TransformStatus" in self._metadata_keys,
-                    "metadata_keys": sorted(self._metadata_keys),
-                    "message_types": dict(sorted(self._seen.items()))}
+                    "transform_status": self._transform_status}
+
+    def received(self) -> dict[str, int]:
+        """Message type → how many arrived on this connection (a PlusServer shows as
+        ``STATUS`` keep-alives beside the TRANSFORMs)."""
+        with self._cond:
+            return dict(sorted(self._seen.items()))
 
     # --- reading -----------------------------------------------------------------------------
     def _read(self) -> TrackerFrame:
@@ -218,6 +233,7 @@ class IGTLTracker(Tracker):
                     self._failure = e
                     self._cond.notify_all()
         finally:
+            self._first.set()
             self._next_frame = frames.next_frame
 
     def _take_messages(self, buf: bytearray, frames: FrameAssembler, arrival: float) -> None:
@@ -263,8 +279,9 @@ class IGTLTracker(Tracker):
         """Remember what the source sends (identity) and log a tool's status when it
         changes (not every frame)."""
         with self._cond:
-            self._header_version = t.version
-            self._metadata_keys.update(t.metadata)
+            self._header_version = max(self._header_version or 0, t.version)
+            self._transform_status |= "TransformStatus" in t.metadata
+        self._first.set()
         status = transform_status(t)
         if t.device in self.device_names.values() \
                 and self._status_logged.get(t.device, "OK") != (status or "OK"):
