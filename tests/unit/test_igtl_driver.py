@@ -253,3 +253,20 @@ def test_bad_arguments_are_refused(kw: dict[str, Any], match: str) -> None:
     args: dict[str, Any] = {"host": "127.0.0.1", "tools": TOOLS, **kw}
     with pytest.raises(ValueError, match=match):
         IGTLTracker(args.pop("host"), args.pop("tools"), **args)
+
+
+def test_an_ipv6_loopback_source() -> None:
+    try:
+        m = IGTLTrackerMock(_rig(), TOOLS, host="::1", port=0, clock=FAST)
+        m.start()
+    except OSError as e:  # pragma: no cover - a machine without IPv6 loopback
+        pytest.skip(f"no IPv6 loopback here ({e})")
+    try:
+        assert m.endpoint == f"[::1]:{m.port}"
+        with IGTLTracker("::1", TOOLS, port=m.port) as t:
+            assert t.read().tools["marker"].usable
+    finally:
+        m.close()
+    t = IGTLTracker("::1", TOOLS, port=m.port, timeout_s=1.0)   # nothing listens there now
+    with pytest.raises(ConnectionLost, match=rf"igtl \[::1\]:{m.port}: connection refused"):
+        t.open()

@@ -84,6 +84,8 @@ class IGTLTracker(Tracker):
                     or len(dev.encode("utf-8")) > wire.MAX_NAME_BYTES:
                 raise ValueError(f"IGTLTracker: tool {tool!r}: device name {dev!r} must be "
                                  f"1…{wire.MAX_NAME_BYTES} bytes")
+        if len(set(tools.values())) != len(tools):
+            raise ValueError(f"IGTLTracker: two tools share one device name: {dict(tools)}")
         if isinstance(timeout_s, bool) or not isinstance(timeout_s, int | float) \
                 or not 0 < timeout_s < float("inf"):
             raise ValueError(f"IGTLTracker: timeout_s must be a number of seconds > 0, got "
@@ -91,10 +93,9 @@ class IGTLTracker(Tracker):
         super().__init__(list(tools), frame_rate_hz)
         self.host, self.port = host, port
         self.device_names = dict(tools)
-        FrameAssembler(self.device_names)  # refuses two tools with one device name
         self.timeout_s = float(timeout_s)
         self.ask_metadata = bool(ask_metadata)
-        self._where = f"{self.name} {host}:{port}"
+        self._where = f"{self.name} {f'[{host}]' if ':' in host else host}:{port}"
         self._cond = threading.Condition()
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
