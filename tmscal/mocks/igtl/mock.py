@@ -194,17 +194,17 @@ class IGTLTrackerMock(MockDevice):
         period = 1.0 / (self.fast_rate_hz if self.clock.fast else self.rate_hz)
         due = time.monotonic()
         while not self._stop.is_set():
-            with self._lock:
-                clients = [c for c in self._clients if not c.closed]
-            if not clients:
-                self._stop.wait(_POLL_S)
-                due = time.monotonic()
-                continue
             wait = due - time.monotonic()
             if wait > 0 and self._stop.wait(wait):
                 return
+            with self._lock:  # a frame counts only for the clients connected when it is made
+                clients = [c for c in self._clients if not c.closed]
+                frame = self._next_frame() if clients else None
+            if frame is None:
+                self._stop.wait(_POLL_S)
+                due = time.monotonic()
+                continue
             due = max(due + period, time.monotonic() - period)
-            frame = self._next_frame()
             for c in clients:
                 self._send_frame(c, frame)
 
