@@ -5,7 +5,7 @@ On the real-time clock the frame counter advances at the model's rate; on the fa
 once per TX/BX request, and ``time_s()`` (frames served / rate) is the tracker's virtual
 time, the time base of the sim rig's settling oscillation on that clock. A new noisy
 observation (``rig.observe``) is taken only when the frame number changes, so the same frame
-always reports the same pose.
+always reports the same pose (``mocks.bodies``).
 """
 
 from __future__ import annotations
@@ -17,12 +17,12 @@ import numpy as np
 from ...drivers.ndi import protocol as p
 from ...drivers.ndi.codes import PORT_HEALTHY, PortStatus, ReplyOption, SystemStatus
 from ...sim.rig import SimRig
+from ..bodies import BodyObserver, Visibility
 from ..clock import Clock
 from .model import MeasurementVolume, PolarisFaults
 
 __all__ = ["FrameSource"]
 
-_OBS_BATCH = 32
 _VALID, _MISSING, _OUT_OF_VOLUME, _UNOCCUPIED = "valid", "missing", "oov", "unoccupied"
 #: per enabled handle: (kind, pose tracker_from_body 4×4 mm or None, port status)
 _HandleState = tuple[str, np.ndarray | None, int]
@@ -47,7 +47,7 @@ class FrameSource:
         self.faults = faults
         self.error_mm = error_mm
         self._rng = rng
-        self._obs_cache: dict[str, tuple[np.ndarray, list[np.ndarray]]] = {}
+        self._bodies = BodyObserver(rig, volume)
         self._served = 0   # fast-clock frames served since power-up (TSTART does not reset it)
         self.restart()
 
@@ -58,7 +58,7 @@ class FrameSource:
         self._fast_frame = 0
         self._frame_cache: tuple[int, dict[int, _HandleState], int] | None = None
         if observations:
-            self._obs_cache = {}
+            self._bodies.forget()
 
     def records(self, handles: Sequence[tuple[int, str | None]], options: int
                 ) -> tuple[list[p.HandleRecord], int]:
@@ -110,7 +110,7 @@ class FrameSource:
             if body is None or (f.missing_fraction > 0 and rng.random() < f.missing_fraction):
                 out[number] = (_MISSING, None, healthy)
                 continue
-            pose = self._observe(body)
+            pose = self._bodies.observe(body)
             kind, bits = self._volume_check(body, pose)
             out[number] = (kind, pose, healthy | bits)
         self._frame_cache = (frame, out, sys_status)
@@ -120,25 +120,9 @@ class FrameSource:
         """(kind, port status bits) of ``body`` at ``pose`` against the measurement volume:
         all spheres inside → valid; some → valid, partially out of volume; none → out of
         volume."""
-        if self.volume is None:
-            return _VALID, 0
-        spheres = np.asarray((self.rig.tools or {}).get(body, np.zeros((1, 3))))
-        inside = self.volume.contains(spheres @ pose[:3, :3].T + pose[:3, 3])
-        if not inside.any():
+        seen = self._bodies.visibility(body, pose)
+        if seen == Visibility.OUTSIDE:
             return _OUT_OF_VOLUME, int(PortStatus.OUT_OF_VOLUME)
-        if not inside.all():
+        if seen == Visibility.PARTIAL:
             return _VALID, int(PortStatus.PARTIALLY_OUT_OF_VOLUME)
         return _VALID, 0
-
-    def _observe(self, body: str) -> np.ndarray:
-        """One noisy ``rig.observe(body)`` (tracker_from_body, 4×4 mm). Observations are
-        drawn from the rig in batches of ``_OBS_BATCH`` at the current true pose and used one
-        per frame; a batch is discarded as soon as the true pose changes (the robot moved),
-        so each frame still gets an independent observation of where the body is now."""
-        true = self.rig.true_body(body)
-        cached = self._obs_cache.get(body)
-        if cached is None or not np.array_equal(cached[0], true) or not cached[1]:
-            batch = self.rig.observe(body, _OBS_BATCH)
-            cached = (true, list(batch[::-1]))
-            self._obs_cache[body] = cached
-        return cached[1].pop()
