@@ -353,51 +353,90 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Chain, level
 def identifiability(prob: _Problem, s: _State, Jd: np.ndarray, vf: float = 1.0
                     ) -> tuple[list[Combination], list[Combination], list[Combination]]:
     """(identified, weak, unidentified) combinations of the deviations (module docstring),
-    from the whitened data Jacobian ``Jd`` (m, P) at the estimate."""
-    nx = prob.n_xyz
-    Jx, Jk = Jd[:, :nx], Jd[:, nx:] * prob.tau           # δ in tolerance units
-    Q, Rq = np.linalg.qr(Jx)
-    Jp = Jk - Q @ (Q.T @ Jk)
+    from the whitened data Jacobian ``Jd`` (m, P) at the estimate. The unidentified ones
+    are sorted by reason — combinations that move no flange pose, those Z absorbs, those
+    X (and Y) absorb, those only all three together absorb — each set in reduced echelon
+    form (one leading parameter per combination), so that they read as parameters."""
+    nx, nb = prob.n_xyz, prob.nb
+    Jk = Jd[:, nx:] * prob.tau                          # δ in tolerance units
+    tol = 1e-7 * max(float(np.linalg.norm(Jk, 2)), 1e-300)
+    Jp = _residual_of(Jd[:, :nx], Jk)
     U, sig, Vt = np.linalg.svd(Jp, full_matrices=False)
-    scale = max(float(np.linalg.norm(Jk, 2)), 1e-300)
     delta_s = s.delta / prob.tau
-    out: tuple[list[Combination], list[Combination], list[Combination]] = ([], [], [])
+    ident: list[Combination] = []
+    weak: list[Combination] = []
     for k, v in enumerate(Vt):
-        v = v if v[np.argmax(np.abs(v))] > 0 else -v
-        order = np.argsort(-np.abs(v))
-        terms = {prob.names[j]: float(v[j]) for j in order if abs(v[j]) >= 0.05}
-        est = float(v @ delta_s)
-        sd = float(np.sqrt(vf / (sig[k] ** 2 + 1.0)))
-        if sig[k] <= 1e-7 * scale:
-            out[2].append(Combination(terms, float(sig[k]), est, sd,
-                                      _why_not(Jd, nx, prob, Jk @ v)))
-        elif sig[k] < 1.0:
-            out[1].append(Combination(terms, float(sig[k]), est, sd,
-                                      "weakly identified: these poses see it less well than "
-                                      "the tolerance says; spread the joints further"))
+        if sig[k] <= tol:
+            continue
+        c = _combination(prob.names, v, float(sig[k]), delta_s, vf)
+        if sig[k] < 1.0:
+            weak.append(Combination(c.terms, c.sigma_data, c.estimate, c.sd,
+                                    "weakly identified: these poses see it less well than the "
+                                    "tolerance says; spread the joints further"))
         else:
-            out[0].append(Combination(terms, float(sig[k]), est, sd))
-    return out
+            ident.append(c)
+    reasons = [("moves no flange pose (equivalent parameters of the chain)", None),
+               ("absorbed by Z (robot/world): it moves the whole arm in the robot's frame",
+                slice(6 * nb, 6 * nb + 6)),
+               ("absorbed by X" + (" and Y" if nb > 1 else "") + " (hand/eye): it moves only "
+                "what the flange carries", slice(0, 6 * nb)),
+               ("absorbed by X, Y and Z together", slice(0, nx))]
+    taken = np.zeros((len(prob.names), 0))
+    unident: list[Combination] = []
+    for why, cols in reasons:
+        M = Jk if cols is None else _residual_of(Jd[:, cols], Jk)
+        basis = _complement(_null_basis(M, tol), taken)
+        taken = np.concatenate([taken, basis], axis=1)
+        for v in _echelon(basis).T:
+            c = _combination(prob.names, v / np.linalg.norm(v), 0.0, delta_s, vf)
+            unident.append(Combination(c.terms, 0.0, c.estimate, float(np.sqrt(vf)), why))
+    return ident, weak, unident
 
 
-def _why_not(Jd: np.ndarray, nx: int, prob: _Problem, e: np.ndarray) -> str:
-    """Why a combination (its effect ``e`` on the whitened data) is not identifiable."""
-    size = float(np.linalg.norm(e))
-    ref = float(np.linalg.norm(Jd[:, nx:] * prob.tau))
-    if size <= 1e-7 * max(ref, 1e-300):
-        return "moves no flange pose (equivalent parameters of the chain)"
-    nb = prob.nb
+def _residual_of(M: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """J with its projection onto the column space of M removed."""
+    Q, _ = np.linalg.qr(M)
+    return J - Q @ (Q.T @ J)
 
-    def absorbed(cols: slice) -> bool:
-        M = Jd[:, cols]
-        x, *_ = np.linalg.lstsq(M, e, rcond=None)
-        return float(np.linalg.norm(e - M @ x)) <= 1e-6 * size
-    if absorbed(slice(6 * nb, 6 * nb + 6)):
-        return "absorbed by Z (robot/world): it moves the whole arm in the robot's frame"
-    if absorbed(slice(0, 6 * nb)):
-        return ("absorbed by X" + (" and Y" if nb > 1 else "") +
-                " (hand/eye): it moves only what the flange carries")
-    return "absorbed by X, Y and Z together"
+
+def _null_basis(M: np.ndarray, tol: float) -> np.ndarray:
+    """Orthonormal basis (k, r) of the null space of M (·, k), singular values ≤ tol."""
+    _, sig, Vt = np.linalg.svd(M, full_matrices=True)
+    rank = int(np.sum(sig > tol))
+    return Vt[rank:].T
+
+
+def _complement(basis: np.ndarray, taken: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of span(basis) with span(taken) (orthonormal) removed."""
+    if basis.shape[1] == 0 or taken.shape[1] == 0:
+        return basis
+    rest = basis - taken @ (taken.T @ basis)
+    U, sig, _ = np.linalg.svd(rest, full_matrices=False)
+    return U[:, sig > 1e-6]
+
+
+def _echelon(basis: np.ndarray) -> np.ndarray:
+    """The same span in reduced column echelon form (each vector one leading parameter with
+    coefficient 1, zero in the others' leading rows; pivots by magnitude)."""
+    B = basis.copy()
+    rows: list[int] = []
+    for j in range(B.shape[1]):
+        free = [i for i in range(B.shape[0]) if i not in rows]
+        i = free[int(np.argmax(np.abs(B[free, j])))]
+        B[:, j] /= B[i, j]
+        for k in range(B.shape[1]):
+            if k != j:
+                B[:, k] -= B[i, k] * B[:, j]
+        rows.append(i)
+    return B
+
+
+def _combination(names: list[str], v: np.ndarray, sigma: float, delta_s: np.ndarray,
+                 vf: float) -> Combination:
+    v = v if v[np.argmax(np.abs(v))] > 0 else -v
+    order = np.argsort(-np.abs(v))
+    terms = {names[j]: float(v[j]) for j in order if abs(v[j]) >= 0.05}
+    return Combination(terms, sigma, float(v @ delta_s), float(np.sqrt(vf / (sigma ** 2 + 1.0))))
 
 
 # --- level selection --------------------------------------------------------------------------
