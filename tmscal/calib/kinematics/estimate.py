@@ -262,6 +262,8 @@ class Combination:
     estimate: float
     sd: float
     reason: str | None = None
+    #: the whole unit vector v over the fit's ``names`` (terms shows its main part)
+    vector: np.ndarray | None = None
 
     def describe(self) -> str:
         """One line, e.g. "+0.71 a_2 +0.70 a_3 = +2.31 ± 0.04 (tolerance units)"."""
@@ -326,15 +328,16 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Chain, level
     m = len(q) * 6 * len(bodies)
     data_r = r[:m]
     chi2 = float(data_r @ data_r)
-    H = J.T @ J
-    d = np.sqrt(np.diag(H))
-    d[d == 0] = 1.0
-    Hs = H / np.outer(d, d)
-    w, V = np.linalg.eigh(Hs)
-    if w[0] <= 1e-14 * w[-1]:
+    Jx = J[:m, :prob.n_xyz]
+    sx = np.linalg.svd(Jx / np.maximum(np.linalg.norm(Jx, axis=0), 1e-300), compute_uv=False)
+    if sx[-1] <= 1e-7 * sx[0]:
         raise CalibrationError("kinematics: hand/eye, coil and robot/world are not "
                                "identifiable from these poses: use more poses with more "
                                "rotation and translation diversity")
+    H = J.T @ J                      # the prior rows make it positive definite
+    d = np.sqrt(np.diag(H))
+    d[d == 0] = 1.0
+    w, V = np.linalg.eigh(H / np.outer(d, d))
     P = (V / w) @ V.T / np.outer(d, d)
     Jd = J[:m]
     p_eff = float(np.trace(P @ (Jd.T @ Jd)))
@@ -372,7 +375,7 @@ def identifiability(prob: _Problem, s: _State, Jd: np.ndarray, vf: float = 1.0
         if sig[k] < 1.0:
             weak.append(Combination(c.terms, c.sigma_data, c.estimate, c.sd,
                                     "weakly identified: these poses see it less well than the "
-                                    "tolerance says; spread the joints further"))
+                                    "tolerance says; spread the joints further", c.vector))
         else:
             ident.append(c)
     reasons = [("moves no flange pose (equivalent parameters of the chain)", None),
@@ -389,7 +392,8 @@ def identifiability(prob: _Problem, s: _State, Jd: np.ndarray, vf: float = 1.0
         taken = np.concatenate([taken, basis], axis=1)
         for v in _echelon(basis).T:
             c = _combination(prob.names, v / np.linalg.norm(v), 0.0, delta_s, vf)
-            unident.append(Combination(c.terms, 0.0, c.estimate, float(np.sqrt(vf)), why))
+            unident.append(Combination(c.terms, 0.0, c.estimate, float(np.sqrt(vf)), why,
+                                       c.vector))
     return ident, weak, unident
 
 
@@ -436,7 +440,8 @@ def _combination(names: list[str], v: np.ndarray, sigma: float, delta_s: np.ndar
     v = v if v[np.argmax(np.abs(v))] > 0 else -v
     order = np.argsort(-np.abs(v))
     terms = {names[j]: float(v[j]) for j in order if abs(v[j]) >= 0.05}
-    return Combination(terms, sigma, float(v @ delta_s), float(np.sqrt(vf / (sigma ** 2 + 1.0))))
+    return Combination(terms, sigma, float(v @ delta_s),
+                       float(np.sqrt(vf / (sigma ** 2 + 1.0))), vector=v)
 
 
 # --- level selection --------------------------------------------------------------------------
