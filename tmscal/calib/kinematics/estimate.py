@@ -224,8 +224,9 @@ def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int
                          ) -> tuple[_State, np.ndarray, np.ndarray, int]:
     """Minimise the whitened cost from s; returns (state, residuals, Jacobian, iterations)."""
     r, J = prob.evaluate(s)
-    cost, lam, it = float(r @ r), 1e-6, 0
-    for it in range(1, max_iter + 1):
+    cost, lam, its = float(r @ r), 1e-6, 0
+    while its < max_iter:
+        its += 1
         d = np.linalg.norm(J, axis=0)
         d[d == 0] = 1.0
         Js = J / d
@@ -245,7 +246,7 @@ def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int
         r, J = prob.evaluate(s)
         if done:
             break
-    return s, r, J, it
+    return s, r, J, its
 
 
 # --- one level --------------------------------------------------------------------------------
