@@ -8,14 +8,16 @@ Poses 4×4 mm (A = base_from_flange, B/C = tracker_from_marker/probe), joints ra
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from tmscal.calib import solve
+from tmscal.calib.kinematics import arm_by_name, base_from_flange
 from tmscal.calib.kinematics import estimate as est
-from tmscal.calib.kinematics.chain import Chain, parallel_joints, parameter_twists
 from tmscal.calib.kinematics.ik import inverse
-from tmscal.calib.selfcal.model import UR5E, VS060
+from tmscal.calib.kinematics.jacobian import deviation_twists, parallel_joints
 from tmscal.geometry import make_pose, random_rotation
 
 HOME = np.array([np.pi, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
@@ -30,47 +32,51 @@ def _twist_of(D: np.ndarray) -> np.ndarray:
     return np.stack([D[:, 2, 1], D[:, 0, 2], D[:, 1, 0], D[:, 0, 3], D[:, 1, 3], D[:, 2, 3]], 1)
 
 
-@pytest.mark.parametrize("convention", ["standard", "modified"])
-def test_parameter_twists_match_finite_differences(convention: str) -> None:
+@pytest.mark.parametrize("name", ["ur5e", "vs060", "fr3"])
+def test_deviation_twists_match_finite_differences(name: str) -> None:
+    """Standard (UR, DENSO) and modified (Franka) DH, with Hayati angles and a flange."""
     rng = np.random.default_rng(3)
-    dh = UR5E.dh if convention == "standard" else VS060.dh
-    chain = Chain(dh, convention, beta=rng.normal(0, 0.01, 6),
-                  flange=make_pose(random_rotation(rng), [1.0, 2.0, 30.0]))
-    names = [f"{k}_{i}" for i in range(1, 7) for k in ("theta0", "d", "a", "alpha", "beta")]
-    q = HOME + rng.uniform(-0.7, 0.7, (6, 6))
-    A, J = parameter_twists(chain, q, names)
-    np.testing.assert_allclose(A, chain.forward(q), atol=1e-9)
+    nominal = arm_by_name(name)
+    n = nominal.n_joints
+    arm = replace(nominal, beta=rng.normal(0, 0.01, n),
+                  flange=nominal.flange @ make_pose(random_rotation(rng), [1.0, 2.0, 30.0]))
+    names = [f"{k}_{i}" for i in range(1, n + 1) for k in ("theta0", "d", "a", "alpha", "beta")]
+    q = rng.uniform(-1.0, 1.0, (6, n))
+    A, J = deviation_twists(arm, q, names)
+    np.testing.assert_allclose(A, base_from_flange(arm, q), atol=1e-9)
     h = 1e-6
     for j, nm in enumerate(names):
-        dA = chain.shifted([nm], [h]).forward(q) - chain.shifted([nm], [-h]).forward(q)
+        dA = (base_from_flange(arm.with_deviations([nm], [h]), q)
+              - base_from_flange(arm.with_deviations([nm], [-h]), q))
         np.testing.assert_allclose(_twist_of(np.linalg.inv(A) @ dA / (2 * h)), J[:, :, j],
                                    atol=2e-6, err_msg=nm)
 
 
 def test_parallel_joints_of_the_ur5e_are_2_and_3() -> None:
-    assert parallel_joints(Chain(UR5E.dh)) == [2, 3]
+    assert parallel_joints(arm_by_name("ur5e")) == [2, 3]
+    assert parallel_joints(arm_by_name("vs060")) == [2]
 
 
 def _rig(seed: int, n: int, level: str = "full", span: float = 0.6, scale: float = 1.0):
     """A noise-free rig: the UR5e with deviations at ``scale`` × the default tolerance on the
     level's parameters, random X, Y, Z, ``n`` configurations around the home."""
     rng = np.random.default_rng(seed)
-    chain0 = Chain(UR5E.dh)
+    chain0 = arm_by_name("ur5e")
     names = est.level_parameters(chain0, level)
     delta = rng.normal(0, scale, len(names)) * est.prior_sigmas(names, est.Tolerances())
-    true = chain0.shifted(names, delta)
+    true = chain0.with_deviations(names, delta)
     X = make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
     Y = make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
     Z = make_pose(random_rotation(rng), rng.uniform(500, 1500, 3))
     q = HOME + rng.uniform(-span, span, (n, 6))
-    A = true.forward(q)
+    A = base_from_flange(true, q)
     B = np.linalg.inv(Z) @ A @ X
     C = np.linalg.inv(Z) @ A @ Y
     return chain0, true, names, delta, (X, Y, Z), q, B, C
 
 
-def _start(chain0: Chain, q: np.ndarray, B: np.ndarray, C: np.ndarray):
-    s = solve(chain0.forward(q), B, C, method="qr36")
+def _start(chain0, q: np.ndarray, B: np.ndarray, C: np.ndarray):
+    s = solve(base_from_flange(chain0, q), B, C, method="qr36")
     return [s.X, s.Y], s.Z
 
 
@@ -78,7 +84,7 @@ def test_noise_free_recovery_of_every_identifiable_combination() -> None:
     chain0, true, names, delta, (X, Y, Z), q, B, C = _rig(0, 40)
     fit = est.fit_kinematics(q, [B, C], chain0, "full", _start(chain0, q, B, C), NOISE, LOOSE)
     # the tracker poses are reproduced exactly …
-    A = fit.chain.forward(q)
+    A = base_from_flange(fit.chain, q)
     np.testing.assert_allclose(np.linalg.inv(fit.Z) @ A @ fit.X, B, atol=1e-6)
     np.testing.assert_allclose(np.linalg.inv(fit.Z) @ A @ fit.Y, C, atol=1e-6)
     # … 18 combinations are identified (26 parameters: θ0, d, a, α per joint and β on the two
@@ -117,8 +123,8 @@ def test_two_parameter_orders_give_the_same_predicted_poses() -> None:
     finally:
         est.level_parameters = orig
     q_new = HOME + np.random.default_rng(9).uniform(-0.6, 0.6, (50, 6))
-    np.testing.assert_allclose(a.chain.forward(q_new) @ a.Y, b.chain.forward(q_new) @ b.Y,
-                               atol=1e-6)
+    np.testing.assert_allclose(base_from_flange(a.chain, q_new) @ a.Y,
+                               base_from_flange(b.chain, q_new) @ b.Y, atol=1e-6)
     np.testing.assert_allclose(a.Z, b.Z, atol=1e-6)
 
 
@@ -140,19 +146,19 @@ def _noisy(P: np.ndarray, rng: np.random.Generator, mm: float = 0.03) -> np.ndar
 
 
 def test_inverse_kinematics_reaches_the_pose_from_a_nearby_seed() -> None:
-    chain = Chain(UR5E.dh)
+    chain = arm_by_name("ur5e")
     rng = np.random.default_rng(4)
     for _ in range(10):
         q = HOME + rng.uniform(-0.5, 0.5, 6)
-        T = chain.forward(q)
+        T = base_from_flange(chain, q)
         qs = inverse(chain, T, [q + rng.uniform(-0.1, 0.1, 6)])
         assert qs is not None
-        np.testing.assert_allclose(chain.forward(qs), T, atol=1e-6)
+        np.testing.assert_allclose(base_from_flange(chain, qs), T, atol=1e-6)
 
 
 def test_unknown_level_and_bad_tolerance_are_calibration_errors() -> None:
     from tmscal.errors import CalibrationError
     with pytest.raises(CalibrationError, match="unknown level 'most'"):
-        est.level_parameters(Chain(UR5E.dh), "most")
+        est.level_parameters(arm_by_name("ur5e"), "most")
     with pytest.raises(CalibrationError, match="length_mm"):
         est.Tolerances(length_mm=0.0)

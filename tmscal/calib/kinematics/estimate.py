@@ -7,8 +7,8 @@ tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from
 4×4, mm; joints rad.
 
 Model. The flange sits where the TRUE arm puts the recorded joints, A_i = A(q_i; p0 + δ)
-(:class:`tmscal.calib.kinematics.chain.Chain` with the nominal parameters p0 plus deviations
-δ), up to the robot's repeatability (a small rigid error per pose, as in
+(the nominal :class:`~tmscal.calib.kinematics.model.Arm` p0 plus deviations δ of its DH
+parameters and Hayati angles, base_from_flange), up to the robot's repeatability (a small rigid error per pose, as in
 :mod:`tmscal.calib.ml`); the tracker reports each body with its noise. Per pose and body
 the residual is r = [log R(E) rad; t(E) mm] of E = (A_i W)⁻¹ Z N_i (W = X or Y, N = B or C),
 whitened by the robot's and the tracker's noise exactly as ``ml`` whitens it. Each deviation
@@ -17,8 +17,8 @@ not overfit, and the estimate minimises
 
     Σ_i r_iᵀ S_i⁻¹ r_i + Σ_j (δ_j / τ_j)²
 
-by Levenberg–Marquardt with the analytic Jacobian (the chain's parameter twists,
-:func:`tmscal.calib.kinematics.chain.parameter_twists`, carried through E). The minimiser is
+by Levenberg–Marquardt with the analytic Jacobian (the deviations' body twists,
+:func:`tmscal.calib.kinematics.jacobian.deviation_twists`, carried through E). The minimiser is
 unique whatever the geometry: a direction of δ that the data cannot see (e.g. a base height
 that Z absorbs, or d_2 − d_3 on parallel axes) costs prior and buys nothing, so it stays at
 zero — the estimate lives in the identifiable subspace and has minimum norm (in tolerance
@@ -45,9 +45,10 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import make_pose
-from ..ml import _rodrigues, _tracker_covs, _whitener, noise_covariance
-from .chain import Chain, parallel_joints, parameter_twists, parameter_units
+from ...geometry import make_pose, matrix_from_rotvec
+from ..ml_model import noise_covariance, tracker_covs, whitener
+from .jacobian import deviation_twists, parallel_joints
+from .model import Arm, base_from_flange, deviation_units
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
@@ -75,10 +76,10 @@ class Tolerances:
 def prior_sigmas(names: list[str], tol: Tolerances) -> np.ndarray:
     """τ per parameter (mm or rad)."""
     return np.array([tol.length_mm if u == "mm" else np.radians(tol.angle_deg)
-                     for u in parameter_units(names)])
+                     for u in deviation_units(names)])
 
 
-def level_parameters(chain: Chain, level: str) -> list[str]:
+def level_parameters(chain: Arm, level: str) -> list[str]:
     """The deviations a level estimates, in the chain's order."""
     n = chain.n_joints
     if level == "none":
@@ -136,7 +137,7 @@ class _State:
 class _Problem:
     """The whitened least-squares problem of one level (module docstring)."""
 
-    def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Chain,
+    def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                  names: list[str], tau: np.ndarray, whiten: np.ndarray) -> None:
         self.q, self.bodies, self.chain0 = q, bodies, chain0
         self.names, self.tau, self.whiten = names, tau, whiten
@@ -147,14 +148,14 @@ class _Problem:
     def n_params(self) -> int:
         return self.n_xyz + len(self.names)
 
-    def chain(self, s: _State) -> Chain:
-        return self.chain0.shifted(self.names, s.delta) if self.names else self.chain0
+    def chain(self, s: _State) -> Arm:
+        return self.chain0.with_deviations(self.names, s.delta) if self.names else self.chain0
 
     def evaluate(self, s: _State, jac: bool = True
                  ) -> tuple[np.ndarray, np.ndarray | None]:
         """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None)."""
         n = len(self.q)
-        A, Jk = parameter_twists(self.chain(s), self.q, self.names)
+        A, Jk = deviation_twists(self.chain(s), self.q, self.names)
         R_A, t_A = A[:, :3, :3], A[:, :3, 3]
         res = np.zeros((n, 6 * self.nb))
         J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
@@ -206,7 +207,7 @@ class _Problem:
     def step(self, s: _State, d: np.ndarray) -> _State:
         """The state moved by parameters d (rotation vectors on the right, offsets in mm)."""
         def pose(T: np.ndarray, p: np.ndarray) -> np.ndarray:
-            return make_pose(T[:3, :3] @ _rodrigues(p[:3]), T[:3, 3] + p[3:])
+            return make_pose(T[:3, :3] @ matrix_from_rotvec(p[:3]), T[:3, 3] + p[3:])
         Ws = [pose(W, d[6 * j:6 * j + 6]) for j, W in enumerate(s.Ws)]
         Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6])
         return _State(Ws, Z, s.delta + d[self.n_xyz:])
@@ -276,7 +277,7 @@ class Combination:
 
 @dataclass
 class KinematicFit:
-    """One fitted level: ``chain`` (the identified arm), ``names``/``delta``/``sd``
+    """One fitted level: ``chain`` (the identified arm, an :class:`Arm`), ``names``/``delta``/``sd``
     (deviations in rad or mm and their posterior SDs), X, (Y,) Z (4×4 mm), ``chi2`` of the
     data rows, ``m`` residuals, ``p_eff`` effective parameters, ``variance_factor``
     χ²/(m − p_eff), ``covariance`` of [X, (Y,) Z, δ] (rows as ``ml``: rotation vector rad,
@@ -284,7 +285,7 @@ class KinematicFit:
     information criterion ``aic`` and LM ``iterations``."""
 
     level: str
-    chain: Chain
+    chain: Arm
     names: list[str]
     delta: np.ndarray
     sd: np.ndarray
@@ -305,13 +306,13 @@ class KinematicFit:
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
     names = ["marker", "probe"][:len(Ws)]
-    tracker = _tracker_covs(n, names, noise)
+    tracker = tracker_covs(n, names, noise)
     rs_mm = float(noise["robot_sigma_mm"])
     rs_rad = float(np.radians(noise["robot_sigma_deg"]))
-    return _whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker))
+    return whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker))
 
 
-def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Chain, level: str,
+def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: str,
                    start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                    tol: Tolerances = Tolerances(), max_iter: int = 50) -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
@@ -461,7 +462,7 @@ class KinematicsResult:
 
 def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray]) -> np.ndarray:
     """Per pose e_t (mm): the sum over bodies of ‖t((A W)⁻¹ Z N)‖ with A from the fitted arm."""
-    A = fit.chain.forward(q)
+    A = base_from_flange(fit.chain, q)
     Ws = [fit.X] if fit.Y is None else [fit.X, fit.Y]
     e = np.zeros(len(q))
     for W, N in zip(Ws, bodies, strict=True):
@@ -482,7 +483,7 @@ def _subset_noise(noise: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
     return {**noise, "spreads": [sp[i] for i in keep]}
 
 
-def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Chain,
+def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
                         max_iter: int = 50) -> KinematicsResult:

@@ -1,5 +1,6 @@
-"""Inverse kinematics of a :class:`~tmscal.calib.kinematics.chain.Chain`: the joints at which
-an arm puts its flange at a wanted pose (base_from_flange, 4×4 mm; joints rad), by damped
+"""Inverse kinematics of an :class:`~tmscal.calib.kinematics.model.Arm`: the joints at which
+it puts its flange at a wanted pose (base_from_flange, 4×4 mm, the robot's own base frame;
+``arm.base`` not applied; joints rad), by damped
 least squares (Levenberg–Marquardt) on the analytic joint Jacobian. Pure numerics, no I/O.
 
 A controller keeps the arm's configuration on a linear move, so the solution sought is the one
@@ -11,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import Chain, parameter_twists
+from .jacobian import deviation_twists
+from .model import Arm
 
 __all__ = ["inverse", "IK_TOL_MM", "IK_TOL_RAD"]
 
@@ -24,12 +26,12 @@ _MAX_STEP_RAD = 0.3
 _ROT_WEIGHT_MM = 100.0
 
 
-def _error(chain: Chain, q: np.ndarray, target: np.ndarray
+def _error(chain: Arm, q: np.ndarray, target: np.ndarray
            ) -> tuple[np.ndarray, np.ndarray]:
     """(e, J): the body-frame error twist from A(q) to ``target`` [rotation vector rad;
     translation mm] and the joint Jacobian (6, n) of the flange's body twist."""
     names = [f"theta0_{i + 1}" for i in range(chain.n_joints)]
-    A, J = parameter_twists(chain, q[None], names)
+    A, J = deviation_twists(chain, q[None], names)
     D = np.linalg.inv(A[0]) @ target
     R = D[:3, :3]
     c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
@@ -40,17 +42,18 @@ def _error(chain: Chain, q: np.ndarray, target: np.ndarray
     return np.concatenate([rv, D[:3, 3]]), J[0]
 
 
-def inverse(chain: Chain, target: np.ndarray, seeds: list[np.ndarray],
+def inverse(chain: Arm, target: np.ndarray, seeds: list[np.ndarray],
             limits_rad: np.ndarray | None = None, max_iter: int = 200) -> np.ndarray | None:
-    """Joints q (rad) with ``chain.forward(q)`` = ``target`` (4×4 mm) within ``IK_TOL_MM`` and
-    ``IK_TOL_RAD``, inside ``limits_rad`` ((n, 2) rad; None: no limits), from the first of
+    """Joints q (rad) with ``base_from_flange(chain, q)`` = ``target`` (4×4 mm) within
+    ``IK_TOL_MM`` and ``IK_TOL_RAD``, inside ``limits_rad`` ((n, 2) rad; None: the arm's
+    joint limits), from the first of
     ``seeds`` (rad) that converges; None when none does (out of reach, or only across a
     limit). For a redundant arm (7 joints) the solution is the one the damped steps reach
     from the seed."""
     target = np.asarray(target, dtype=np.float64)
     n = chain.n_joints
-    lo, hi = ((np.full(n, -np.inf), np.full(n, np.inf)) if limits_rad is None
-              else (np.asarray(limits_rad)[:, 0], np.asarray(limits_rad)[:, 1]))
+    lim = chain.joint_limits_rad if limits_rad is None else np.asarray(limits_rad, dtype=float)
+    lo, hi = lim[:, 0], lim[:, 1]
     wts = np.array([_ROT_WEIGHT_MM] * 3 + [1.0] * 3)
     for seed in seeds:
         q = np.clip(np.asarray(seed, dtype=np.float64), lo, hi)
