@@ -46,7 +46,15 @@ import numpy as np
 
 from ...errors import CalibrationError
 from ...geometry import make_pose, matrix_from_rotvec
-from ..ml_model import noise_covariance, tracker_covs, whitener
+from ..ml_model import (
+    DISTORTION_MODELS,
+    G_STEP,
+    noise_covariance,
+    tracker_covs,
+    undistort,
+    undistortion,
+    whitener,
+)
 from .jacobian import deviation_twists, parallel_joints
 from .model import Arm, base_from_flange, deviation_units
 
@@ -127,26 +135,41 @@ def _log_and_jr_inv(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class _State:
-    """Current estimate: Ws [X, (Y)], Z and the deviations δ (of ``names``)."""
+    """Current estimate: Ws [X, (Y)], Z, the deviations δ (of ``names``) and the tracker's
+    undistortion parameters g (``ml``'s, of the problem's distortion model)."""
 
     Ws: list[np.ndarray]
     Z: np.ndarray
     delta: np.ndarray
+    g: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class _Problem:
     """The whitened least-squares problem of one level (module docstring)."""
 
     def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
-                 names: list[str], tau: np.ndarray, whiten: np.ndarray) -> None:
+                 names: list[str], tau: np.ndarray, whiten: np.ndarray,
+                 distortion: str = "none", moments: list[np.ndarray | None] | None = None
+                 ) -> None:
         self.q, self.bodies, self.chain0 = q, bodies, chain0
         self.names, self.tau, self.whiten = names, tau, whiten
+        self.model, self.moments = distortion, moments or [None] * len(bodies)
         self.nb = len(bodies)
-        self.n_xyz = 6 * (self.nb + 1)
+        self.n_g = DISTORTION_MODELS[distortion]
+        #: X, (Y,) Z and the distortion: the parameters without a prior
+        self.n_xyz = 6 * (self.nb + 1) + self.n_g
 
     @property
     def n_params(self) -> int:
         return self.n_xyz + len(self.names)
+
+    def _measured(self, g: np.ndarray) -> list[np.ndarray]:
+        """The tracker poses with the distortion of parameters g undone (``ml``'s model)."""
+        if self.model == "none":
+            return self.bodies
+        G = undistortion(self.model, g)
+        return [undistort(N, G, self.model, M) for N, M in zip(self.bodies, self.moments,
+                                                               strict=True)]
 
     def chain(self, s: _State) -> Arm:
         return self.chain0.with_deviations(self.names, s.delta) if self.names else self.chain0
@@ -160,7 +183,7 @@ class _Problem:
         res = np.zeros((n, 6 * self.nb))
         J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
         RZ, tZ = s.Z[:3, :3], s.Z[:3, 3]
-        for b, (W, N) in enumerate(zip(s.Ws, self.bodies, strict=True)):
+        for b, (W, N) in enumerate(zip(s.Ws, self._measured(s.g), strict=True)):
             RW, tW = W[:3, :3], W[:3, 3]
             # E = W⁻¹ A⁻¹ Z N
             R_M = RW.T @ np.swapaxes(R_A, 1, 2)                       # rotation of W⁻¹A⁻¹
@@ -194,6 +217,14 @@ class _Problem:
                     + np.cross(tWi[None, :, None], eta_w, axis=1)
                 J[:, 6 * b:6 * b + 3, self.n_xyz:] = -Jr @ R_Et @ eta_w
                 J[:, 6 * b + 3:6 * b + 6, self.n_xyz:] = tEx @ eta_w - eta_v
+        if J is not None and self.n_g:  # the distortion's few columns by central differences
+            c0 = 6 * (self.nb + 1)
+            for k in range(self.n_g):
+                e = np.zeros(self.n_g)
+                e[k] = G_STEP
+                rp = self._raw(_State(s.Ws, s.Z, s.delta, s.g + e), A)
+                rm = self._raw(_State(s.Ws, s.Z, s.delta, s.g - e), A)
+                J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
         rw = _apply(self.whiten, res).ravel()
         prior = s.delta / self.tau
         r = np.concatenate([rw, prior])
@@ -204,13 +235,23 @@ class _Problem:
         Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
         return r, np.concatenate([Jw, Jp], axis=0)
 
+    def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
+        """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
+        out = []
+        for W, N in zip(s.Ws, self._measured(s.g), strict=True):
+            E = np.linalg.inv(A @ W) @ (s.Z @ N)
+            phi, _ = _log_and_jr_inv(E[:, :3, :3])
+            out.append(np.concatenate([phi, E[:, :3, 3]], axis=1))
+        return np.concatenate(out, axis=1)
+
     def step(self, s: _State, d: np.ndarray) -> _State:
         """The state moved by parameters d (rotation vectors on the right, offsets in mm)."""
         def pose(T: np.ndarray, p: np.ndarray) -> np.ndarray:
             return make_pose(T[:3, :3] @ matrix_from_rotvec(p[:3]), T[:3, 3] + p[3:])
         Ws = [pose(W, d[6 * j:6 * j + 6]) for j, W in enumerate(s.Ws)]
         Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6])
-        return _State(Ws, Z, s.delta + d[self.n_xyz:])
+        c0 = 6 * (self.nb + 1)
+        return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g])
 
 
 def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -282,7 +323,8 @@ class KinematicFit:
     data rows, ``m`` residuals, ``p_eff`` effective parameters, ``variance_factor``
     χ²/(m − p_eff), ``covariance`` of [X, (Y,) Z, δ] (rows as ``ml``: rotation vector rad,
     offset mm, then δ), ``identified``/``weak``/``unidentified`` combinations, the
-    information criterion ``aic`` and LM ``iterations``."""
+    information criterion ``aic``, LM ``iterations``, and the tracker ``distortion`` model
+    with its undistortion ``G`` = D⁻¹ (3×3; identity for "none")."""
 
     level: str
     chain: Arm
@@ -302,6 +344,9 @@ class KinematicFit:
     unidentified: list[Combination] = field(default_factory=list)
     aic: float = float("nan")
     iterations: int = 0
+    #: the tracker distortion model estimated with the rest and its undistortion G (3×3)
+    distortion: str = "none"
+    G: np.ndarray = field(default_factory=lambda: np.eye(3))
 
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
@@ -314,17 +359,26 @@ def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.nda
 
 def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: str,
                    start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
-                   tol: Tolerances = Tolerances(), max_iter: int = 50) -> KinematicFit:
+                   tol: Tolerances = Tolerances(), max_iter: int = 50,
+                   distortion: str = "none",
+                   moments: list[np.ndarray | None] | None = None) -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
-    spreads). The whitening is evaluated at the start and once more at the estimate."""
+    spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
+    "affine") estimated with the rest, ``moments`` the tools' second moments (``ml``'s
+    ``tool_moment``; None: isotropic). The whitening is evaluated at the start and once more
+    at the estimate."""
+    if distortion not in DISTORTION_MODELS:
+        raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
+                               f"{', '.join(DISTORTION_MODELS)}")
     names = level_parameters(chain0, level)
     tau = prior_sigmas(names, tol)
-    s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)))
+    s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
+               np.zeros(DISTORTION_MODELS[distortion]))
     its = 0
     for _ in range(2):
         whiten = _whitener_for(s.Ws, noise, len(q))
-        prob = _Problem(q, bodies, chain0, names, tau, whiten)
+        prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments)
         s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
         its += it
     m = len(q) * 6 * len(bodies)
@@ -348,7 +402,8 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     fit = KinematicFit(level, prob.chain(s), names, s.delta.copy(),
                        np.sqrt(np.diag(P)[prob.n_xyz:] * vf) if k else np.zeros(0),
                        s.Ws[0], s.Ws[1] if len(s.Ws) > 1 else None, s.Z, chi2, m, p_eff, vf,
-                       P * vf, iterations=its)
+                       P * vf, iterations=its, distortion=distortion,
+                       G=undistortion(distortion, s.g))
     fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(prob, s, Jd, vf)
@@ -460,11 +515,17 @@ class KinematicsResult:
     reason: str
 
 
-def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray]) -> np.ndarray:
-    """Per pose e_t (mm): the sum over bodies of ‖t((A W)⁻¹ Z N)‖ with A from the fitted arm."""
+def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray],
+                 moments: list[np.ndarray | None] | None = None) -> np.ndarray:
+    """Per pose e_t (mm): the sum over bodies of ‖t((A W)⁻¹ Z N)‖ with A from the fitted arm
+    (N undistorted by the fitted distortion)."""
     A = base_from_flange(fit.chain, q)
     Ws = [fit.X] if fit.Y is None else [fit.X, fit.Y]
     e = np.zeros(len(q))
+    Ms = moments or [None] * len(bodies)
+    if fit.distortion != "none":
+        bodies = [undistort(N, fit.G, fit.distortion, M) for N, M in zip(bodies, Ms,
+                                                                         strict=True)]
     for W, N in zip(Ws, bodies, strict=True):
         E = np.linalg.inv(A @ W) @ (fit.Z @ N)
         e += np.linalg.norm(E[:, :3, 3], axis=1)
@@ -486,29 +547,32 @@ def _subset_noise(noise: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
 def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
-                        max_iter: int = 50) -> KinematicsResult:
+                        max_iter: int = 50, distortion: str = "none",
+                        moments: list[np.ndarray | None] | None = None) -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
     keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
     and δ refitted on each training part); a simpler level wins when its held-out error is
-    within one standard error of the best and its AIC is lower (the tie-break)."""
+    within one standard error of the best and its AIC is lower (the tie-break).
+    ``distortion`` and ``moments`` as :func:`fit_kinematics`, the same for every level."""
+    opts = {"distortion": distortion, "moments": moments}
     if level != "auto":
-        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter)
+        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts)
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
     n = len(q)
     k = max(2, min(folds, n // 4))
     fits, cv = {}, {}
     for lv in LEVELS:
-        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter)
+        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts)
         errs = []
         for test in _folds(n, k):
             train = np.setdiff1d(np.arange(n), test)
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
-                                   _subset_noise(noise, train), tol, max_iter)
+                                   _subset_noise(noise, train), tol, max_iter, **opts)
             except CalibrationError:
                 errs = []
                 break
-            errs.append(_heldout_e_t(f, q[test], [N[test] for N in bodies]))
+            errs.append(_heldout_e_t(f, q[test], [N[test] for N in bodies], moments))
         if errs:
             e = np.concatenate(errs)
             cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": float(e.std(ddof=1) / np.sqrt(len(e))),

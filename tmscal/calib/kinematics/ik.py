@@ -17,8 +17,9 @@ from .model import Arm
 
 __all__ = ["inverse", "IK_TOL_MM", "IK_TOL_RAD"]
 
-#: converged when the flange is this close to the target (mm, rad)
-IK_TOL_MM = 1e-7
+#: converged when the flange is this close to the target (mm, rad): far below any
+#: calibration's accuracy, and reachable in double precision on a metre-sized arm
+IK_TOL_MM = 1e-6
 IK_TOL_RAD = 1e-9
 #: the largest joint step of one iteration (rad): stays on the seed's branch
 _MAX_STEP_RAD = 0.3
@@ -34,10 +35,9 @@ def _error(chain: Arm, q: np.ndarray, target: np.ndarray
     A, J = deviation_twists(chain, q[None], names)
     D = np.linalg.inv(A[0]) @ target
     R = D[:3, :3]
-    c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
-    th = float(np.arccos(c))
     w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     s = float(np.linalg.norm(w))
+    th = float(np.arctan2(s, 0.5 * (np.trace(R) - 1.0)))  # exact near 0, unlike arccos
     rv = w * (th / s) if s > 1e-12 else w
     return np.concatenate([rv, D[:3, 3]]), J[0]
 
@@ -61,7 +61,7 @@ def inverse(chain: Arm, target: np.ndarray, seeds: list[np.ndarray],
         cost = float(np.sum((wts * e) ** 2))
         lam = 1e-3
         for _ in range(max_iter):
-            if np.linalg.norm(e[3:]) <= IK_TOL_MM and np.linalg.norm(e[:3]) <= IK_TOL_RAD:
+            if _converged(e):
                 return q
             Jw = wts[:, None] * J
             H = Jw.T @ Jw
@@ -79,4 +79,10 @@ def inverse(chain: Arm, target: np.ndarray, seeds: list[np.ndarray],
                 lam *= 10.0
                 if lam > 1e8:
                     break
+        if _converged(e):  # stalled in round-off at the solution
+            return q
     return None
+
+
+def _converged(e: np.ndarray) -> bool:
+    return bool(np.linalg.norm(e[3:]) <= IK_TOL_MM and np.linalg.norm(e[:3]) <= IK_TOL_RAD)
