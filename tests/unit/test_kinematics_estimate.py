@@ -162,3 +162,102 @@ def test_unknown_level_and_bad_tolerance_are_calibration_errors() -> None:
         est.level_parameters(arm_by_name("ur5e"), "most")
     with pytest.raises(CalibrationError, match="length_mm"):
         est.Tolerances(length_mm=0.0)
+
+
+def _controller_rig(seed: int = 7, n: int = 40):
+    """A rig whose controller reports in a frame 150 mm from the arm's base (a work
+    coordinate system), with an arm in error and noisy tracker positions."""
+    rng = np.random.default_rng(seed)
+    arm0 = arm_by_name("ur5e")
+    names = est.level_parameters(arm0, "full")
+    true = arm0.with_deviations(names, rng.normal(0, 1, len(names))
+                                * est.prior_sigmas(names, est.Tolerances(0.3, 0.03)))
+    M = make_pose(np.eye(3), [150.0, 0.0, 0.0])
+    X = make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
+    Y = make_pose(np.eye(3), [0.0, 0.0, 150.0])
+    Z = make_pose(random_rotation(rng), rng.uniform(500, 1500, 3))
+    q = HOME + rng.uniform(-0.5, 0.5, (n, 6))
+    At = M @ base_from_flange(true, q)
+    B = _noisy(np.linalg.inv(Z) @ At @ X, rng, 0.02)
+    C = _noisy(np.linalg.inv(Z) @ At @ Y, rng, 0.02)
+    return arm0, true, M, (X, Y, Z), q, M @ base_from_flange(arm0, q), B, C, rng
+
+
+def test_library_form_commands_the_coil_closer_than_the_nominal_arm() -> None:
+    """calib.solve(..., method="ml", joints=q, arm="ur5e", kinematics="estimate"): the
+    controller's frame is found, and the flange commands (IK on the identified arm, FK on the
+    nominal) put the coil where it is wanted, on joints the calibration never saw."""
+    from tmscal.calib.metrics import placement_errors
+
+    arm0, true, M, (X, Y, Z), q, A_rep, B, C, rng = _controller_rig()
+    cal = solve(A_rep, B, C, method="ml", joints=q, arm="ur5e", kinematics="estimate")
+    np.testing.assert_allclose(cal.arm.controller_frame, M, atol=1e-9)
+    assert cal.arm.report["level"] == "full"
+    qt = HOME + rng.uniform(-0.5, 0.5, (30, 6))
+    Ct = np.linalg.inv(Z) @ (M @ base_from_flange(true, qt)) @ Y  # targets as the tracker sees
+
+    def reached(A_cmd):  # the controller: IK on its nominal model, the true arm moves
+        qs = [inverse(arm0, np.linalg.inv(M) @ T, [s]) for T, s in zip(A_cmd, qt, strict=True)]
+        return M @ base_from_flange(true, np.array(qs))
+
+    with_arm = placement_errors(cal.flange_command(Ct, seeds=qt), Ct, Y, Z, reached)
+    nominal = solve(A_rep, B, C, method="qr36", orthonormal=True)
+    without = placement_errors(nominal.flange_command(Ct), Ct, Y, Z, reached)
+    assert with_arm.mean() < 0.3 * without.mean()
+    # the daily check's robot poses (the identified arm at the joints, controller frame)
+    # predict where the tracker sees the marker, to within the tracker's noise
+    seen = np.linalg.inv(cal.Z) @ cal.robot_poses(A_rep, q) @ cal.X
+    assert np.linalg.norm(seen[:, :3, 3] - B[:, :3, 3], axis=1).max() < 0.15
+
+
+def test_flange_command_without_an_arm_is_the_placement_rule() -> None:
+    _, _, _, _, q, A_rep, B, C, _ = _controller_rig(n=20)
+    cal = solve(A_rep, B, C, method="qr36", orthonormal=True)
+    np.testing.assert_allclose(cal.flange_command(C[:3]),
+                               cal.Z @ C[:3] @ np.linalg.inv(cal.Y), atol=1e-9)
+    np.testing.assert_array_equal(cal.robot_poses(A_rep), A_rep)
+
+
+def test_kinematics_needs_joints_and_the_right_arm() -> None:
+    from tmscal.errors import CalibrationError
+
+    _, _, _, _, q, A_rep, B, C, _ = _controller_rig(n=20)
+    with pytest.raises(CalibrationError, match="joint angles of every pose"):
+        solve(A_rep, B, C, method="ml", arm="ur5e", kinematics="estimate")
+    with pytest.raises(CalibrationError, match="not the ur10e nominal forward kinematics"):
+        solve(A_rep, B, C, method="ml", joints=q, arm="ur10e", kinematics="estimate")
+    with pytest.raises(CalibrationError, match="unknown arm 'ur7'"):
+        solve(A_rep, B, C, method="ml", joints=q, arm="ur7", kinematics="estimate")
+    with pytest.raises(CalibrationError, match="fixed model"):
+        solve(A_rep, B, C, method="ml", joints=q, arm="ur5e", kinematics="estimate",
+              distortion="bent")
+
+
+def test_a_tracker_scale_and_the_arms_size_are_one_direction() -> None:
+    """A 0.1 % tracker scale and an arm in error, noise-free: the tracker poses are
+    reproduced exactly with the scale estimated alongside, but a tracker scale and a uniform
+    scaling of the arm's lengths (with X, Y, Z) are the same direction: one combination fewer
+    is identified, and it is reported as absorbed together with the others."""
+    rng = np.random.default_rng(11)
+    arm0 = arm_by_name("ur5e")
+    names = est.level_parameters(arm0, "full")
+    true = arm0.with_deviations(names, rng.normal(0, 1, len(names))
+                                * est.prior_sigmas(names, est.Tolerances(0.3, 0.03)))
+    X = make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
+    Y = make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
+    Z = make_pose(random_rotation(rng), rng.uniform(500, 1500, 3))
+    q = HOME + rng.uniform(-0.6, 0.6, (40, 6))
+    At = base_from_flange(true, q)
+    B, C = np.linalg.inv(Z) @ At @ X, np.linalg.inv(Z) @ At @ Y
+    B[:, :3, 3] *= 1.001
+    C[:, :3, 3] *= 1.001
+    start = _start(arm0, q, B, C)
+    fits = {d: est.fit_kinematics(q, [B, C], arm0, "full", start, NOISE, LOOSE, distortion=d)
+            for d in ("none", "scale")}
+    assert len(fits["scale"].identified) == len(fits["none"].identified) - 1 == 17
+    f = fits["scale"]
+    A = base_from_flange(f.chain, q)
+    seen = np.linalg.inv(f.Z) @ A @ f.X
+    undone = B[:, :3, 3] @ f.G.T
+    assert np.abs(seen[:, :3, 3] - undone).max() < 1e-5
+    assert any("together" in c.reason for c in f.unidentified)

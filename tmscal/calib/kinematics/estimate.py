@@ -6,14 +6,15 @@ Frames and units as everywhere: A = base_from_flange, B = tracker_from_marker, C
 tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker;
 4×4, mm; joints rad.
 
-Model. The flange sits where the TRUE arm puts the recorded joints, A_i = A(q_i; p0 + δ)
-(the nominal :class:`~tmscal.calib.kinematics.model.Arm` p0 plus deviations δ of its DH
-parameters and Hayati angles, base_from_flange), up to the robot's repeatability (a small rigid error per pose, as in
-:mod:`tmscal.calib.ml`); the tracker reports each body with its noise. Per pose and body
-the residual is r = [log R(E) rad; t(E) mm] of E = (A_i W)⁻¹ Z N_i (W = X or Y, N = B or C),
-whitened by the robot's and the tracker's noise exactly as ``ml`` whitens it. Each deviation
-has a Gaussian prior N(0, τ²) — its manufacturing tolerance — so that a few dozen poses do
-not overfit, and the estimate minimises
+Model. The flange sits where the TRUE arm puts the recorded joints, A_i = A(q_i; p0 + δ):
+the nominal :class:`~tmscal.calib.kinematics.model.Arm` p0 plus deviations δ of its DH
+parameters and Hayati angles (base_from_flange), up to the robot's repeatability (a small
+rigid error per pose, as in :mod:`tmscal.calib.ml`); the tracker reports each body with its
+noise. Per pose and body the residual is r = [log R(E) rad; t(E) mm] of
+E = (A_i W)⁻¹ Z N_i (W = X or Y, N = B or C), whitened by the robot's and the tracker's noise
+exactly as ``ml`` whitens it. Each deviation has a Gaussian prior N(0, τ²) — its
+manufacturing tolerance — so that a few dozen poses do not overfit, and the estimate
+minimises
 
     Σ_i r_iᵀ S_i⁻¹ r_i + Σ_j (δ_j / τ_j)²
 
@@ -440,7 +441,9 @@ def identifiability(prob: _Problem, s: _State, Jd: np.ndarray, vf: float = 1.0
                 slice(6 * nb, 6 * nb + 6)),
                ("absorbed by X" + (" and Y" if nb > 1 else "") + " (hand/eye): it moves only "
                 "what the flange carries", slice(0, 6 * nb)),
-               ("absorbed by X, Y and Z together", slice(0, nx))]
+               ("absorbed by X, Y and Z together" if not prob.n_g else
+                "absorbed by X, Y, Z and the tracker distortion together (e.g. a tracker scale "
+                "and the arm's overall size)", slice(0, nx))]
     taken = np.zeros((len(prob.names), 0))
     unident: list[Combination] = []
     for why, cols in reasons:
