@@ -10,12 +10,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import CalibrationError
+from ..geometry import orthonormalize
 from .metrics import holdout_errors
 from .ml_model import undistort
+
+if TYPE_CHECKING:
+    from .kinematics.calibrated import ArmCalibration
 
 __all__ = ["Applied", "Calibration"]
 
@@ -62,6 +67,10 @@ class Calibration:
     distortion: dict[str, Any] | None = None
     #: method-specific facts (iterations, restarts, the information criterion, …)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: the arm's kinematics identified with X, Y, Z (``tmscal solve --kinematics estimate``,
+    #: docs/kinematics.md): robot poses from joints, and the flange pose to command; None
+    #: when the calibration takes the controller's poses as they are
+    arm: ArmCalibration | None = None
 
     def used(self) -> dict[str, np.ndarray | None]:
         """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal).
@@ -91,6 +100,35 @@ class Calibration:
             return undistort(C, G, "affine"), self.Y, self.Z
         u = self.used()
         return C, u["Y"], u["Z"]
+
+    def flange_command(self, C: np.ndarray, seeds: Any = None) -> np.ndarray:
+        """The flange poses to command (n, 4, 4), base_from_flange mm in the controller's
+        frame, so that the coil (probe frame) lands where the tracker would see the probe at
+        poses C (n, 4, 4) mm: A = (Ẑ C' Ŷ⁻¹)⊥ with C', Ŷ, Ẑ as :meth:`placement` gives them
+        (a robot takes rigid poses); with an identified arm (:attr:`arm`), the pose the
+        controller's nominal kinematics must be told so that the real arm reaches A (inverse
+        kinematics on the identified arm, forward on the nominal one; ``seeds``: joint
+        configurations, rad, tried first). CalibrationError for a marker-only calibration or
+        a pose the arm cannot reach."""
+        targets, Y, Z = self.placement(np.asarray(C, dtype=float).reshape(-1, 4, 4))
+        if Y is None:
+            raise CalibrationError("a marker-only calibration has no coil (Y): it cannot "
+                                   "place the coil")
+        A = orthonormalize(Z @ targets @ np.linalg.inv(Y))
+        return A if self.arm is None else self.arm.command(A, seeds)
+
+    def robot_poses(self, A: np.ndarray, joints: Any = None) -> np.ndarray:
+        """The robot poses (n, 4, 4) base_from_flange mm, controller's frame, this
+        calibration applies: with an identified arm, recomputed from ``joints`` (n, dof) rad
+        (the controller's A are its nominal kinematics); otherwise ``A`` as given.
+        CalibrationError when the arm needs joints that are not given."""
+        if self.arm is None:
+            return np.asarray(A, dtype=float)
+        if joints is None:
+            raise CalibrationError(f"the calibration carries an identified "
+                                   f"{self.arm.nominal.name} arm: the robot poses are "
+                                   "recomputed from the joints, which are missing")
+        return self.arm.robot_poses(joints)
 
     def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
                ) -> dict[str, Any]:

@@ -23,7 +23,7 @@ import numpy as np
 from ..geometry import angle_between, orthonormalize, rotation_angle
 
 __all__ = ["body_errors", "holdout_errors", "truth_errors", "coil_placement_errors",
-           "noise_floor"]
+           "placement_errors", "noise_floor"]
 
 
 def body_errors(A: np.ndarray, N: np.ndarray, X: np.ndarray, Z: np.ndarray
@@ -83,6 +83,19 @@ def truth_errors(estimates: Mapping[str, np.ndarray], truth: Mapping[str, np.nda
     return out
 
 
+def placement_errors(A_cmd: np.ndarray, C: np.ndarray, Y_true: np.ndarray,
+                     Z_true: np.ndarray, reached: Any = None) -> np.ndarray:
+    """Coil placement error (mm) per target: the robot is commanded the flange poses A_cmd
+    (n, 4, 4) mm (e.g. ``Calibration.flange_command(C)``) to put the coil at the probe poses
+    C (n, 4, 4); the flange really reaches ``reached(A_cmd)`` (a callable: the true arm's
+    answer to the commands; default: exactly A_cmd), so the coil really sits at that · Y_true
+    where Z_true C_i was wanted. Returns ‖t(actual) − t(Z_true C_i)‖."""
+    A_act = np.asarray(A_cmd, dtype=float) if reached is None else reached(A_cmd)
+    actual = A_act @ Y_true
+    desired = Z_true @ C
+    return np.linalg.norm(actual[:, :3, 3] - desired[:, :3, 3], axis=1)
+
+
 def coil_placement_errors(C: np.ndarray, Y_hat: np.ndarray, Z_hat: np.ndarray,
                           Y_true: np.ndarray, Z_true: np.ndarray,
                           C_cmd: np.ndarray | None = None) -> np.ndarray:
@@ -95,9 +108,7 @@ def coil_placement_errors(C: np.ndarray, Y_hat: np.ndarray, Z_hat: np.ndarray,
     the robot is commanded with, when they differ from the true ones (e.g. undistorted by a
     calibration that found a tracker distortion, ``Calibration.placement``)."""
     A_cmd = orthonormalize(Z_hat @ (C if C_cmd is None else C_cmd) @ np.linalg.inv(Y_hat))
-    actual = A_cmd @ Y_true
-    desired = Z_true @ C
-    return np.linalg.norm(actual[:, :3, 3] - desired[:, :3, 3], axis=1)
+    return placement_errors(A_cmd, C, Y_true, Z_true)
 
 
 def noise_floor(A: np.ndarray, bodies: Mapping[str, np.ndarray],

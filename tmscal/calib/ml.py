@@ -196,11 +196,32 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
              robot_sigma_deg: float = 0.03, tracker_sigma_mm: float = 0.025,
              tracker_sigma_deg: float = 0.05, tracker_cov: Any = None, spreads: Any = None,
              tools_mm: Any = None, criterion: str = "aic", scale_covariance: bool = True,
-             max_iter: int = 50) -> Calibration:
+             max_iter: int = 50, kinematics: str | None = None, joints: Any = None,
+             arm: Any = None, level: str = "auto", tolerances: Any = None,
+             folds: int = 5) -> Calibration:
     """Maximum-likelihood X, (Y,) Z with tracker distortion ``distortion`` ("auto" by BIC,
     "none", "scale", "axis", "affine"); see the module docstring for the model, the noise
     options and the parameters. The raw matrices carry the distortion (Z_raw = Z · G, G =
-    D⁻¹), as QR24's absorb it; ``errors`` undoes it either way."""
+    D⁻¹), as QR24's absorb it; ``errors`` undoes it either way.
+
+    ``kinematics="estimate"`` estimates the arm's kinematics with X, Y, Z in the same
+    likelihood (:mod:`tmscal.calib.kinematics.solve`, docs/kinematics.md): ``joints`` (n, dof)
+    rad, ``arm`` the nominal model (an ``Arm`` or a registry name such as "ur5e"), ``level``
+    ("auto", "none", "offsets", "full"), ``tolerances`` (a ``Tolerances``: the prior), ``folds``
+    of the held-out level choice; ``distortion`` then "none" (default with kinematics) or a
+    fixed model ("auto" is not searched with the arm)."""
+    if kinematics is not None:
+        from .kinematics.solve import solve_with_kinematics
+
+        if kinematics != "estimate":
+            raise CalibrationError(f"method 'ml': unknown kinematics {kinematics!r}; expected "
+                                   "'estimate' (or none)")
+        return solve_with_kinematics(
+            A, B, C, joints=joints, arm=arm, level=level, tolerances=tolerances, folds=folds,
+            distortion="none" if distortion == "auto" else distortion, tools_mm=tools_mm,
+            robot_sigma_mm=robot_sigma_mm, robot_sigma_deg=robot_sigma_deg,
+            tracker_sigma_mm=tracker_sigma_mm, tracker_sigma_deg=tracker_sigma_deg,
+            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal)
     if distortion not in DISTORTION_MODELS and distortion != "auto":
         raise CalibrationError(f"method 'ml': unknown distortion {distortion!r}; expected "
                                f"auto, {', '.join(DISTORTION_MODELS)}")

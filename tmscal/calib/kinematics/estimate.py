@@ -1,0 +1,601 @@
+"""Maximum-likelihood hand/eye X, coil Y, robot/world Z and the arm's kinematic deviations
+in one problem, from the tracker poses of a session whose robot joints were recorded
+(docs/kinematics.md).
+
+Frames and units as everywhere: A = base_from_flange, B = tracker_from_marker, C =
+tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker;
+4×4, mm; joints rad.
+
+Model. The flange sits where the TRUE arm puts the recorded joints, A_i = A(q_i; p0 + δ):
+the nominal :class:`~tmscal.calib.kinematics.model.Arm` p0 plus deviations δ of its DH
+parameters and Hayati angles (base_from_flange), up to the robot's repeatability (a small
+rigid error per pose, as in :mod:`tmscal.calib.ml`); the tracker reports each body with its
+noise. Per pose and body the residual is r = [log R(E) rad; t(E) mm] of
+E = (A_i W)⁻¹ Z N_i (W = X or Y, N = B or C), whitened by the robot's and the tracker's noise
+exactly as ``ml`` whitens it. Each deviation has a Gaussian prior N(0, τ²) — its
+manufacturing tolerance — so that a few dozen poses do not overfit, and the estimate
+minimises
+
+    Σ_i r_iᵀ S_i⁻¹ r_i + Σ_j (δ_j / τ_j)²
+
+by Levenberg–Marquardt with the analytic Jacobian (the deviations' body twists,
+:func:`tmscal.calib.kinematics.jacobian.deviation_twists`, carried through E). The minimiser is
+unique whatever the geometry: a direction of δ that the data cannot see (e.g. a base height
+that Z absorbs, or d_2 − d_3 on parallel axes) costs prior and buys nothing, so it stays at
+zero — the estimate lives in the identifiable subspace and has minimum norm (in tolerance
+units) elsewhere, and it does not depend on the order or choice of equivalent parameters.
+
+Identifiability (:func:`identifiability`): the data Jacobian of δ with X, Y, Z projected out
+(the information about the arm that hand/eye and robot/world cannot absorb), columns in
+tolerance units, by its singular value decomposition. A singular value σ_k ≥ 1 means the
+poses know that combination better than the tolerance does (identified: its estimate and
+posterior σ are reported); 0 < σ_k < 1 weakly identified (the prior decides); σ_k ≈ 0 not
+identifiable, with the reason: the combination moves no flange, or X/Y and/or Z absorb it.
+
+Levels (:data:`LEVELS`): "none" (X, Y, Z on the nominal arm), "offsets" (joint zero
+offsets θ0_i) and "full" (every θ0, d, a, α, and β where consecutive axes are parallel);
+``level="auto"`` chooses by k-fold held-out error, with the information criterion (AIC)
+as a tie-break only when the held-out errors are within one standard error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ...errors import CalibrationError
+from ...geometry import make_pose, matrix_from_rotvec
+from ..ml_model import (
+    DISTORTION_MODELS,
+    G_STEP,
+    noise_covariance,
+    tracker_covs,
+    undistort,
+    undistortion,
+    whitener,
+)
+from .jacobian import deviation_twists, parallel_joints
+from .model import Arm, base_from_flange, deviation_units
+
+__all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
+           "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
+
+LEVELS = ("none", "offsets", "full")
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """The prior: each deviation ~ N(0, τ²) with τ = ``length_mm`` for d, a (mm) and
+    ``angle_deg`` for θ0, α, β (degrees here, rad inside). The defaults are the assumption
+    of docs/kinematics.md for an arm without a per-robot factory calibration."""
+
+    length_mm: float = 0.5
+    angle_deg: float = 0.1
+
+    def __post_init__(self) -> None:
+        for k in ("length_mm", "angle_deg"):
+            v = getattr(self, k)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise CalibrationError(f"kinematics: tolerance {k} must be a finite number > 0, "
+                                       f"got {v!r}")
+
+
+def prior_sigmas(names: list[str], tol: Tolerances) -> np.ndarray:
+    """τ per parameter (mm or rad)."""
+    return np.array([tol.length_mm if u == "mm" else np.radians(tol.angle_deg)
+                     for u in deviation_units(names)])
+
+
+def level_parameters(chain: Arm, level: str) -> list[str]:
+    """The deviations a level estimates, in the chain's order."""
+    n = chain.n_joints
+    if level == "none":
+        return []
+    if level == "offsets":
+        return [f"theta0_{i}" for i in range(1, n + 1)]
+    if level == "full":
+        par = set(parallel_joints(chain))
+        out = []
+        for i in range(1, n + 1):
+            out += [f"theta0_{i}", f"d_{i}", f"a_{i}", f"alpha_{i}"]
+            if i in par:
+                out.append(f"beta_{i}")
+        return out
+    raise CalibrationError(f"kinematics: unknown level {level!r}; expected auto, "
+                           f"{', '.join(LEVELS)}")
+
+
+# --- residuals and their analytic Jacobian ---------------------------------------------------
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(…, 3, 3) cross-product matrices of (…, 3) vectors."""
+    z = np.zeros(v.shape[:-1])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
+                     np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+def _log_and_jr_inv(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation vectors φ (n, 3) of rotations R (n, 3, 3) (angle < π) and the inverse right
+    Jacobians J_r⁻¹(φ) (n, 3, 3): log(R exp(η)) = φ + J_r⁻¹(φ) η + O(η²)."""
+    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0],
+                        R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    s = np.linalg.norm(w, axis=1)
+    th = np.arctan2(s, 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0))
+    small = s < 1e-9
+    phi = w * np.where(small, 1.0, th / np.where(small, 1.0, s))[:, None]
+    K = _skew(phi)
+    th2 = np.where(small, 1.0, th * th)
+    coef = np.where(small, 1.0 / 12.0,
+                    1.0 / th2 - (1.0 + np.cos(th)) / (2.0 * np.where(small, 1.0, th)
+                                                       * np.where(small, 1.0, np.sin(th))))
+    return phi, np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
+
+
+@dataclass
+class _State:
+    """Current estimate: Ws [X, (Y)], Z, the deviations δ (of ``names``) and the tracker's
+    undistortion parameters g (``ml``'s, of the problem's distortion model)."""
+
+    Ws: list[np.ndarray]
+    Z: np.ndarray
+    delta: np.ndarray
+    g: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class _Problem:
+    """The whitened least-squares problem of one level (module docstring)."""
+
+    def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
+                 names: list[str], tau: np.ndarray, whiten: np.ndarray,
+                 distortion: str = "none", moments: list[np.ndarray | None] | None = None
+                 ) -> None:
+        self.q, self.bodies, self.chain0 = q, bodies, chain0
+        self.names, self.tau, self.whiten = names, tau, whiten
+        self.model, self.moments = distortion, moments or [None] * len(bodies)
+        self.nb = len(bodies)
+        self.n_g = DISTORTION_MODELS[distortion]
+        #: X, (Y,) Z and the distortion: the parameters without a prior
+        self.n_xyz = 6 * (self.nb + 1) + self.n_g
+
+    @property
+    def n_params(self) -> int:
+        return self.n_xyz + len(self.names)
+
+    def _measured(self, g: np.ndarray) -> list[np.ndarray]:
+        """The tracker poses with the distortion of parameters g undone (``ml``'s model)."""
+        if self.model == "none":
+            return self.bodies
+        G = undistortion(self.model, g)
+        return [undistort(N, G, self.model, M) for N, M in zip(self.bodies, self.moments,
+                                                               strict=True)]
+
+    def chain(self, s: _State) -> Arm:
+        return self.chain0.with_deviations(self.names, s.delta) if self.names else self.chain0
+
+    def evaluate(self, s: _State, jac: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
+        """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None)."""
+        n = len(self.q)
+        A, Jk = deviation_twists(self.chain(s), self.q, self.names)
+        R_A, t_A = A[:, :3, :3], A[:, :3, 3]
+        res = np.zeros((n, 6 * self.nb))
+        J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
+        RZ, tZ = s.Z[:3, :3], s.Z[:3, 3]
+        for b, (W, N) in enumerate(zip(s.Ws, self._measured(s.g), strict=True)):
+            RW, tW = W[:3, :3], W[:3, 3]
+            # E = W⁻¹ A⁻¹ Z N
+            R_M = RW.T @ np.swapaxes(R_A, 1, 2)                       # rotation of W⁻¹A⁻¹
+            t_M = -RW.T @ tW - np.einsum("nij,nj->ni", R_M, t_A)
+            ZN_R = RZ @ N[:, :3, :3]
+            ZN_t = N[:, :3, 3] @ RZ.T + tZ
+            R_E = R_M @ ZN_R
+            t_E = np.einsum("nij,nj->ni", R_M, ZN_t) + t_M
+            phi, Jr = _log_and_jr_inv(R_E)
+            rows = slice(6 * b, 6 * b + 6)
+            res[:, rows] = np.concatenate([phi, t_E], axis=1)
+            if J is None:
+                continue
+            R_Et = np.swapaxes(R_E, 1, 2)
+            tEx = _skew(t_E)
+            # W = (R_W exp(ω), t_W + p): dlog = −J_r⁻¹ R_Eᵀ ω; dt = [t_E]× ω − R_Wᵀ p
+            c = 6 * b
+            J[:, 6 * b:6 * b + 3, c:c + 3] = -Jr @ R_Et
+            J[:, 6 * b + 3:6 * b + 6, c:c + 3] = tEx
+            J[:, 6 * b + 3:6 * b + 6, c + 3:c + 6] = -RW.T
+            # Z = (R_Z exp(ω), t_Z + p): dlog = J_r⁻¹ R_Nᵀ ω; dt = −R_M R_Z [t_N]× ω + R_M p
+            c = 6 * self.nb
+            J[:, 6 * b:6 * b + 3, c:c + 3] = Jr @ np.swapaxes(N[:, :3, :3], 1, 2)
+            J[:, 6 * b + 3:6 * b + 6, c:c + 3] = -(R_M @ RZ) @ _skew(N[:, :3, 3])
+            J[:, 6 * b + 3:6 * b + 6, c + 3:c + 6] = R_M
+            # the arm: A' = A exp(ξ), η = Ad(W⁻¹) ξ: dlog = −J_r⁻¹ R_Eᵀ η_ω; dt = [t_E]× η_ω − η_v
+            if self.names:
+                eta_w = np.einsum("ij,njk->nik", RW.T, Jk[:, :3, :])
+                tWi = -RW.T @ tW
+                eta_v = np.einsum("ij,njk->nik", RW.T, Jk[:, 3:, :]) \
+                    + np.cross(tWi[None, :, None], eta_w, axis=1)
+                J[:, 6 * b:6 * b + 3, self.n_xyz:] = -Jr @ R_Et @ eta_w
+                J[:, 6 * b + 3:6 * b + 6, self.n_xyz:] = tEx @ eta_w - eta_v
+        if J is not None and self.n_g:  # the distortion's few columns by central differences
+            c0 = 6 * (self.nb + 1)
+            for k in range(self.n_g):
+                e = np.zeros(self.n_g)
+                e[k] = G_STEP
+                rp = self._raw(_State(s.Ws, s.Z, s.delta, s.g + e), A)
+                rm = self._raw(_State(s.Ws, s.Z, s.delta, s.g - e), A)
+                J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
+        rw = _apply(self.whiten, res).ravel()
+        prior = s.delta / self.tau
+        r = np.concatenate([rw, prior])
+        if J is None:
+            return r, None
+        Jw = _apply_jac(self.whiten, J).reshape(-1, self.n_params)
+        Jp = np.zeros((len(self.names), self.n_params))
+        Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
+        return r, np.concatenate([Jw, Jp], axis=0)
+
+    def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
+        """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
+        out = []
+        for W, N in zip(s.Ws, self._measured(s.g), strict=True):
+            E = np.linalg.inv(A @ W) @ (s.Z @ N)
+            phi, _ = _log_and_jr_inv(E[:, :3, :3])
+            out.append(np.concatenate([phi, E[:, :3, 3]], axis=1))
+        return np.concatenate(out, axis=1)
+
+    def step(self, s: _State, d: np.ndarray) -> _State:
+        """The state moved by parameters d (rotation vectors on the right, offsets in mm)."""
+        def pose(T: np.ndarray, p: np.ndarray) -> np.ndarray:
+            return make_pose(T[:3, :3] @ matrix_from_rotvec(p[:3]), T[:3, 3] + p[3:])
+        Ws = [pose(W, d[6 * j:6 * j + 6]) for j, W in enumerate(s.Ws)]
+        Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6])
+        c0 = 6 * (self.nb + 1)
+        return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g])
+
+
+def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
+    return r @ whiten.T if whiten.ndim == 2 else np.einsum("nij,nj->ni", whiten, r)
+
+
+def _apply_jac(whiten: np.ndarray, J: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,njk->nik", whiten, J) if whiten.ndim == 2 else whiten @ J
+
+
+def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int
+                         ) -> tuple[_State, np.ndarray, np.ndarray, int]:
+    """Minimise the whitened cost from s; returns (state, residuals, Jacobian, iterations)."""
+    r, J = prob.evaluate(s)
+    cost, lam, its = float(r @ r), 1e-6, 0
+    while its < max_iter:
+        its += 1
+        d = np.linalg.norm(J, axis=0)
+        d[d == 0] = 1.0
+        Js = J / d
+        H, g = Js.T @ Js, Js.T @ r
+        while True:
+            step = np.linalg.solve(H + lam * np.eye(len(d)), -g) / d
+            s_new = prob.step(s, step)
+            r_new, _ = prob.evaluate(s_new, jac=False)
+            c_new = float(r_new @ r_new)
+            if c_new <= cost or lam > 1e8:
+                break
+            lam *= 10.0
+        if c_new > cost:
+            break
+        done = cost - c_new <= 1e-12 * cost + 1e-30
+        s, cost, lam = s_new, c_new, max(lam / 10.0, 1e-12)
+        r, J = prob.evaluate(s)
+        if done:
+            break
+    return s, r, J, its
+
+
+# --- one level --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Combination:
+    """One direction of the deviations in tolerance units (Σ_j v_j δ_j / τ_j): ``terms``
+    {parameter: v_j} (|v_j| ≥ 0.05, largest first), the data's singular value ``sigma_data``
+    (≥ 1: identified), the estimate and its posterior standard deviation (tolerance units),
+    and for an unidentified one the ``reason``."""
+
+    terms: dict[str, float]
+    sigma_data: float
+    estimate: float
+    sd: float
+    reason: str | None = None
+    #: the whole unit vector v over the fit's ``names`` (terms shows its main part)
+    vector: np.ndarray | None = None
+
+    def describe(self) -> str:
+        """One line, e.g. "+0.71 a_2 +0.70 a_3 = +2.31 ± 0.04 (tolerance units)"."""
+        lhs = " ".join(f"{v:+.2f} {k}" for k, v in self.terms.items())
+        if self.reason:
+            return f"{lhs}: {self.reason}"
+        return f"{lhs} = {self.estimate:+.3g} ± {self.sd:.2g}"
+
+
+@dataclass
+class KinematicFit:
+    """One fitted level: ``chain`` (the identified arm, an :class:`Arm`), ``names``/``delta``/``sd``
+    (deviations in rad or mm and their posterior SDs), X, (Y,) Z (4×4 mm), ``chi2`` of the
+    data rows, ``m`` residuals, ``p_eff`` effective parameters, ``variance_factor``
+    χ²/(m − p_eff), ``covariance`` of [X, (Y,) Z, δ] (rows as ``ml``: rotation vector rad,
+    offset mm, then δ), ``identified``/``weak``/``unidentified`` combinations, the
+    information criterion ``aic``, LM ``iterations``, and the tracker ``distortion`` model
+    with its undistortion ``G`` = D⁻¹ (3×3; identity for "none")."""
+
+    level: str
+    chain: Arm
+    names: list[str]
+    delta: np.ndarray
+    sd: np.ndarray
+    X: np.ndarray
+    Y: np.ndarray | None
+    Z: np.ndarray
+    chi2: float
+    m: int
+    p_eff: float
+    variance_factor: float
+    covariance: np.ndarray
+    identified: list[Combination] = field(default_factory=list)
+    weak: list[Combination] = field(default_factory=list)
+    unidentified: list[Combination] = field(default_factory=list)
+    aic: float = float("nan")
+    iterations: int = 0
+    #: the tracker distortion model estimated with the rest and its undistortion G (3×3)
+    distortion: str = "none"
+    G: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+
+def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
+    names = ["marker", "probe"][:len(Ws)]
+    tracker = tracker_covs(n, names, noise)
+    rs_mm = float(noise["robot_sigma_mm"])
+    rs_rad = float(np.radians(noise["robot_sigma_deg"]))
+    return whitener(noise_covariance(Ws, rs_mm, rs_rad, tracker))
+
+
+def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: str,
+                   start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
+                   tol: Tolerances = Tolerances(), max_iter: int = 50,
+                   distortion: str = "none",
+                   moments: list[np.ndarray | None] | None = None) -> KinematicFit:
+    """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
+    options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
+    spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
+    "affine") estimated with the rest, ``moments`` the tools' second moments (``ml``'s
+    ``tool_moment``; None: isotropic). The whitening is evaluated at the start and once more
+    at the estimate."""
+    if distortion not in DISTORTION_MODELS:
+        raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
+                               f"{', '.join(DISTORTION_MODELS)}")
+    names = level_parameters(chain0, level)
+    tau = prior_sigmas(names, tol)
+    s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
+               np.zeros(DISTORTION_MODELS[distortion]))
+    its = 0
+    for _ in range(2):
+        whiten = _whitener_for(s.Ws, noise, len(q))
+        prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments)
+        s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
+        its += it
+    m = len(q) * 6 * len(bodies)
+    data_r = r[:m]
+    chi2 = float(data_r @ data_r)
+    Jx = J[:m, :prob.n_xyz]
+    sx = np.linalg.svd(Jx / np.maximum(np.linalg.norm(Jx, axis=0), 1e-300), compute_uv=False)
+    if sx[-1] <= 1e-7 * sx[0]:
+        raise CalibrationError("kinematics: hand/eye, coil and robot/world are not "
+                               "identifiable from these poses: use more poses with more "
+                               "rotation and translation diversity")
+    H = J.T @ J                      # the prior rows make it positive definite
+    d = np.sqrt(np.diag(H))
+    d[d == 0] = 1.0
+    w, V = np.linalg.eigh(H / np.outer(d, d))
+    P = (V / w) @ V.T / np.outer(d, d)
+    Jd = J[:m]
+    p_eff = float(np.trace(P @ (Jd.T @ Jd)))
+    vf = chi2 / max(m - p_eff, 1.0)
+    k = len(names)
+    fit = KinematicFit(level, prob.chain(s), names, s.delta.copy(),
+                       np.sqrt(np.diag(P)[prob.n_xyz:] * vf) if k else np.zeros(0),
+                       s.Ws[0], s.Ws[1] if len(s.Ws) > 1 else None, s.Z, chi2, m, p_eff, vf,
+                       P * vf, iterations=its, distortion=distortion,
+                       G=undistortion(distortion, s.g))
+    fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
+    if k:
+        fit.identified, fit.weak, fit.unidentified = identifiability(prob, s, Jd, vf)
+    return fit
+
+
+def identifiability(prob: _Problem, s: _State, Jd: np.ndarray, vf: float = 1.0
+                    ) -> tuple[list[Combination], list[Combination], list[Combination]]:
+    """(identified, weak, unidentified) combinations of the deviations (module docstring),
+    from the whitened data Jacobian ``Jd`` (m, P) at the estimate. The unidentified ones
+    are sorted by reason — combinations that move no flange pose, those Z absorbs, those
+    X (and Y) absorb, those only all three together absorb — each set in reduced echelon
+    form (one leading parameter per combination), so that they read as parameters."""
+    nx, nb = prob.n_xyz, prob.nb
+    Jk = Jd[:, nx:] * prob.tau                          # δ in tolerance units
+    tol = 1e-7 * max(float(np.linalg.norm(Jk, 2)), 1e-300)
+    Jp = _residual_of(Jd[:, :nx], Jk)
+    U, sig, Vt = np.linalg.svd(Jp, full_matrices=False)
+    delta_s = s.delta / prob.tau
+    ident: list[Combination] = []
+    weak: list[Combination] = []
+    for k, v in enumerate(Vt):
+        if sig[k] <= tol:
+            continue
+        c = _combination(prob.names, v, float(sig[k]), delta_s, vf)
+        if sig[k] < 1.0:
+            weak.append(Combination(c.terms, c.sigma_data, c.estimate, c.sd,
+                                    "weakly identified: these poses see it less well than the "
+                                    "tolerance says; spread the joints further", c.vector))
+        else:
+            ident.append(c)
+    reasons = [("moves no flange pose (equivalent parameters of the chain)", None),
+               ("absorbed by Z (robot/world): it moves the whole arm in the robot's frame",
+                slice(6 * nb, 6 * nb + 6)),
+               ("absorbed by X" + (" and Y" if nb > 1 else "") + " (hand/eye): it moves only "
+                "what the flange carries", slice(0, 6 * nb)),
+               ("absorbed by X, Y and Z together" if not prob.n_g else
+                "absorbed by X, Y, Z and the tracker distortion together (e.g. a tracker scale "
+                "and the arm's overall size)", slice(0, nx))]
+    taken = np.zeros((len(prob.names), 0))
+    unident: list[Combination] = []
+    for why, cols in reasons:
+        M = Jk if cols is None else _residual_of(Jd[:, cols], Jk)
+        basis = _complement(_null_basis(M, tol), taken)
+        taken = np.concatenate([taken, basis], axis=1)
+        for v in _echelon(basis).T:
+            c = _combination(prob.names, v / np.linalg.norm(v), 0.0, delta_s, vf)
+            unident.append(Combination(c.terms, 0.0, c.estimate, float(np.sqrt(vf)), why,
+                                       c.vector))
+    return ident, weak, unident
+
+
+def _residual_of(M: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """J with its projection onto the column space of M removed."""
+    Q, _ = np.linalg.qr(M)
+    return J - Q @ (Q.T @ J)
+
+
+def _null_basis(M: np.ndarray, tol: float) -> np.ndarray:
+    """Orthonormal basis (k, r) of the null space of M (·, k), singular values ≤ tol."""
+    _, sig, Vt = np.linalg.svd(M, full_matrices=True)
+    rank = int(np.sum(sig > tol))
+    return Vt[rank:].T
+
+
+def _complement(basis: np.ndarray, taken: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of span(basis) with span(taken) (orthonormal) removed."""
+    if basis.shape[1] == 0 or taken.shape[1] == 0:
+        return basis
+    rest = basis - taken @ (taken.T @ basis)
+    U, sig, _ = np.linalg.svd(rest, full_matrices=False)
+    return U[:, sig > 1e-6]
+
+
+def _echelon(basis: np.ndarray) -> np.ndarray:
+    """The same span in reduced column echelon form (each vector one leading parameter with
+    coefficient 1, zero in the others' leading rows; pivots by magnitude)."""
+    B = basis.copy()
+    rows: list[int] = []
+    for j in range(B.shape[1]):
+        free = [i for i in range(B.shape[0]) if i not in rows]
+        i = free[int(np.argmax(np.abs(B[free, j])))]
+        B[:, j] /= B[i, j]
+        for k in range(B.shape[1]):
+            if k != j:
+                B[:, k] -= B[i, k] * B[:, j]
+        rows.append(i)
+    return B
+
+
+def _combination(names: list[str], v: np.ndarray, sigma: float, delta_s: np.ndarray,
+                 vf: float) -> Combination:
+    v = v if v[np.argmax(np.abs(v))] > 0 else -v
+    order = np.argsort(-np.abs(v))
+    terms = {names[j]: float(v[j]) for j in order if abs(v[j]) >= 0.05}
+    return Combination(terms, sigma, float(v @ delta_s),
+                       float(np.sqrt(vf / (sigma ** 2 + 1.0))), vector=v)
+
+
+# --- level selection --------------------------------------------------------------------------
+
+@dataclass
+class KinematicsResult:
+    """The chosen fit, the fits of every level tried (``fits``), and the held-out table
+    ``cv``: {level: {"e_t_mm": mean over folds, "se_mm": its standard error, "folds": k}}
+    (None for a level fitted without cross-validation), and ``reason`` for the choice."""
+
+    fit: KinematicFit
+    fits: dict[str, KinematicFit]
+    cv: dict[str, dict[str, float] | None]
+    reason: str
+
+
+def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray],
+                 moments: list[np.ndarray | None] | None = None) -> np.ndarray:
+    """Per pose e_t (mm): the sum over bodies of ‖t((A W)⁻¹ Z N)‖ with A from the fitted arm
+    (N undistorted by the fitted distortion)."""
+    A = base_from_flange(fit.chain, q)
+    Ws = [fit.X] if fit.Y is None else [fit.X, fit.Y]
+    e = np.zeros(len(q))
+    Ms = moments or [None] * len(bodies)
+    if fit.distortion != "none":
+        bodies = [undistort(N, fit.G, fit.distortion, M) for N, M in zip(bodies, Ms,
+                                                                         strict=True)]
+    for W, N in zip(Ws, bodies, strict=True):
+        E = np.linalg.inv(A @ W) @ (fit.Z @ N)
+        e += np.linalg.norm(E[:, :3, 3], axis=1)
+    return e
+
+
+def _folds(n: int, k: int) -> list[np.ndarray]:
+    idx = np.arange(n)
+    return [idx[idx % k == f] for f in range(k)]
+
+
+def _subset_noise(noise: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
+    if noise.get("spreads") is None:
+        return noise
+    sp = list(noise["spreads"])
+    return {**noise, "spreads": [sp[i] for i in keep]}
+
+
+def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
+                        start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
+                        level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
+                        max_iter: int = 50, distortion: str = "none",
+                        moments: list[np.ndarray | None] | None = None) -> KinematicsResult:
+    """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
+    keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
+    and δ refitted on each training part); a simpler level wins when its held-out error is
+    within one standard error of the best and its AIC is lower (the tie-break).
+    ``distortion`` and ``moments`` as :func:`fit_kinematics`, the same for every level."""
+    opts = {"distortion": distortion, "moments": moments}
+    if level != "auto":
+        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts)
+        return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
+    n = len(q)
+    k = max(2, min(folds, n // 4))
+    fits, cv = {}, {}
+    for lv in LEVELS:
+        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts)
+        errs = []
+        for test in _folds(n, k):
+            train = np.setdiff1d(np.arange(n), test)
+            try:
+                f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
+                                   _subset_noise(noise, train), tol, max_iter, **opts)
+            except CalibrationError:
+                errs = []
+                break
+            errs.append(_heldout_e_t(f, q[test], [N[test] for N in bodies], moments))
+        if errs:
+            e = np.concatenate(errs)
+            cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": float(e.std(ddof=1) / np.sqrt(len(e))),
+                      "folds": float(k)}
+        else:
+            cv[lv] = None
+    scored = {lv: c for lv, c in cv.items() if c is not None}
+    if not scored:
+        raise CalibrationError(f"kinematics: too few poses ({n}) to cross-validate the levels")
+    best = min(scored, key=lambda lv: scored[lv]["e_t_mm"])
+    reason = (f"held-out e_t {scored[best]['e_t_mm']:.4g} mm, the lowest of "
+              + ", ".join(f"{lv} {c['e_t_mm']:.4g}" for lv, c in scored.items()))
+    for lv in LEVELS[:LEVELS.index(best)]:  # simpler levels first
+        c = scored.get(lv)
+        if c is None:
+            continue
+        close = c["e_t_mm"] - scored[best]["e_t_mm"] <= max(c["se_mm"], scored[best]["se_mm"])
+        if close and fits[lv].aic < fits[best].aic:
+            reason = (f"held-out e_t {c['e_t_mm']:.4g} mm within one standard error of "
+                      f"{best}'s {scored[best]['e_t_mm']:.4g} mm; the lower AIC decides")
+            best = lv
+            break
+    return KinematicsResult(fits[best], fits, cv, reason)
