@@ -112,20 +112,22 @@ def test_resume_refuses_an_arm_turned_where_the_run_stopped(tmp_path, kind):
 
 
 @pytest.mark.e2e
-def test_resume_refuses_a_header_whose_p0_was_turned(tmp_path):
+@pytest.mark.parametrize("kind", ["plan", "adaptive"])
+def test_resume_refuses_a_header_whose_p0_was_turned(tmp_path, kind):
     """P0 turned 40° about its tool axis in the header of a session with no pose yet, inside
-    a 90° envelope: the plan around it is a different plan, and the arm (at the real P0) is
-    40° from it. Refused on the orientation; nothing moves."""
+    a 90° envelope: the plan (the adaptive pool) around it is a different one, and the arm
+    (at the real P0) is 40° from it. Refused on the orientation; nothing moves."""
     cfg = load_config(_denso_cfg(tmp_path, safety=WIDE))
+    run = acquire if kind == "plan" else acquire_adaptive
     out = tmp_path / "s.jsonl"
     with start_mock_rig(cfg, tracker_transport="pty") as mr:
         kw = endpoints_kwargs(mr.endpoints)
-        acquire(cfg, out, should_stop=lambda: True, **kw)  # header only
+        run(cfg, out, should_stop=lambda: True, **kw)  # header only
         _edit_header(out, lambda h: h["plan"].update(
             p0=_turned(np.array(h["plan"]["p0"]), 40).tolist()))
         before = out.read_bytes()
         with pytest.raises(SessionError, match=r"0\.0 mm and 40\.0° from the session's P0"):
-            acquire(cfg, out, resume=True, **kw)
+            run(cfg, out, resume=True, **kw)
         assert mr.devices[-1].stats["moves"] == 0
     assert out.read_bytes() == before
 
