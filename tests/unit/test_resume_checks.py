@@ -8,6 +8,7 @@ Poses base_from_flange 4×4 mm, joints rad, angles deg."""
 from __future__ import annotations
 
 import copy
+import re
 
 import numpy as np
 import pytest
@@ -207,3 +208,25 @@ def test_a_header_draw_out_of_range_is_a_session_error(selfcal, change):
     with pytest.raises(SessionError, match="the header's 'selfcal' plan is incomplete or "
                                            "invalid"):
         _header_plan(plan, **change)
+
+
+@pytest.mark.parametrize("arm, header_arm, said", [
+    ("vs060", "ur5e", "the session was recorded for arm 'ur5e'; --arm says 'vs060'"),
+    (None, "kuka_kr6", "the header's selfcal.arm"),
+])
+def test_a_resume_needs_the_sessions_arm(tmp_path, selfcal, arm, header_arm, said):
+    """The header's arm is the nominal model its poses are re-derived on: an unknown one, or
+    another named by --arm, is refused."""
+    from tmscal.acquisition.selfcal import SelfcalStrategy
+    from tmscal.session import SessionWriter, make_header, read_session
+
+    _, plan = selfcal
+    path = tmp_path / "sc.jsonl"
+    with SessionWriter.create(path, make_header(["ft"], selfcal={**plan.to_header(),
+                                                                 "arm": header_arm})):
+        pass
+    strategy = SelfcalStrategy(load_config(CONFIGS / "mock-ur-ati.yaml", check_files=False),
+                               arm=arm)
+    strategy.read(read_session(path))
+    with pytest.raises(SessionError, match=re.escape(said)):
+        strategy.rederive(read_session(path))
