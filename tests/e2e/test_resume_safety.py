@@ -1,7 +1,8 @@
 """End to end, on the DENSO and Polaris mocks (real sockets and ptys): a resumed run trusts
-nothing in the session header that the config and the recorded poses do not confirm; it keeps
-the header's sampling settings; and ``run.retries`` bounds the reconnects for one fault, not
-for the whole run."""
+nothing in the session header that the config and the recorded poses do not confirm, and
+refuses an arm that is not where the run stopped, in position or in orientation (plan and
+adaptive runs alike); it keeps the header's sampling settings; and ``run.retries`` bounds the
+reconnects for one fault, not for the whole run."""
 
 from __future__ import annotations
 
@@ -11,9 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tmscal.acquisition.adaptive import acquire_adaptive
+from tmscal.acquisition.devices import make_robot
 from tmscal.acquisition.run import acquire
 from tmscal.config import load_config
 from tmscal.errors import SessionError
+from tmscal.geometry import angle_between, rot_z
 from tmscal.mocks.rig import start_mock_rig
 from tmscal.session import read_session
 
@@ -60,6 +64,71 @@ def test_resume_refuses_a_header_whose_p0_was_moved(tmp_path, recorded):
         with pytest.raises(SessionError, match="header|P0"):
             acquire(cfg, out, resume=True, **kw)
         assert mr.devices[-1].stats["moves"] == moves
+    assert out.read_bytes() == before
+
+
+def _turned(P: np.ndarray, deg: float) -> np.ndarray:
+    """Pose ``P`` turned by ``deg`` about its own tool (z) axis, the flange where it is."""
+    T = np.array(P, dtype=float)
+    T[:3, :3] = T[:3, :3] @ rot_z(np.radians(deg))
+    return T
+
+
+#: a wide rotation limit: an arm turned 60° from where the run stopped is inside the envelope
+WIDE = {"max_rotation_deg": 90}
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("kind", ["plan", "adaptive"])
+def test_resume_refuses_an_arm_turned_where_the_run_stopped(tmp_path, kind):
+    """Issue 22, #3: the arm where the run stopped but turned 60° about its tool axis (inside
+    a 90° envelope) was resumed from; the flange's orientation is now checked too, for every
+    kind of run: refused naming the angles, nothing moved, the session unchanged. Turned
+    back, the same session resumes."""
+    cfg = load_config(_denso_cfg(tmp_path, safety=WIDE))
+    run = acquire if kind == "plan" else acquire_adaptive
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        done: list[int] = []
+        run(cfg, out, should_stop=lambda: len(done) >= 2, progress=SeenPoses(done), **kw)
+        last = max(read_session(out).poses, key=lambda p: p.index).commanded
+        robot = make_robot(cfg, host=kw["robot_host"], port=kw["robot_port"])
+        with robot:   # the config's box and caps; no P0, so no rotation limit: a jog
+            np.testing.assert_allclose(robot.flange_pose(), last, atol=1e-3)
+            robot.move_to(_turned(last, 60))
+            here = robot.flange_pose()
+        assert 59 < np.degrees(angle_between(last, here)) < 61
+        moves, before = mr.devices[-1].stats["moves"], out.read_bytes()
+        with pytest.raises(SessionError, match=r"° from the session's P0 .* and [2-9]\d\.\d° "
+                                               r"from the path where the run stopped .*20°"):
+            run(cfg, out, resume=True, **kw)
+        assert mr.devices[-1].stats["moves"] == moves and out.read_bytes() == before
+        with robot:
+            robot.move_to(last)
+        res = run(cfg, out, resume=True, should_stop=lambda: len(done) >= 3,
+                  progress=SeenPoses(done), **kw)
+    assert res.new_poses == 1 and len(read_session(out).poses) == 3
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("kind", ["plan", "adaptive"])
+def test_resume_refuses_a_header_whose_p0_was_turned(tmp_path, kind):
+    """P0 turned 40° about its tool axis in the header of a session with no pose yet, inside
+    a 90° envelope: the plan (the adaptive pool) around it is a different one, and the arm
+    (at the real P0) is 40° from it. Refused on the orientation; nothing moves."""
+    cfg = load_config(_denso_cfg(tmp_path, safety=WIDE))
+    run = acquire if kind == "plan" else acquire_adaptive
+    out = tmp_path / "s.jsonl"
+    with start_mock_rig(cfg, tracker_transport="pty") as mr:
+        kw = endpoints_kwargs(mr.endpoints)
+        run(cfg, out, should_stop=lambda: True, **kw)  # header only
+        _edit_header(out, lambda h: h["plan"].update(
+            p0=_turned(np.array(h["plan"]["p0"]), 40).tolist()))
+        before = out.read_bytes()
+        with pytest.raises(SessionError, match=r"0\.0 mm and 40\.0° from the session's P0"):
+            run(cfg, out, resume=True, **kw)
+        assert mr.devices[-1].stats["moves"] == 0
     assert out.read_bytes() == before
 
 

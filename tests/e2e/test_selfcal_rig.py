@@ -4,19 +4,23 @@ parameters the gravity wrench identifies), the mock ATI Net F/T serves that arm'
 wrench plus noise over real UDP; ``tmscal selfcal acquire`` records joints and wrenches,
 ``tmscal selfcal identify`` writes the kinematics file, and the identified arm is closer to
 the truth than the nominal one. Ctrl-C leaves a session that ``--resume`` completes; an
-envelope too tight for the plan refuses before anything moves. Poses mm, joints rad."""
+envelope too tight for the plan refuses before anything moves; ``--resume`` refuses an arm
+turned away from where the run stopped and a header whose plan was edited, before anything
+moves. Poses mm, joints rad."""
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation, Slerp
 
 from tmscal.acquisition.plan import check_plan
-from tmscal.acquisition.selfcal import SelfcalPlan
+from tmscal.acquisition.selfcal import SelfcalPlan, acquire_selfcal, nominal_arm, nominal_poses
 from tmscal.calib.selfcal.identify import error_stats, position_errors
 from tmscal.config import load_config
 from tmscal.exports.kinfile import read_kinematics
@@ -24,7 +28,7 @@ from tmscal.mocks.rig import spawn_mock_rig
 from tmscal.session import read_session
 from tmscal.sim.arm import make_arm
 
-from ..rigs import wait_for_lines
+from ..rigs import SeenPoses, wait_for_lines
 
 pytestmark = pytest.mark.e2e
 pytest.importorskip("rtde_control")
@@ -141,6 +145,122 @@ def test_an_envelope_too_tight_refuses_before_moving(tmp_path, mock_config):
     assert "safety envelope" in r.stderr and "Nothing was moved" in r.stderr
     assert not out.exists()
     assert before.stdout.splitlines()[1] == after.stdout.splitlines()[1]   # the flange line
+
+
+def _first_configurations(cfg, out, ep, n: int) -> None:
+    """A self-calibration run of 10 configurations (pool 400) stopped after ``n``."""
+    host, _, port = ep["ft"].partition(":")
+    done: list[int] = []
+    acquire_selfcal(load_config(cfg), out, arm="ur5e", k=10, pool=400, robot_host=ep["robot"],
+                    ft_host=host, ft_port=int(port), should_stop=lambda: len(done) >= n,
+                    progress=SeenPoses(done))
+    assert len(done) == n
+
+
+def _flange(cfg, ep) -> str:
+    """The flange line of ``tmscal robot`` (where the arm is, as the controller says)."""
+    r = _tmscal("robot", cfg, "--host", ep["robot"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout.splitlines()[1]
+
+
+def _jog(cfg, ep, P) -> None:
+    """``tmscal robot --move-to`` the flange pose P (base_from_flange mm)."""
+    from tmscal.geometry import denso_p_from_matrix
+
+    xyzrpy = ",".join(f"{v:.6f}" for v in denso_p_from_matrix(P))
+    r = _tmscal("robot", cfg, "--host", ep["robot"], "--move-to", xyzrpy, "--yes")
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+def test_resume_refuses_an_arm_turned_away_from_p0(tmp_path, mock_config):
+    """Issue 22, #3: with the arm at P0 but turned 100° about its tool axis (inside the
+    config's 120°), ``selfcal acquire --resume`` resumed (it checked the position only) and
+    swung the wrist from there. Now: one error line naming the angles, the arm where it was,
+    the session unchanged; turned back to P0, the same session resumes to the end."""
+    cfg = _config(mock_config, "127.22.3.1")
+    out = tmp_path / "sc.jsonl"
+    with spawn_mock_rig(cfg, transport="tcp") as mp:
+        ep = mp.endpoints
+        _first_configurations(cfg, out, ep, 3)
+        plan = SelfcalPlan.from_header(read_session(out).header)
+        # P0 turned about the tool axis, the sense farther from the orientations of the path
+        # the run stopped on (configuration 2 to 3): a test of the orientation, not position
+        path = Slerp([0, 1], Rotation.from_matrix(plan.poses[2:4, :3, :3]))(
+            np.linspace(0, 1, 201))
+        turns = []
+        for deg in (100, -100):
+            T = plan.p0.copy()
+            T[:3, :3] = plan.p0[:3, :3] @ Rotation.from_euler("z", deg, degrees=True).as_matrix()
+            gap = np.degrees((path.inv() * Rotation.from_matrix(T[:3, :3])).magnitude().min())
+            turns.append((gap, T))
+        gap, turned = max(turns, key=lambda t: t[0])
+        assert gap > 40
+        _jog(cfg, ep, plan.p0)
+        _jog(cfg, ep, turned)
+        where, before = _flange(cfg, ep), out.read_bytes()
+        r = _tmscal(*_acquire_args(cfg, out, ep, "--resume"))
+        assert r.returncode == 1 and r.stderr.startswith("error: ") and \
+            r.stderr.count("\n") == 1, r.stderr[-2000:]
+        assert "0.0 mm and 100.0° from the session's P0" in r.stderr
+        assert "Nothing was moved" in r.stderr
+        assert _flange(cfg, ep) == where and out.read_bytes() == before
+        _jog(cfg, ep, plan.p0)
+        r = _tmscal(*_acquire_args(cfg, out, ep, "--resume"))
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert sorted(p.index for p in read_session(out).poses) == list(range(10))
+
+
+def _edit_selfcal(path, edit) -> bytes:
+    lines = path.read_bytes().split(b"\n")
+    h = json.loads(lines[0])
+    edit(h["selfcal"])
+    lines[0] = json.dumps(h).encode()
+    path.write_bytes(b"\n".join(lines))
+    return path.read_bytes()
+
+
+def _move_pose(sc) -> None:
+    sc["poses"][5][0][3] += 20.0      # 20 mm along x, inside the envelope
+
+
+def _move_joint(sc) -> None:
+    q = np.array(sc["q_rad"])
+    q[5, 5] += 0.05                   # the last wrist joint, its pose moved to match
+    sc["q_rad"] = q.tolist()
+    sc["poses"][5] = nominal_poses(nominal_arm(sc["arm"]), q[5])[0].tolist()
+
+
+def _swap(sc) -> None:
+    for key in ("q_rad", "poses"):
+        sc[key][6], sc[key][7] = sc[key][7], sc[key][6]
+
+
+def test_resume_refuses_a_header_whose_plan_was_edited(tmp_path, mock_config):
+    """Issue 22, #3: ``selfcal acquire --resume`` took the plan's poses from the header as
+    written (only the recorded ones were compared). Now the plan is re-derived: a pose not
+    yet visited moved 20 mm (its joints not), a configuration's joints and pose moved
+    together (no longer a candidate drawn from the seed), two configurations swapped (no
+    longer the nearest-neighbour order): each refused in one line naming the configuration,
+    before anything opens; the file unchanged."""
+    cfg = _config(mock_config, "127.22.3.2")
+    out = tmp_path / "sc.jsonl"
+    with spawn_mock_rig(cfg, transport="tcp") as mp:
+        ep = mp.endpoints
+        _first_configurations(cfg, out, ep, 3)
+        where = _flange(cfg, ep)
+        for edit, said in [(_move_pose, "configuration 5 of the header's plan is at"),
+                           (_move_joint, "configuration 5 of the header is none of the 400 "
+                                         "candidates drawn from its seed 0"),
+                           (_swap, "not in the nearest-neighbour order")]:
+            bad = tmp_path / f"{edit.__name__}.jsonl"
+            bad.write_bytes(out.read_bytes())
+            edited = _edit_selfcal(bad, edit)
+            r = _tmscal(*_acquire_args(cfg, bad, ep, "--resume"))
+            assert r.returncode == 1 and r.stderr.count("\n") == 1, (edit, r.stderr[-2000:])
+            assert said in r.stderr, r.stderr
+            assert bad.read_bytes() == edited
+        assert _flange(cfg, ep) == where
 
 
 def test_planned_poses_are_what_the_controller_reports():

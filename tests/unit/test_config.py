@@ -106,3 +106,49 @@ def test_unknown_driver_and_fault_options_are_named(tmp_path):
     with pytest.raises(ConfigError, match=r"key 'mock.tracker.faults': unknown key "
                                           r"'crc_eror_prob'.*crc_error_prob"):
         start_mock_rig(cfg)
+
+
+def _rom_path(tmp_path, case):
+    """A ROM path the file system refuses: a name over 255 characters, a path over 4096, a
+    symbolic link loop, a directory."""
+    if case == "loop":
+        (tmp_path / "loop").symlink_to("loop")
+    return {"name over 255": str(tmp_path / ("m" * 300 + ".rom")),
+            "path over 4096": "/tmp/" + "d/" * 2100 + "m.rom",
+            "loop": str(tmp_path / "loop"), "directory": str(tmp_path)}[case]
+
+
+@pytest.mark.parametrize("case, problem", [
+    ("name over 255", "ENAMETOOLONG"), ("path over 4096", "ENAMETOOLONG"),
+    ("loop", "ELOOP"), ("directory", "not a regular file")])
+def test_a_rom_path_the_file_system_refuses_is_a_config_error(tmp_path, case, problem):
+    """Issue 22, #10: a ROM path over 255 characters gave a raw OSError. Every file system
+    refusal is a ConfigError naming the file, the line and the tool's key, with the errno's
+    name, in one line of bounded length (the path shortened), at load and when a config
+    loaded without the file check builds the tracker."""
+    from tmscal.acquisition.devices import make_tracker
+
+    rom = _rom_path(tmp_path, case)
+    p = _write(tmp_path, {"tracker": {"port": "/dev/null", "tools": {"marker": rom}}})
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    msg = str(e.value)
+    assert msg.startswith(f"{p}, line 4: key 'tracker.tools.marker': ROM file ")
+    assert problem in msg and "\n" not in msg and len(msg) < len(str(p)) + 220
+    cfg = load_config(p, check_files=False)
+    with pytest.raises(ConfigError, match=r"key 'tracker.tools.marker': ROM file .*"
+                                          + problem):
+        make_tracker(cfg)
+
+
+def test_a_wire_log_path_the_file_system_refuses_is_a_config_error(tmp_path):
+    """``tracker.log_wire`` over 255 characters, beside a ROM path in a symbolic link loop:
+    a ConfigError naming log_wire, not a raw OSError or RuntimeError."""
+    (tmp_path / "loop").symlink_to("loop")
+    data = {"tracker": {"port": "/dev/ttyUSB0", "tools": {"marker": str(tmp_path / "loop")},
+                        "log_wire": str(tmp_path / ("w" * 300 + ".log"))}}
+    with pytest.raises(ConfigError, match=r"key 'tracker.log_wire': .*ENAMETOOLONG"):
+        load_config(_write(tmp_path, data), check_files=False)
+    data["tracker"]["log_wire"] = str(tmp_path / "w.log")
+    cfg = load_config(_write(tmp_path, data), check_files=False)
+    assert cfg.tracker.settings.log_wire == str(tmp_path / "w.log")

@@ -403,3 +403,92 @@ def test_plan_summary_box_flange_and_tool_extents():
     s = plan_summary(poses, poses[0], 100.0, 0.0, 10, 60.0)
     assert s["box_min_mm"] is None and s["tool_min_mm"] is None
     assert s["flange_max_mm"] == [600, 0, 400] and s["poses"] == 2
+
+
+# --- units sanity: values written in metres (issue 22, "Units sanity") ---------------------
+
+#: a robot config's sections written in metres by mistake, the key named, the cause said
+METRES = {
+    "tool points": ({"safety": {"tool_points_mm": [[0.003, 0.005, 0.11], [0.063, 0.005, 0.11],
+                                                   [-0.057, 0.005, 0.11]]}},
+                    "safety.tool_points_mm", "these look like metres"),
+    "box": ({"safety": {"workspace_min_mm": [0.1, -0.4, 0], "workspace_max_mm": [0.9, 0.4, 0.8]}},
+            "safety.workspace_min_mm", "these look like metres"),
+    "speed": ({"robot": {"speed_mm_s": 0.05}}, "robot.speed_mm_s", "this looks like m/s;"),
+    "accel": ({"robot": {"accel_mm_s2": 0.5}}, "robot.accel_mm_s2", "this looks like m/s²"),
+    "max speed": ({"robot": {"speed_mm_s": 0.1}, "safety": {"max_speed_mm_s": 0.25}},
+                  "safety.max_speed_mm_s", "this looks like m/s;"),
+    "max accel": ({"robot": {"accel_mm_s2": 0.5}, "safety": {"max_accel_mm_s2": 0.9}},
+                  "safety.max_accel_mm_s2", "this looks like m/s²"),
+}
+
+
+def _dry_run_config(tmp_path, changes):
+    """configs/mock-ur-polaris.yaml with P0 given (the dry run asks no robot) and sections
+    updated by ``changes``, written as rig.yaml in ``tmp_path``."""
+    data = yaml.safe_load((CONFIGS / "mock-ur-polaris.yaml").read_text())
+    data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
+    data["plan"]["start"] = {"xyz_mm": [500, 0, 400], "rpy_deg": [180, 0, 0]}
+    for section, values in changes.items():
+        data[section].update(values)
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(data))
+    return "rig.yaml"
+
+
+@pytest.mark.parametrize("case", list(METRES))
+def test_values_in_metres_are_refused_in_one_short_line(tmp_path, monkeypatch, case):
+    """Tool points in metres passed every check (the box then bounded the flange only: the
+    dry run said "every pose inside"), a box in metres was refused in a 1,000-character line
+    without a word about units, a speed of 0.05 (m/s) was accepted. Each is refused by
+    ``tmscal acquire --dry-run`` in one line under 200 characters naming the key and the
+    likely cause; the same config in mm runs its dry run."""
+    from click.testing import CliRunner
+
+    from tmscal.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    ok = CliRunner().invoke(main, ["acquire", _dry_run_config(tmp_path, {}), "-o", "s.jsonl",
+                                   "--dry-run"])
+    assert ok.exit_code == 0 and "inside" in ok.stdout, ok.output
+    changes, key, cause = METRES[case]
+    r = CliRunner().invoke(main, ["acquire", _dry_run_config(tmp_path, changes), "-o",
+                                  "s.jsonl", "--dry-run"])
+    assert r.exit_code == 1, r.output
+    line = r.stderr
+    assert line.startswith("error: rig.yaml, line ") and line.count("\n") == 1, line
+    assert f"key '{key}'" in line and cause in line and len(line) < 200, (len(line), line)
+    assert not (tmp_path / "s.jsonl").exists()
+
+
+@pytest.mark.parametrize("points", [[[0, 0, 5]], [[4.9, 0, 0], [0, 0, 120]], [[-5, 0, 0]]])
+def test_tool_points_beyond_a_few_mm_are_millimetres(points):
+    """Only points that ALL lie within 5 mm of the flange on every axis look like metres: a
+    point 5 mm out, or one real coil point among them, is mm."""
+    cfg = parse_config(rig(safety={**SAFE, "tool_points_mm": points}), "rig.yaml")
+    assert cfg.safety.tool_points_mm is not None
+
+
+@pytest.mark.parametrize("lo, hi, metres", [
+    ([0.1, -0.4, 0], [0.9, 0.4, 0.8], True), ([-9.9, -9.9, -9.9], [9.9, 9.9, 9.9], True),
+    ([0.1, -0.4, 0], [0.9, 0.4, 10], False), ([-10, -1, -1], [1, 1, 1], False)])
+def test_a_box_below_ten_on_every_coordinate_is_metres(lo, hi, metres):
+    data = rig(safety={**SAFE, "workspace_min_mm": lo, "workspace_max_mm": hi})
+    if metres:
+        msg = key_error(data, "safety.workspace_min_mm")
+        assert "these look like metres" in msg and "m = [" in msg
+    else:
+        assert parse_config(data, "rig.yaml").safety.workspace_min_mm == tuple(lo)
+
+
+@pytest.mark.parametrize("section, key, value", [
+    ("robot", "speed_mm_s", 0.999), ("robot", "accel_mm_s2", 0.5),
+    ("safety", "max_speed_mm_s", 0.5), ("safety", "max_accel_mm_s2", 0.05)])
+def test_speeds_and_accelerations_below_one_are_si(section, key, value):
+    """Below 1 mm/s (mm/s²) is refused naming the value in mm; exactly 1 is accepted."""
+    base = {"robot": ROBOT, "safety": SAFE}[section]
+    msg = key_error(rig(**{section: {**base, key: value}}), f"{section}.{key}")
+    assert f"= {value * 1000:g} mm/s" in msg and "this looks like m/s" in msg
+    one = {"robot": {**ROBOT, "speed_mm_s": 1, "accel_mm_s2": 1},
+           "safety": {**SAFE, "max_speed_mm_s": 1, "max_accel_mm_s2": 1}}
+    cfg = parse_config(rig(**one), "rig.yaml")
+    assert (cfg.robot.speed_mm_s, cfg.safety.max_accel_mm_s2) == (1, 1)

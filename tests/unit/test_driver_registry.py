@@ -158,8 +158,9 @@ def test_robot_refuses_before_sending(monkeypatch):
 def test_config_accepts_an_entry_point_driver_and_builtins_despite_a_broken_one(entry_points):
     from tmscal.config import parse_config
 
-    safety = {"max_offset_mm": 100, "max_rotation_deg": 10, "workspace_min_mm": [-1, -1, -1],
-              "workspace_max_mm": [1, 1, 1], "max_speed_mm_s": 100, "max_accel_mm_s2": 500}
+    safety = {"max_offset_mm": 100, "max_rotation_deg": 10,
+              "workspace_min_mm": [-1000, -1000, -1000], "workspace_max_mm": [1000, 1000, 1000],
+              "max_speed_mm_s": 100, "max_accel_mm_s2": 500}
     entry_points.append(_ep("kuka", f"{__name__}:KUKA"))
     assert parse_config({"robot": {"driver": "kuka"}, "safety": safety}).robot.driver == "kuka"
     entry_points[:] = [_ep("broken", "no_such_module_xyz:SPEC")]

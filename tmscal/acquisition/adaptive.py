@@ -57,7 +57,7 @@ from .devices import Endpoints
 from .engine import AcquireResult, AcquisitionStopped, Engine
 from .plan import PlanSpec
 from .progress import Progress
-from .run import PlanStrategy, check_plan_matches
+from .run import PlanStrategy
 from .settings import SamplingSettings, sampling_settings
 from .strategy import Step
 
@@ -188,7 +188,7 @@ def _by_need(st: SamplingSettings, settings: AdaptiveSettings) -> None:
 def _check_pool_poses(session: Any, pool: np.ndarray) -> None:
     """Every recorded pose of an adaptive session names a pool pose (``pool``) that is
     distinct from the others; its commanded pose is checked against it by
-    ``run.check_plan_matches``."""
+    ``resume.check_recorded``."""
     seen: set[int] = set()
     for rec in session.poses:
         j = rec.pool
@@ -253,13 +253,9 @@ class AdaptiveStrategy(PlanStrategy):
         self._use(spec)
         _check_pool_poses(session, self.pool)
 
-    def check_resume(self, session: Session) -> None:
-        assert self.spec is not None
-        expected = np.tile(np.eye(4), (max((r.index for r in session.poses), default=-1) + 1,
-                                       1, 1))
-        for r in session.poses:
-            expected[r.index] = self.pool[r.pool]
-        check_plan_matches(self.cfg, session, self.spec, expected)
+    def planned_pose(self, rec: PoseRecord) -> np.ndarray | None:
+        """The pool pose the record names (``read`` checked that it names a distinct one)."""
+        return self.pool[rec.pool] if rec.pool is not None else None
 
     def settings(self, header: dict[str, Any] | None) -> list[str]:
         assert self.adaptive is not None

@@ -9,9 +9,12 @@ The engine owns what every run shares:
 * the session file: a new one's header (the config, the devices' identity, the strategy's
   entries), one fsynced line per pose (a measurement the reader would refuse is recorded as
   skipped with the reason, ``valid_or_skipped``), a torn last line cut off on ``--resume``;
-* resume: the session locked, the strategy's plan read back from the header, the generic
-  checks (same drivers and bodies; the arm near P0 or where the run stopped, and inside
-  the envelope) and the strategy's own;
+* resume: the session locked, the strategy's plan read back from the header, and the same
+  checks for every kind of run (:mod:`.resume`), before anything moves: same drivers and
+  bodies; the header's plan equal to the one re-derived from the config and the recorded P0
+  and seed (``Strategy.rederive``), which is the one run; every recorded pose commanded where
+  that plan puts it; the plan inside the envelope; the arm near P0 or where the run stopped,
+  in position and orientation, and inside the envelope;
 * a device fault (timeout, corrupt reply, lost connection) is retried with a reconnect, at
   most ``run.retries`` times for one pose; a robot fault (protective or emergency stop)
   stops at once. Either way the run ends with ``AcquisitionStopped`` naming the cause and
@@ -45,7 +48,13 @@ from ..solving.predict import PHASES
 from .devices import Devices, Endpoints, envelope_for
 from .plan import check_plan
 from .progress import Progress
-from .resume import check_same_rig, check_where_run_stopped, resume_command
+from .resume import (
+    check_recorded,
+    check_same_plan,
+    check_same_rig,
+    check_where_run_stopped,
+    resume_command,
+)
 from .skips import SkipWatch
 from .strategy import Step, Strategy
 
@@ -214,11 +223,15 @@ class Engine:
 
     def _resume(self, strategy: Strategy, dev: Devices, session: Session
                 ) -> tuple[Envelope, list[str]]:
-        """A resumed run: the plan read back from the header and checked against the
-        config and the records, every pose against the envelope; then the devices open."""
+        """A resumed run: the plan read back from the header, re-derived from the config and
+        compared with it (the re-derived plan is the one run), the records checked against
+        it, every pose against the envelope; then the devices open."""
         strategy.read(session)
         check_same_rig(self.cfg, session, strategy.sensor)
-        strategy.check_resume(session)
+        derived, source = strategy.rederive(session)
+        check_same_plan(strategy.poses, derived, session.path, strategy.unit, source)
+        strategy.poses = derived
+        check_recorded(session.poses, strategy.planned_pose, session.path, strategy.unit)
         envelope = envelope_for(self.cfg, strategy.p0)
         check_plan(strategy.poses, envelope)
         dev.open(envelope)
@@ -233,7 +246,7 @@ class Engine:
     def _check_where(self, dev: Devices, envelope: Envelope, strategy: Strategy,
                      session: Session | None, step: Step | None) -> None:
         """Before the first move: on a resume (``session``) the arm is near P0 or where the
-        run stopped; in any case inside the envelope."""
+        run stopped, in position and orientation; in any case inside the envelope."""
         assert dev.robot is not None
         here = dev.robot.flange_pose()
         if session is not None:

@@ -2,10 +2,11 @@
 settled and sampled by the tracker (:mod:`.sample`), through the one engine (:mod:`.engine`:
 devices, reconnect, stop, resume, the session file, progress).
 
-* The plan is regenerated from (kind, P0, seed, ranges) stored in the session header, so
-  ``resume`` continues the same plan and skips the indices already recorded — also after a
-  crash (each pose is one fsynced line; a torn last line is cut off). The header's plan must
-  match the config's and reproduce every commanded pose already recorded.
+* On ``resume`` the plan is re-derived from the config's plan section around the P0 (and
+  with the length) the session header records, so the run continues the same plan and skips
+  the indices already recorded — also after a crash (each pose is one fsynced line; a torn
+  last line is cut off). The header's plan (kind, seed, ranges, P0) must be the config's and
+  reproduce every commanded pose already recorded.
 * A pose whose bodies were not seen well enough is sampled once more (moving again), then
   recorded as skipped with the reason.
 * ``PlanStrategy`` is also the adaptive run's base (:mod:`.adaptive`): its candidates are
@@ -77,12 +78,11 @@ def measure_tracked(dev: Devices, i: int, P: np.ndarray, st: SamplingSettings, t
     return _record(i, P, s, t)
 
 
-def check_plan_matches(cfg: RigConfig, session: Session, spec: PlanSpec,
-                       plan: np.ndarray) -> None:
-    """Refuse to resume a session into a different plan: the header's plan must be the
-    config's (kind, seed, ranges, P0 when the config fixes it), and must reproduce every
-    commanded pose already recorded (``plan[index]``; an edited or foreign header would
-    not). Raises SessionError."""
+def check_plan_matches(cfg: RigConfig, session: Session, spec: PlanSpec) -> None:
+    """Refuse to resume a session into a different plan: the header's plan ``spec`` must be
+    the config's (kind, seed, ranges, P0 when the config fixes it). Raises SessionError
+    naming the key that differs. (That the recorded commanded poses are the plan's is
+    ``resume.check_recorded``.)"""
     where = f"{session.path}"
     want = {"kind": cfg.plan.kind, "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
             "rotation_deg": cfg.plan.rotation_deg}
@@ -93,19 +93,9 @@ def check_plan_matches(cfg: RigConfig, session: Session, spec: PlanSpec,
                                f"{v!r}; {RESUME_HINT}")
     if not isinstance(cfg.plan.start, str):
         d = float(np.abs(spec.p0 - np.asarray(cfg.plan.start, dtype=float)).max())
-        if d > POSE_TOL_MM:
+        if not d <= POSE_TOL_MM:
             raise SessionError(f"{where}: the session's P0 differs from the config's "
                                f"plan.start (by up to {d:.3g} mm); {RESUME_HINT}")
-    for rec in session.poses:
-        if rec.commanded is None or rec.index >= len(plan):
-            continue
-        d = float(np.abs(rec.commanded - plan[rec.index]).max())
-        if not d <= POSE_TOL_MM:
-            raise SessionError(
-                f"{where}: pose {rec.index} was commanded to "
-                f"{np.round(rec.commanded[:3, 3], 1).tolist()} mm but the header's plan "
-                f"puts it at {np.round(plan[rec.index][:3, 3], 1).tolist()} mm: the header "
-                "was edited or belongs to another run; refusing to resume")
 
 
 class PlanStrategy(Strategy):
@@ -150,9 +140,12 @@ class PlanStrategy(Strategy):
         n = self.n or (last + 1 if last + 1 > n0 else None)
         self._use(spec if n is None else spec.with_n(n))
 
-    def check_resume(self, session: Session) -> None:
+    def rederive(self, session: Session) -> tuple[np.ndarray, str]:
+        """The config's plan section around the recorded P0, with the header's length."""
         assert self.spec is not None
-        check_plan_matches(self.cfg, session, self.spec, self.poses)
+        check_plan_matches(self.cfg, session, self.spec)
+        derived = PlanSpec.from_config(self.cfg.plan, self.spec.p0, self.spec.n)
+        return derived.poses(), f"{self.cfg.path}'s plan section around the recorded P0"
 
     def settings(self, header: dict[str, Any] | None) -> list[str]:
         self.st = sampling_settings(self.cfg, header, self.samples)

@@ -27,11 +27,22 @@ force-torque readings (N, N·m, sensor frame; mean and SD per channel), read the
 append one fsynced line (``joints_rad``, ``wrench``, ``wrench_spread``, A, commanded).
 
 The run is a strategy of the one engine (:mod:`tmscal.acquisition.engine`), so crash safety
-is the plan run's: the header records the whole plan (configurations and poses), so
-``resume`` continues it and skips the configurations already recorded, after checking the
-drivers, the plan and where the arm is; Ctrl-C (``should_stop``) finishes the configuration
-in flight; a device fault is retried with a reconnect (``run.retries``); a robot fault stops
-at once. Either way the session stays valid.
+is the plan run's: the header records the whole plan (configurations and poses) and how it was
+drawn (the joints ``q0`` it started from, P0, seed, pool, span), so ``resume`` continues it and
+skips the configurations already recorded, after the engine's checks of every resume (the
+drivers, the plan, the records, the envelope, where the arm is and how it is turned); Ctrl-C
+(``should_stop``) finishes the configuration in flight; a device fault is retried with a
+reconnect (``run.retries``); a robot fault stops at once. Either way the session stays valid.
+
+What a resume re-derives (``rederive_poses``): the candidates are a deterministic function of
+(q0, seed, pool, span, the arm's joint limits), so they are drawn again and every header
+configuration must be one of them, distinct, in the nearest-neighbour order from q0; their
+poses are the nominal forward kinematics of their joints, so they are computed again and the
+header's must equal them; the engine checks them against the config's envelope. The DETMAX
+selection among the candidates is not run again: it is an optimisation in floating point
+whose ties may fall differently on another numpy or BLAS, and which candidates it kept does
+not bear on safety (every candidate inside the envelope is a safe one). A header from before
+``q0_rad`` was recorded gets every check but the draw (noted).
 """
 
 from __future__ import annotations
@@ -54,14 +65,15 @@ from .devices import Devices, Endpoints
 from .engine import AcquireResult, Engine
 from .plan import check_plan
 from .progress import Progress
-from .resume import POSE_TOL_MM, resume_command
+from .resume import RESUME_HINT, resume_command
 from .strategy import Step, Strategy
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DESIGN_SIGMA", "SelfcalPlan", "candidate_configurations", "nominal_poses",
            "select_configurations", "plan_selfcal", "acquire_selfcal", "resume_command",
-           "nominal_arm", "SelfcalStrategy", "SelfcalSettings", "measure_wrench"]
+           "nominal_arm", "SelfcalStrategy", "SelfcalSettings", "measure_wrench",
+           "rederive_poses"]
 
 #: channel noise (N, N, N, N·m, N·m, N·m) that weights the design's rows: the wrench noise of
 #: Joubair et al.'s (2016) simulation; only the ratio of forces to torques matters here
@@ -79,8 +91,9 @@ class SelfcalPlan:
     (k, n) rad in visiting order, their nominal flange poses ``poses`` (k, 4, 4)
     base_from_flange mm, ``p0`` (the flange when the plan was made; the envelope's centre),
     and how they were chosen: ``seed``, ``pool`` candidates, ``inside`` of them in the
-    envelope, ``span_deg``, ``identifiable`` (the parameters the design was made for) and
-    the design's O1."""
+    envelope, ``span_deg``, ``identifiable`` (the parameters the design was made for),
+    the design's O1 and ``q0`` (n,) rad, the joints the candidates were drawn around (None
+    in a session recorded before it was kept)."""
 
     arm: str
     q: np.ndarray
@@ -92,15 +105,18 @@ class SelfcalPlan:
     span_deg: float
     identifiable: tuple[str, ...] = ()
     o1: float = float("nan")
+    q0: np.ndarray | None = None
 
     def to_header(self) -> dict[str, Any]:
         """The session header's "selfcal" entry (plain types)."""
-        return {"arm": self.arm, "configurations": len(self.q), "seed": self.seed,
-                "pool": self.pool, "inside": self.inside, "span_deg": self.span_deg,
-                "selection": "detmax", "identifiable": list(self.identifiable),
-                "o1": None if not np.isfinite(self.o1) else float(self.o1),
-                "p0": self.p0.tolist(), "q_rad": self.q.tolist(),
-                "poses": self.poses.tolist()}
+        out = {"arm": self.arm, "configurations": len(self.q), "seed": self.seed,
+               "pool": self.pool, "inside": self.inside, "span_deg": self.span_deg,
+               "selection": "detmax", "identifiable": list(self.identifiable),
+               "o1": None if not np.isfinite(self.o1) else float(self.o1),
+               "p0": self.p0.tolist()}
+        if self.q0 is not None:
+            out["q0_rad"] = self.q0.tolist()
+        return {**out, "q_rad": self.q.tolist(), "poses": self.poses.tolist()}
 
     @classmethod
     def from_header(cls, header: Any, where: Any = "session") -> SelfcalPlan:
@@ -120,14 +136,30 @@ class SelfcalPlan:
                 raise ValueError("a joint angle is not finite")
             for i, P in enumerate(poses):
                 check_pose(P, f"pose {i}")
+            seed, pool = _count(h["seed"], "seed"), _count(h["pool"], "pool")
+            span = float(h["span_deg"])
+            if not (len(q) <= pool <= MAX_POOL and 0 < span <= 180):
+                raise ValueError(f"need configurations ≤ pool ≤ {MAX_POOL} and 0 < span_deg "
+                                 f"≤ 180, got pool {pool}, span_deg {span}")
+            q0 = None
+            if h.get("q0_rad") is not None:
+                q0 = np.array(h["q0_rad"], dtype=float)
+                if q0.shape != q.shape[1:] or not np.isfinite(q0).all():
+                    raise ValueError(f"q0_rad: expected {q.shape[1]} finite joint angles")
             o1 = h.get("o1")
-            return cls(str(h["arm"]), q, poses, check_pose(h["p0"], "p0"), int(h["seed"]),
-                       int(h["pool"]), int(h["inside"]), float(h["span_deg"]),
-                       tuple(str(n) for n in h.get("identifiable", [])),
-                       float("nan") if o1 is None else float(o1))
+            return cls(str(h["arm"]), q, poses, check_pose(h["p0"], "p0"), seed, pool,
+                       int(h["inside"]), span, tuple(str(n) for n in h.get("identifiable", [])),
+                       float("nan") if o1 is None else float(o1), q0)
         except (KeyError, TypeError, ValueError, OverflowError) as e:
             raise SessionError(f"{where}: the header's 'selfcal' plan is incomplete or "
                                f"invalid ({e})") from None
+
+
+def _count(v: Any, what: str) -> int:
+    """A header's integer ≥ 0 (not a bool, not a float)."""
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise ValueError(f"{what}: expected an integer ≥ 0, got {v!r}")
+    return v
 
 
 # --- the plan (numerics on the nominal model; nothing moves) ----------------------------------
@@ -235,9 +267,61 @@ def plan_selfcal(model: Any, q0: np.ndarray, p0: np.ndarray, envelope: Envelope,
     order = idx[_visit_order(q0, cand[idx])]
     plan = SelfcalPlan(str(model.name), cand[order], poses[order],
                        np.asarray(p0, dtype=float), seed, pool, n_in, float(span_deg),
-                       tuple(names), o1)
+                       tuple(names), o1, np.asarray(q0, dtype=float).copy())
     check_plan(plan.poses, envelope)
     return plan
+
+
+#: a header configuration is a candidate of the draw when no joint differs by more (rad)
+Q_TOL_RAD = 1e-9
+
+
+def rederive_poses(plan: SelfcalPlan, model: Any, where: Any = "session"
+                   ) -> tuple[np.ndarray, list[str]]:
+    """The flange poses (k, 4, 4) base_from_flange mm of a header's plan re-derived from the
+    nominal ``model`` (module docstring, "What a resume re-derives"): every configuration
+    within the arm's nominal joint limits and, when the header records ``q0``, one of the
+    ``pool`` candidates drawn again from (q0, seed, span), distinct, in nearest-neighbour
+    order from q0; the poses are the nominal forward kinematics of the header's joints.
+    Returns them and the notes (a header without q0). SessionError naming the configuration
+    and what differs."""
+    q = plan.q
+    lim = np.asarray(model.joint_limits_rad, dtype=float)
+    edited = f"the header was edited or belongs to another run; {RESUME_HINT}"
+    if q.shape[1] != len(lim):
+        raise SessionError(f"{where}: the header's configurations have {q.shape[1]} joints; "
+                           f"arm {plan.arm!r} has {len(lim)}; {edited}")
+    out = (q < lim[:, 0] - Q_TOL_RAD) | (q > lim[:, 1] + Q_TOL_RAD)
+    if out.any():
+        i, j = np.argwhere(out)[0]
+        raise SessionError(f"{where}: configuration {i} of the header puts joint {j + 1} at "
+                           f"{np.degrees(q[i, j]):.1f}°, outside arm {plan.arm!r}'s nominal "
+                           f"limits; {edited}")
+    notes: list[str] = []
+    if plan.q0 is None:
+        notes.append(f"{where}: the header records no q0_rad (a session from an earlier "
+                     "tmscal): its configurations were checked against the arm's limits, its "
+                     "forward kinematics and the envelope, not drawn again from the seed")
+    else:
+        cand = candidate_configurations(plan.q0, lim, plan.pool, plan.span_deg,
+                                        np.random.default_rng(plan.seed))
+        used: dict[int, int] = {}
+        for i, qi in enumerate(q):
+            gap = np.abs(cand - qi).max(axis=1)
+            c = int(np.argmin(gap))
+            if not gap[c] <= Q_TOL_RAD:
+                raise SessionError(
+                    f"{where}: configuration {i} of the header is none of the {plan.pool} "
+                    f"candidates drawn from its seed {plan.seed} around its q0_rad "
+                    f"(±{plan.span_deg:g}° at the wrist); {edited}")
+            if c in used:
+                raise SessionError(f"{where}: configurations {used[c]} and {i} of the header "
+                                   f"are the same candidate; {edited}")
+            used[c] = i
+        if not np.array_equal(_visit_order(plan.q0, q), np.arange(len(q))):
+            raise SessionError(f"{where}: the header's configurations are not in the "
+                               f"nearest-neighbour order from its q0_rad; {edited}")
+    return nominal_poses(model, q), notes
 
 
 # --- the run ---------------------------------------------------------------------------------
@@ -308,6 +392,7 @@ class SelfcalStrategy(Strategy):
         self.samples = samples
         self.model: Any = None
         self.st: SelfcalSettings | None = None
+        self._notes: list[str] = []
 
     def check(self) -> None:
         if self.cfg.ft is None:
@@ -330,21 +415,26 @@ class SelfcalStrategy(Strategy):
     def read(self, session: Session) -> None:
         self._use(SelfcalPlan.from_header(session.header, session.path))
 
-    def check_resume(self, session: Session) -> None:
-        """The recorded commanded poses must be the header plan's (an edited or foreign
-        header would not)."""
-        for r in session.poses:
-            if r.commanded is None or r.index >= len(self.poses):
-                continue
-            if not float(np.abs(r.commanded - self.poses[r.index]).max()) <= POSE_TOL_MM:
-                raise SessionError(f"{session.path}: configuration {r.index} was commanded "
-                                   "elsewhere than the header's plan: the header was edited "
-                                   "or belongs to another run; refusing to resume")
+    def rederive(self, session: Session) -> tuple[np.ndarray, str]:
+        """The header's configurations drawn again and their poses computed again on the
+        nominal model of the header's arm (:func:`rederive_poses`); ``--arm``, when given,
+        must name that arm."""
+        plan: SelfcalPlan = self.plan
+        try:
+            model = nominal_arm(plan.arm, f"{session.path}: the header's selfcal.arm")
+        except ConfigError as e:
+            raise SessionError(str(e)) from None
+        if self.arm is not None and nominal_arm(self.arm).name != model.name:
+            raise SessionError(f"{session.path}: the session was recorded for arm "
+                               f"{plan.arm!r}; --arm says {self.arm!r}; {RESUME_HINT}")
+        poses, self._notes = rederive_poses(plan, model, session.path)
+        return poses, (f"arm {plan.arm!r}'s nominal forward kinematics at the header's "
+                       "joints")
 
     def settings(self, header: dict[str, Any] | None) -> list[str]:
         self.st = SelfcalSettings(_ft_samples(self.cfg, header, self.samples),
                                   float(self.cfg.sampling.settle_s))
-        return []
+        return list(self._notes) if header is not None else []
 
     def header(self) -> dict[str, Any]:
         assert self.st is not None

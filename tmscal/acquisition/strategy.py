@@ -46,7 +46,8 @@ class Strategy:
 
     After ``start``/``resume``: ``p0`` (the envelope's centre, base_from_flange mm),
     ``poses`` (every pose the run may command, checked against the envelope before anything
-    moves) and ``plan`` (what ``Progress.planned`` hears) are set."""
+    moves; on a resume the plan re-derived by ``rederive``, not the header's) and ``plan``
+    (what ``Progress.planned`` hears) are set."""
 
     sensor = "tracker"
     unit = "pose"
@@ -92,9 +93,18 @@ class Strategy:
         where that needs no config): set ``p0``, ``poses``, ``plan``; SessionError."""
         raise NotImplementedError
 
-    def check_resume(self, session: Session) -> None:
-        """After the engine's own checks (same drivers, same bodies): the header's plan
-        matches the config and the recorded commanded poses; SessionError."""
+    def rederive(self, session: Session) -> tuple[np.ndarray, str]:
+        """The plan of a resumed run RE-DERIVED from the config and what the header records
+        of the rig and the run's draw (P0, a seed …), never from the header's poses: the
+        poses (n, 4, 4) base_from_flange mm, and what they were derived from (for messages).
+        The engine compares them with the header's (``resume.check_same_plan``) and runs
+        them. SessionError naming a setting of the header that the config contradicts."""
+        raise NotImplementedError
+
+    def planned_pose(self, rec: PoseRecord) -> np.ndarray | None:
+        """Where the plan commands recorded pose ``rec`` (base_from_flange mm; None: the plan
+        does not say), for ``resume.check_recorded``."""
+        return self.poses[rec.index] if 0 <= rec.index < len(self.poses) else None
 
     # --- both -----------------------------------------------------------------------------
 

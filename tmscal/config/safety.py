@@ -5,6 +5,12 @@ Every limit is a finite real (not a bool, string, NaN or ±inf), positive, below
 plausibility bound (10 m, 180°, 5 m/s, 50 m/s²: a larger value is a typo or a unit mistake);
 the workspace box (robot base frame, mm) is ordered on every axis; tool points ([x, y, z] mm in
 the FLANGE frame) are few and near the flange. -0.0 is read as 0.
+
+Units sanity (values written in metres by mistake; each refused in one short line naming the
+likely cause): tool points that all lie within ``TOOL_UNITS_MM`` of the flange on every axis
+(a TMS coil hangs ~100 mm below it), a box whose every coordinate is below ``BOX_UNITS_MM``
+in magnitude, speeds and accelerations (``robot.speed_mm_s``, ``robot.accel_mm_s2``,
+``safety.max_speed_mm_s``, ``safety.max_accel_mm_s2``) below ``MIN_MOTION`` (1 mm/s, 1 mm/s²).
 """
 
 from __future__ import annotations
@@ -17,7 +23,8 @@ from .sections import RobotConfig, SafetyConfig
 from .values import build, err, positive
 
 __all__ = ["SAFETY_KEYS", "SAFETY_BOUNDS", "COORD_BOUND_MM", "TOOL_BOUND_MM",
-           "MAX_TOOL_POINTS", "parse_safety", "check_robot_caps", "warn_without_tool_points"]
+           "MAX_TOOL_POINTS", "TOOL_UNITS_MM", "BOX_UNITS_MM", "MIN_MOTION", "parse_safety",
+           "check_robot_caps", "check_motion_units", "warn_without_tool_points"]
 
 log = logging.getLogger(__name__)
 
@@ -30,6 +37,15 @@ SAFETY_BOUNDS = {"max_offset_mm": 10_000.0, "max_rotation_deg": 180.0,
 COORD_BOUND_MM = 10_000.0   # |workspace coordinate| (mm, base frame)
 TOOL_BOUND_MM = 2_000.0     # |tool point coordinate| (mm, flange frame)
 MAX_TOOL_POINTS = 64
+#: tool points that all lie within this (mm, every axis) of the flange look like metres
+TOOL_UNITS_MM = 5.0
+#: a box whose every coordinate is below this in magnitude (mm) looks like metres
+BOX_UNITS_MM = 10.0
+#: a speed (mm/s) or acceleration (mm/s²) below this looks like m/s or m/s²
+MIN_MOTION = 1.0
+#: the keys below ``MIN_MOTION`` and their units
+_MOTION_UNITS = {"speed_mm_s": ("mm/s", "m/s"), "accel_mm_s2": ("mm/s²", "m/s²"),
+                 "max_speed_mm_s": ("mm/s", "m/s"), "max_accel_mm_s2": ("mm/s²", "m/s²")}
 
 
 def parse_safety(data: Any, src: str, drives_robot: bool) -> SafetyConfig:
@@ -49,6 +65,8 @@ def parse_safety(data: Any, src: str, drives_robot: bool) -> SafetyConfig:
     safety = build(SafetyConfig, raw, src, "safety")
     for k, bound in SAFETY_BOUNDS.items():
         positive(src, f"safety.{k}", getattr(safety, k), at_most=bound)
+        if k in _MOTION_UNITS:
+            check_motion_units(src, f"safety.{k}", getattr(safety, k))
     _check_box(safety, src)
     if safety.tool_points_mm is not None:
         if len(safety.tool_points_mm) > MAX_TOOL_POINTS:
@@ -58,7 +76,20 @@ def parse_safety(data: Any, src: str, drives_robot: bool) -> SafetyConfig:
                 raise err(src, f"safety.tool_points_mm[{i}]", f"{list(q)} mm: a tool point "
                           f"(flange frame) must be within ±{TOOL_BOUND_MM:g} mm of the "
                           "flange; check the units")
+        if all(abs(c) < TOOL_UNITS_MM for q in safety.tool_points_mm for c in q):
+            raise err(src, "safety.tool_points_mm", f"every point is within {TOOL_UNITS_MM:g} "
+                      "mm of the flange: these look like metres; give mm (a coil is ~100 mm "
+                      "below the flange)")
     return safety
+
+
+def check_motion_units(src: str, key: str, value: float) -> None:
+    """A speed (mm/s) or acceleration (mm/s²) ``key`` below ``MIN_MOTION`` looks like one in
+    m/s or m/s²: ConfigError naming the key, the likely cause and the value in mm."""
+    unit, si = _MOTION_UNITS[key.rpartition(".")[2]]
+    if value < MIN_MOTION:
+        raise err(src, key, f"{value:g} {unit} is below {MIN_MOTION:g} {unit}: this looks like "
+                  f"{si}; give {unit} ({value:g} {si} = {value * 1000:g} {unit})")
 
 
 def _check_box(safety: SafetyConfig, src: str) -> None:
@@ -73,15 +104,26 @@ def _check_box(safety: SafetyConfig, src: str) -> None:
         if not all(abs(c) <= COORD_BOUND_MM for c in xyz):
             raise err(src, key, f"{list(xyz)} mm: every coordinate must be within "
                       f"±{COORD_BOUND_MM:g} mm of the robot base; check the units")
+    if all(abs(c) < BOX_UNITS_MM for c in (*lo, *hi)):
+        raise err(src, "safety.workspace_min_mm", f"every coordinate of the box is below "
+                  f"{BOX_UNITS_MM:g}: these look like metres; give mm ({_xyz(lo)} m = "
+                  f"{_xyz(c * 1000 for c in lo)} mm)")
     for axis, a, b in zip("xyz", lo, hi, strict=True):
         if not a < b:
             raise err(src, "safety.workspace_max_mm", f"{axis} {b} must exceed "
                       f"workspace_min_mm {axis} {a}")
 
 
+def _xyz(values: Any) -> str:
+    return "[" + ", ".join(f"{c:.6g}" for c in values) + "]"
+
+
 def check_robot_caps(robot: RobotConfig | None, safety: SafetyConfig, src: str) -> None:
     """The robot's configured speed (mm/s) and acceleration (mm/s²) are within the safety
-    caps."""
+    caps, and neither looks like one in m/s or m/s² (``check_motion_units``)."""
+    if robot is not None:
+        check_motion_units(src, "robot.speed_mm_s", robot.speed_mm_s)
+        check_motion_units(src, "robot.accel_mm_s2", robot.accel_mm_s2)
     if robot is not None and robot.speed_mm_s > safety.max_speed_mm_s:
         raise err(src, "robot.speed_mm_s", f"{robot.speed_mm_s} mm/s exceeds "
                   f"safety.max_speed_mm_s {safety.max_speed_mm_s}")

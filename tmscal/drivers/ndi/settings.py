@@ -9,7 +9,10 @@ is also the driver's own check before a port opens (``wire.py``).
 from __future__ import annotations
 
 import dataclasses
+import errno
+import os
 import re
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +23,7 @@ from ...config.values import err, show
 from .codes import BAUD_CODES
 
 __all__ = ["NDISettings", "tracker_port_problem", "rom_path", "check_rom_exists",
-           "log_wire_path"]
+           "log_wire_path", "short_path"]
 
 #: per-command waits the driver takes as options (seconds)
 _WAIT = Option(float, above=0, hi=120)
@@ -62,11 +65,41 @@ def rom_path(rom: Any, src: str, name: str, base_dir: Path | None,
     return str(p)
 
 
+def short_path(path: Any, limit: int = 120) -> str:
+    """``path`` for a message: whole when short, else its start and end around "…" (a path
+    of thousands of characters would bury the message)."""
+    text = str(path)
+    if len(text) <= limit:
+        return text
+    keep = (limit - 1) // 2
+    return f"{text[:keep]}…{text[-keep:]}"
+
+
+def _fs_problem(e: OSError) -> str:
+    """What the file system said, with the errno's name (ENAMETOOLONG, EACCES, ELOOP …)."""
+    code = errno.errorcode.get(e.errno or 0)
+    what = e.strerror or type(e).__name__
+    return f"{what} ({code})" if code else what
+
+
 def check_rom_exists(src: str, name: str, path: str | None) -> None:
-    """ConfigError naming ``tracker.tools.<name>`` when its ROM file is not there (None: a
-    tool already loaded in the tracker, nothing to check)."""
-    if path is not None and not Path(path).is_file():
-        raise err(src, f"tracker.tools.{name}", f"ROM file not found: {path}")
+    """ConfigError naming ``tracker.tools.<name>`` when its ROM file is not there or not a
+    regular file, or the file system refuses the path (a name over 255 characters, no
+    permission, a symbolic link loop; None: a tool already loaded in the tracker, nothing
+    to check)."""
+    if path is None:
+        return
+    key = f"tracker.tools.{name}"
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise err(src, key, f"ROM file not found: {short_path(path)}") from None
+    except OSError as e:
+        raise err(src, key, f"ROM file {short_path(path)}: {_fs_problem(e)}") from None
+    except ValueError as e:  # an embedded NUL byte
+        raise err(src, key, f"ROM file {short_path(path)}: {e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise err(src, key, f"ROM file {short_path(path)}: not a regular file")
 
 
 def log_wire_path(raw: Any, port: str, tools: Mapping[str, str | None], src: str,
@@ -81,17 +114,32 @@ def log_wire_path(raw: Any, port: str, tools: Mapping[str, str | None], src: str
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
     p = p.absolute()
-    inputs = {Path(r).resolve() for r in tools.values() if r}
-    if Path(src).is_file():
-        inputs.add(Path(src).resolve())
-    if p.resolve() in inputs:
-        raise err(src, "tracker.log_wire", f"{p} is an input file; name a new file")
-    if p.is_dir():
-        raise err(src, "tracker.log_wire", f"{p} is a directory; name a new file")
-    if not p.parent.is_dir():
-        raise err(src, "tracker.log_wire", f"directory {p.parent} does not exist")
+    try:
+        inputs = {_resolved(r) for r in [*tools.values(), src] if r} - {None}
+        if p.resolve() in inputs:
+            raise err(src, "tracker.log_wire", f"{short_path(p)} is an input file; name a new "
+                      "file")
+        if p.is_dir():
+            raise err(src, "tracker.log_wire", f"{short_path(p)} is a directory; name a new "
+                      "file")
+        if not p.parent.is_dir():
+            raise err(src, "tracker.log_wire", f"directory {short_path(p.parent)} does not "
+                      "exist")
+    except OSError as e:  # a name too long, no permission: the path, not a raw OSError
+        raise err(src, "tracker.log_wire", f"{short_path(p)}: {_fs_problem(e)}") from None
+    except RuntimeError as e:  # Path.resolve on a symbolic link loop
+        raise err(src, "tracker.log_wire", f"{short_path(p)}: {e}") from None
     _check_wire_port(port, src)
     return str(p)
+
+
+def _resolved(path: str) -> Path | None:
+    """``path`` resolved, or None when the file system cannot resolve it (a loop, a name
+    too long): such a path names no file that the wire log could overwrite."""
+    try:
+        return Path(path).resolve()
+    except (OSError, RuntimeError):
+        return None
 
 
 def _check_wire_port(port: str, src: str) -> None:
