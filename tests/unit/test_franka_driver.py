@@ -144,6 +144,8 @@ class FakeFranky:
         self.moved = []
         self.translation_velocity_limit = SimpleNamespace(get=lambda: 1.7)
         self.translation_acceleration_limit = SimpleNamespace(get=lambda: 9.0)
+        self.rotation_velocity_limit = SimpleNamespace(get=lambda: 2.5)
+        self.rotation_acceleration_limit = SimpleNamespace(get=lambda: 17.0)
 
     def recover_from_errors(self) -> bool:
         self.recovered += 1
