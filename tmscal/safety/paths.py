@@ -475,6 +475,11 @@ def check_joint_path(env: Envelope, fk: Callable[[np.ndarray], np.ndarray], q0: 
     ok, s, col, value, certain = certify(g, np.zeros(1), np.ones(1), L)
     if ok:
         return None
+    if certain:   # it does leave: report the worst of a fine sampling (and the point found)
+        shares = np.append(np.linspace(0.0, 1.0, 1001), s[0])
+        G = g(shares)
+        j, c = np.unravel_index(int(np.argmax(G)), G.shape)
+        s, col, value = shares[j:j + 1], int(c), float(G[j, c])
     share = float(s[0])
     return cons.violation(col, value, poses(np.array([share]))[0], share, certain)
 

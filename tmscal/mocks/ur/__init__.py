@@ -30,7 +30,8 @@ rad/s², docs/devices.md) and the flange follows the path; on the fast clock it 
 ``rotvec_pose_from_matrix(rig.reported_flange() · tcp_offset)``: the TCP offset is zero unless
 ``URMock(tcp_offset=…)`` sets one (``getTCPOffset`` answers it, and ``moveL`` then moves the TCP
 on the straight line). Every move the controller starts is kept in ``trajectory`` (its
-``Motion`` gives the flange at any time of the modelled profile, on the fast clock too). Without ``mock.kinematics`` joint values are placeholders; with it, the rig's joints
+``Motion`` gives the flange at any time of the modelled profile, on the fast clock too).
+Without ``mock.kinematics`` joint values are placeholders; with it, the rig's joints
 (docs/selfcal.md).
 
 Because ur_rtde's ports are fixed, each mock binds its own loopback address (127.0.0.2,
