@@ -118,14 +118,19 @@ def test_the_audits_coil_speed_before_and_after():
 
 
 def test_a_ur_turn_on_the_spot_is_timed_by_its_rotation():
-    # no translation: the rotation profile (4 rad/s per m/s) times the move, so a point
-    # 125 mm from the axis moves at most at 125/250 of the commanded speed: no lowering
+    # no translation: the rotation profile (4 rad/s per m/s: 250 mm per rad) times the move,
+    # so a point ρ mm from the axis moves at most at ρ/250 of the commanded speed: 125 mm
+    # needs no lowering, 400 mm needs 250 · 250/400 = 156.25 mm/s
     S = make_pose(DOWN, [500.0, 0.0, 400.0])
     T = S @ make_pose(rot_z(1.5))
-    env = Envelope(max_speed_mm_s=250.0, max_accel_mm_s2=1500.0,
-                   tool_points_mm=[[125.0, 0.0, 0.0]])
-    (leg,) = plan_move(env, S, T, UR, 250.0, 1200.0).legs
-    assert leg.speed_mm_s == 250.0
+    for rho, want in ((125.0, 250.0), (400.0, 156.25)):
+        q = np.array([[rho, 0.0, 0.0]])
+        env = Envelope(max_speed_mm_s=250.0, max_accel_mm_s2=1500.0, tool_points_mm=q)
+        (leg,) = plan_move(env, S, T, UR, 250.0, 1200.0).legs
+        assert leg.speed_mm_s == pytest.approx(want, rel=1e-12)
+        pose_at, duration = ur_motion(S, T, leg.speed_mm_s, leg.accel_mm_s2)
+        v, _ = fastest(pose_at, np.linspace(0, duration, 3001), q)
+        assert v <= 250.0 * (1 + 1e-6) and v == pytest.approx(rho / 250.0 * want, rel=1e-3)
 
 
 def test_a_denso_turn_without_translation_is_refused_and_a_slight_one_is_slowed():
