@@ -157,6 +157,7 @@ class DensoRobot(Robot):
         self._arm = False
         self._motor = False
         self._controller_info: dict[str, Any] = {}
+        self._ext_accel_pct: float | None = None   # the ExtSpeed accel % sent at open
 
     @property
     def client(self) -> BCAPClient:
@@ -177,6 +178,7 @@ class DensoRobot(Robot):
         self._arm = True
         accel = self.accel_percent()
         c.ext_speed(self._robot, self.ext_speed_percent, accel, accel)
+        self._ext_accel_pct = accel
         log.info("DENSO ExtSpeed %s %%, accel = decel = %s %% of %g mm/s²",
                  _pct_text(self.ext_speed_percent), _pct_text(accel),
                  self.max_linear_accel_mm_s2)
@@ -245,6 +247,7 @@ class DensoRobot(Robot):
         self._client = None
         self._robot = self._ctrl = None
         self._service = self._arm = self._motor = False
+        self._ext_accel_pct = None
 
     def identity(self) -> dict[str, Any]:
         """Driver, endpoint, provider, robot name and what the controller says about itself."""
@@ -281,9 +284,11 @@ class DensoRobot(Robot):
         return np.radians(np.array(v[:self.arm_axes], dtype=np.float64))
 
     def open_accel_mm_s2(self) -> float:
-        """The acceleration (mm/s²) the ExtSpeed sent at open sets: ``accel_percent()`` of
-        ``max_linear_accel_mm_s2``. A move's ``ACCEL``/``DECEL`` percentages scale it."""
-        return self.accel_percent() / 100.0 * self.max_linear_accel_mm_s2
+        """The acceleration (mm/s²) that the ExtSpeed sent at open set (its percentage of
+        ``max_linear_accel_mm_s2``; before open, the one it would send). A move's
+        ``ACCEL``/``DECEL`` percentages scale it."""
+        pct = self.accel_percent() if self._ext_accel_pct is None else self._ext_accel_pct
+        return pct / 100.0 * self.max_linear_accel_mm_s2
 
     def motion_law(self) -> MotionLaw:
         """``MOVE L`` moves the flange (no tool selected) on a straight line and the rotation
