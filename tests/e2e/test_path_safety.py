@@ -240,6 +240,28 @@ if __name__ != "__main__":
                     check_executed(legs, env, "duration_s")
 
 
+def test_denso_lowers_the_acceleration_of_a_turning_move_for_the_coil():
+    """Opened at 3000 mm/s² (ExtSpeed accel 15 % of 20,000), a move that turns 60° with a coil
+    point 200 mm from the axis must reach the arm with ACCEL/DECEL below 100 %, and the coil
+    point must keep under the 1500 mm/s² cap on the mock's executed profile."""
+    from tmscal.drivers.denso.robot import DensoRobot
+    from tmscal.mocks.denso import DensoMock
+    from tmscal.safety import Envelope
+
+    env = {"center": TMS_RIG_P0.tolist(), "max_offset_mm": 600.0, "max_rotation_deg": 175.0,
+           "box_min_mm": [0.0, -600.0, 0.0], "box_max_mm": [1000.0, 600.0, 900.0],
+           "max_speed_mm_s": 250.0, "max_accel_mm_s2": 1500.0,
+           "tool_points_mm": [[200.0, 0.0, 0.0]]}
+    with DensoMock(_rig(), clock=FAST) as mock:
+        host, port = mock.start().rsplit(":", 1)
+        with DensoRobot(host, int(port), speed_mm_s=250.0, accel_mm_s2=3000.0) as robot:
+            robot.envelope = Envelope(**{**env, "center": np.array(env["center"])})
+            robot.accel_mm_s2 = 1500.0
+            robot.move_to(TMS_RIG_P0 @ make_pose(rot_y(math.radians(60.0)), [100.0, 0, 0]))
+            assert mock.move_accel is not None and mock.move_accel < 100.0
+            check_executed(list(mock.trajectory), env, "duration_s")
+
+
 # --- the child: URRobot over ur_rtde -------------------------------------------------------------
 
 def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) -> None:
