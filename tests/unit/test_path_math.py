@@ -216,6 +216,24 @@ def test_the_split_route_goes_through_p0_and_stays_inside():
         prev = leg.target
 
 
+def test_a_turn_past_the_rotation_limit_goes_back_through_p0s_orientation():
+    # +100° and −100° about P0's x axis are both inside a 120° limit, but the geodesic between
+    # them (and the same turn at the centre) passes 180° from P0: the route turns back to
+    # P0's orientation at the centre, then on to the target's, never more than 100° from P0
+    p0 = make_pose(DOWN, [500.0, 0.0, 400.0])
+    env = Envelope(center=p0, max_rotation_deg=120.0, box_min_mm=BOX[0], box_max_mm=BOX[1])
+    S = make_pose(DOWN @ rot_x(math.radians(100)), [450.0, 50.0, 420.0])
+    T = make_pose(DOWN @ rot_x(math.radians(-100)), [560.0, -40.0, 380.0])
+    route = plan_move(env, S, T, UR_LAW, 250.0, 1200.0)
+    want = [make_pose(S[:3, :3], [500.0, 0.0, 400.0]), p0,
+            make_pose(T[:3, :3], [500.0, 0.0, 400.0]), T]
+    assert route.split and "rotation" in route.why and len(route.legs) == 4
+    for leg, w in zip(route.legs, want, strict=True):
+        np.testing.assert_allclose(leg.target, w, atol=1e-9)
+        R = straight(leg.start, leg.target, np.linspace(0, 1, 2001))[:, :3, :3]
+        assert np.degrees(Rotation.from_matrix(DOWN.T @ R).magnitude()).max() <= 100 + 1e-6
+
+
 def test_a_move_whose_split_also_leaves_is_refused_naming_move_point_and_wall():
     # a box only 240 mm wide: turning at P0 (x = 500) swings the coil point to x = 350 < 380
     p0 = make_pose(DOWN, [500.0, 0.0, 450.0])

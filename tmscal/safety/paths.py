@@ -114,11 +114,11 @@ class Violation:
         at = "" if self.where_mm is None else \
             f" at {np.round(self.where_mm, 1).tolist()} mm"
         way = "" if self.share is None else f" {self.share:.0%} of the way"
+        unit = self.unit if self.unit == "°" else f" {self.unit}"
         if self.certain:
-            return (f"{self.what} would go {self.excess:.1f} {self.unit} beyond "
-                    f"{self.limit}{way}{at}")
+            return f"{self.what} would go {self.excess:.1f}{unit} beyond {self.limit}{way}{at}"
         return (f"{self.what} cannot be shown to stay inside {self.limit}{way}{at} (within "
-                f"{max(self.excess, 0.0):.2g} {self.unit} of it)")
+                f"{max(self.excess, 0.0):.2g}{unit} of it)")
 
 
 # --- the constraints of one envelope, on many flange poses ---------------------------------------

@@ -9,7 +9,10 @@ straight path would leave the envelope, and timed so that every tool point keeps
    every tool point in the box, the flange within the offset and rotation limits of P0.
 3. The split rule, when it does not: translate to the centre (P0's position, else the box's
    centre) keeping the start orientation, turn there to the target orientation, translate to
-   the target keeping it. Each leg (and both waypoints) is checked the same way; a leg of no
+   the target keeping it. If that leaves the envelope too and there is a P0, the turn at the
+   centre goes through P0's own orientation (turn back to it, then on to the target's: each
+   turn moves monotonically away from or towards P0's orientation, so the rotation limit
+   holds on the way). Each leg (and every waypoint) is checked the same way; a leg of no
    motion is dropped. If a leg still leaves the envelope, the move is refused, naming the move
    (from → to, mm), the point (flange origin or tool point i), where, and which wall.
 4. Each leg's speed and acceleration are lowered for the fastest point (:mod:`.laws`).
@@ -74,22 +77,25 @@ def _fmt(pose: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.1f}" for x in np.asarray(pose)[:3, 3]) + ")"
 
 
-def split_waypoints(env: Envelope, start: np.ndarray, target: np.ndarray
-                    ) -> list[np.ndarray] | None:
-    """The split route's poses [start, W1, W2, target] (legs of no motion dropped): W1 is the
-    start orientation at the centre (P0's position, else the box's centre), W2 the target
-    orientation there. None when the envelope has neither."""
+def split_waypoints(env: Envelope, start: np.ndarray, target: np.ndarray,
+                    via_p0: bool = False) -> list[np.ndarray] | None:
+    """The split route's poses [start, W1, (P0,) W2, target] (legs of no motion dropped): W1
+    is the start orientation at the centre (P0's position, else the box's centre), W2 the
+    target orientation there; ``via_p0`` turns through P0's own orientation in between (two
+    turns, each moving monotonically away from or towards P0's orientation). None when the
+    envelope has no centre (or, with ``via_p0``, no P0)."""
     if env.center is not None:
         c = np.asarray(env.center)[:3, 3]
-    elif env.has_box:
+    elif env.has_box and not via_p0:
         c = 0.5 * (np.asarray(env.box_min_mm) + np.asarray(env.box_max_mm))
     else:
         return None
     w1, w2 = np.array(start, dtype=np.float64), np.array(target, dtype=np.float64)
     w1[:3, 3] = c
     w2[:3, 3] = c
+    via = [w1, np.array(env.center, dtype=np.float64), w2] if via_p0 else [w1, w2]
     out = [np.asarray(start, dtype=np.float64)]
-    for p in (w1, w2, np.asarray(target, dtype=np.float64)):
+    for p in (*via, np.asarray(target, dtype=np.float64)):
         if not _same(out[-1], p):
             out.append(p)
     return out
@@ -156,24 +162,48 @@ def plan_move(env: Envelope, start: np.ndarray, target: np.ndarray, law: MotionL
 
 def _split(env: Envelope, start: np.ndarray, target: np.ndarray, law: MotionLaw, move: str,
            straight: Violation) -> list[np.ndarray]:
-    """The split route's poses, each leg checked; ``SafetyError`` when one still leaves."""
-    poses = split_waypoints(env, start, target)
-    if poses is None:
-        raise SafetyError(f"{move} refused: {straight}; the envelope has no P0 or box centre "
-                          "to split the move through. Nothing was moved.")
+    """The split route's poses, each leg checked: turning at the centre straight from the
+    start's orientation to the target's, else (with a P0) through P0's orientation;
+    ``SafetyError`` naming the straight path's failure and each route's when none stays
+    inside."""
+    why: list[str] = []
+    tried: list[list[np.ndarray]] = []
+    for via_p0 in (False, True):
+        poses = split_waypoints(env, start, target, via_p0)
+        if poses is None or any(len(p) == len(poses) and all(_same(a, b) for a, b in
+                                                               zip(p, poses, strict=True))
+                                for p in tried):
+            continue
+        tried.append(poses)
+        bad = _route_violation(env, poses, law, via_p0)
+        if bad is None:
+            return poses
+        why.append(bad)
+    if not why:
+        why.append("the envelope has no P0 or box centre to split the move through")
+    raise SafetyError(f"{move} refused: {straight}; {'; '.join(why)}. Nothing was moved.")
+
+
+def _route_violation(env: Envelope, poses: list[np.ndarray], law: MotionLaw, via_p0: bool
+                     ) -> str | None:
+    """Why the split route ``poses`` leaves the envelope (its waypoints, then its legs), or
+    None when it stays inside."""
     centre = _fmt(poses[1]) if len(poses) > 2 else "P0"
+    route = f"the split route through {centre} mm" + (
+        " turning through P0's orientation" if via_p0 else "")
     for w in poses[1:-1]:
         bad = env.violations(w)
         if bad:
-            raise SafetyError(f"{move} refused: {straight}; the split route through {centre} "
-                              f"mm does not help: a waypoint there is outside the envelope "
-                              f"({'; '.join(bad)}). Nothing was moved.")
-    names = ["translate to", "turn at", "translate from"]
+            return f"{route} does not help: a waypoint there is outside ({'; '.join(bad)})"
     for i, (a, b) in enumerate(zip(poses[:-1], poses[1:], strict=True)):
         v = check_path(env, a, b, law.path)
         if v is not None:
-            leg = names[i] if len(poses) == 4 else f"leg {i + 1}"
-            raise SafetyError(f"{move} refused: {straight}; the split route through {centre} "
-                              f"mm does not help: its leg {i + 1} ({leg} the centre) {v}. "
-                              "Nothing was moved.")
-    return poses
+            return f"{route} does not help: its leg {i + 1} ({_leg_name(a, b, i)}) {v}"
+    return None
+
+
+def _leg_name(a: np.ndarray, b: np.ndarray, i: int) -> str:
+    """What leg a → b of a split route does: turn at the centre, or translate to / from it."""
+    if np.linalg.norm(a[:3, 3] - b[:3, 3]) <= 1e-9:
+        return "turn at the centre"
+    return "translate to the centre" if i == 0 else "translate from the centre"
