@@ -139,6 +139,9 @@ def test_a_denso_turn_without_translation_is_refused_and_a_slight_one_is_slowed(
                    tool_points_mm=[[0.0, 100.0, 0.0]])
     with pytest.raises(SafetyError, match="turns 57.3° without translating"):
         plan_move(env, S, S @ make_pose(rot_z(1.0)), DENSO, 250.0, 1200.0)
+    # the same pose again, up to the rounding of a reported pose (10⁻⁸ rad: 10⁻⁶ mm of travel)
+    again = S @ make_pose(rot_z(1e-8))
+    assert plan_move(env, S, again, DENSO, 250.0, 1200.0).legs[0].speed_mm_s == 250.0
     # 10 mm while turning 1 rad: the point travels up to 10 + 100 mm while the translation
     # travels 10, so the command is 250 · 10/110
     T = S @ make_pose(rot_z(1.0), [10.0, 0.0, 0.0])

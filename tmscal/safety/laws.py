@@ -25,7 +25,8 @@ acceleration a (mm/s²):
   tests/unit/test_path_laws.py). The axis of rotation is not fixed, so ρ = |q|.
 
 :func:`scale` lowers (v, a) so that the bound holds for the farthest point; it never raises
-them. Units: mm, mm/s, mm/s², rad.
+them. A move in which no point travels more than ``NEGLIGIBLE_MM`` (0.01 mm) is left as it is.
+Units: mm, mm/s, mm/s², rad.
 """
 
 from __future__ import annotations
@@ -35,10 +36,15 @@ from dataclasses import dataclass
 
 from ..errors import SafetyError
 
-__all__ = ["SharedProfile", "AxisProfile", "ROTVEC_RATE_TERM", "point_bounds", "scale"]
+__all__ = ["SharedProfile", "AxisProfile", "ROTVEC_RATE_TERM", "NEGLIGIBLE_MM", "point_bounds",
+           "scale"]
 
 #: |α| ≤ |r̈| + ROTVEC_RATE_TERM · |ṙ|² for a rotation vector r(t) (numerically ≈ 0.32 at most)
 ROTVEC_RATE_TERM = 0.5
+#: a move in which no point travels more than this (mm: d + θ·ρ) is sent as it is: its speed
+#: cannot matter (a pose re-commanded after a reconnect differs from the reported one by
+#: rounding, and a DENSO could not time that rounding's rotation at all)
+NEGLIGIBLE_MM = 0.01
 
 
 @dataclass(frozen=True)
@@ -97,7 +103,7 @@ def scale(law: Timing, d: float, theta: float, rho: float, v: float, a: float,
     a point at ``rho`` mm (the farthest one) stays at or under ``cap_v`` and ``cap_a`` (None:
     no cap) during a move of ``d`` mm and ``theta`` rad. ``SafetyError`` naming ``what`` when
     the law cannot time the move or the controller cannot go slow enough."""
-    if cap_v is None and cap_a is None:
+    if (cap_v is None and cap_a is None) or d + theta * rho <= NEGLIGIBLE_MM:
         return v, a
     if isinstance(law, AxisProfile):
         v2, a2 = _scale_axis(law, d, theta, rho, v, a, cap_v, cap_a)
