@@ -179,7 +179,7 @@ class FakeRobot(Robot):
     def _flange_pose(self):
         return np.eye(4)
 
-    def _move_to(self, pose, speed_mm_s):
+    def _move_to(self, pose, speed_mm_s, accel_mm_s2):
         raise AssertionError("not used")
 
     def _stop(self):

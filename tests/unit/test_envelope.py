@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tmscal.drivers.base import Envelope, Robot, SafetyError
+from tmscal.safety import LinearPath, MotionLaw, SharedProfile
 
 # P0: flange 500 mm in front of the base, 400 mm up, tool axis (flange z) pointing down
 P0 = np.array([[1.0, 0.0, 0.0, 500.0],
@@ -38,7 +39,8 @@ def at(x: float, y: float, z: float, R: np.ndarray | None = None) -> np.ndarray:
 
 
 class Recorder(Robot):
-    """A robot whose motion hook only records what reached it."""
+    """A robot whose motion hook only records what reached it; it moves like a UR moveL
+    (rotation timed at 250 mm per rad) and stands at P0."""
 
     name = "recorder"
 
@@ -55,8 +57,11 @@ class Recorder(Robot):
     def _flange_pose(self):
         return P0.copy()
 
-    def _move_to(self, pose, speed_mm_s):
-        self.sent.append((pose.copy(), speed_mm_s, self.accel_mm_s2))
+    def motion_law(self):
+        return MotionLaw(LinearPath(), SharedProfile(250.0))
+
+    def _move_to(self, pose, speed_mm_s, accel_mm_s2):
+        self.sent.append((pose.copy(), speed_mm_s, accel_mm_s2))
 
     def _stop(self):
         pass

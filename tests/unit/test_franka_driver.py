@@ -144,6 +144,8 @@ class FakeFranky:
         self.moved = []
         self.translation_velocity_limit = SimpleNamespace(get=lambda: 1.7)
         self.translation_acceleration_limit = SimpleNamespace(get=lambda: 9.0)
+        self.rotation_velocity_limit = SimpleNamespace(get=lambda: 2.5)
+        self.rotation_acceleration_limit = SimpleNamespace(get=lambda: 17.0)
 
     def recover_from_errors(self) -> bool:
         self.recovered += 1
@@ -185,6 +187,28 @@ def test_reflex_is_a_fault_unless_recovery_is_allowed():
     expected = ee_target(target, HAND_M)
     np.testing.assert_allclose(fake.moved[0].target.pose.end_effector_pose.matrix, expected,
                                atol=1e-12)
+
+
+def test_a_turn_sends_factors_that_keep_the_coil_under_the_speed_cap():
+    # franky runs each axis at most at factor × its limit: the flange at most at
+    # √3·fv·1.7 m/s, the rotation at most at √3·fv·2.5 rad/s; a coil point 300 mm from the
+    # end effector then moves at most at √3·fv·(1700 + 2.5·300) mm/s, which must stay at or
+    # under the 250 mm/s cap (the flange alone would allow fv = 0.25 / (√3·1.7))
+    from tmscal.drivers.base import Envelope
+
+    fake = FakeFranky()
+    here = make_pose(DOWN, [500.0, 0.0, 400.0])
+    coil = np.array([0.0, 0.0, 300.0])                       # flange frame
+    env = Envelope(max_speed_mm_s=250.0, max_accel_mm_s2=1500.0, tool_points_mm=[coil])
+    r = _robot(fake, envelope=env, speed_mm_s=250.0, accel_mm_s2=1500.0)
+    r.move_to(here @ make_pose(rot_z(0.5), [20.0, 0.0, 0.0]))
+    fv = fake.moved[0].relative_dynamics_factor.velocity
+    ee = np.linalg.norm(np.linalg.inv(HAND_M) @ [0.0, 0.0, 0.3, 1.0] - [0, 0, 0, 1]) * 1000
+    assert ee == pytest.approx(300.0 - 103.4, abs=1e-9)      # the coil from the hand's origin
+    flange_from_ee = np.linalg.norm(HAND_M[:3, 3]) * 1000    # the flange origin from it
+    fastest = math.sqrt(3) * fv * (1700.0 + 2.5 * max(ee, flange_from_ee))
+    assert fastest <= 250.0 * (1 + 1e-9)
+    assert fv < 0.25 / (math.sqrt(3) * 1.7)                  # lowered for the coil
 
 
 def test_user_stop_is_a_fault_even_with_recovery():

@@ -72,7 +72,7 @@ class NoisyRobot(Robot):
     def _flange_pose(self) -> np.ndarray:
         return _noisy(TRUE_A, self.rng, SIGMA_A_MM, 0.0)
 
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
         pass
 
     def _stop(self) -> None:

@@ -121,7 +121,7 @@ class StillRobot(Robot):
     def _flange_pose(self) -> np.ndarray:
         return A_REST.copy()
 
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
         self.tracker.moved()
 
     def _stop(self) -> None:

@@ -7,6 +7,9 @@ A driver subclasses ``Tracker`` or ``Robot`` and fills the private hooks (``_ope
 public behaviour: the context-manager lifecycle (``close()`` is safe twice and after a failed
 ``open()``), and, for robots, the safety check that runs before every motion is sent.
 
+The safety ``Envelope`` lives in :mod:`tmscal.safety` (with the checks of a whole move) and is
+re-exported here.
+
 Frames and units: tracker poses are ``tracker_from_<tool>`` 4×4 in mm; robot poses are
 ``base_from_flange`` 4×4 in mm; speeds are mm/s; wrenches are [Fx, Fy, Fz N, Tx, Ty, Tz
 N·m] in the force-torque sensor's frame.
@@ -15,7 +18,6 @@ N·m] in the force-torque sensor's frame.
 from __future__ import annotations
 
 import logging
-import math
 from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
@@ -36,6 +38,8 @@ from ..errors import (  # noqa: F401  (re-exported: the contract's error types)
     TmscalError,
 )
 from ..registry import DriverSpec, driver_class  # noqa: F401  (re-exported: the registry)
+from ..safety import DEFAULT_LAW, MotionLaw, Route, plan_move
+from ..safety import Envelope as Envelope  # re-exported: ``from ..drivers.base import Envelope``
 from ..timing import Deadline
 from .robot_lock import RobotLock
 
@@ -205,161 +209,15 @@ class Tracker(_Device):
 _SEEN_WINDOW = 4096
 
 
-def _limit(name: str, value: Any) -> float | None:
-    """A positive finite limit (or None); anything else raises ValueError naming it."""
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ValueError(f"Envelope.{name}: expected a number, got {value!r}")
-    try:
-        v = float(value)
-    except OverflowError:
-        raise ValueError(f"Envelope.{name}: {value!r} is too large") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"Envelope.{name}: expected a finite number > 0, got {value!r}")
-    return v
-
-
-def _points(name: str, value: Any, k: int | None = None) -> np.ndarray:
-    """A (k, 3) finite float array, read-only; anything else raises ValueError naming it."""
-    try:
-        a = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError) as e:
-        raise ValueError(f"Envelope.{name}: expected [x, y, z] points in mm ({e})") from None
-    if a.ndim == 1 and k == 1:
-        a = a[None]
-    if a.ndim != 2 or a.shape[1] != 3 or (k is not None and a.shape[0] != k):
-        raise ValueError(f"Envelope.{name}: expected [x, y, z] points in mm, got shape "
-                         f"{a.shape}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"Envelope.{name}: every coordinate must be finite, got "
-                         f"{a.tolist()}")
-    a.setflags(write=False)
-    return a
-
-
-@dataclass(frozen=True, eq=False)
-class Envelope:
-    """Safety envelope for robot motion. Poses are base_from_flange, mm.
-
-    ``center`` (P0, base_from_flange 4×4 mm) with ``max_offset_mm`` (distance of the flange
-    origin from P0) and ``max_rotation_deg`` (rotation angle away from P0, degrees);
-    ``box_min_mm``/``box_max_mm`` a workspace box in the robot base frame (mm) that the flange
-    origin and every one of ``tool_points_mm`` (k×3 points in the FLANGE frame, mm: the coil
-    centre, points on the coil's rim) must stay inside; ``max_speed_mm_s`` and
-    ``max_accel_mm_s2`` caps.
-
-    Any limit left None is not checked. Limits that are given are validated when the envelope
-    is built (ValueError for NaN, ±inf, non-positive caps, a box with min ≥ max on an axis),
-    and ``violations`` fails closed: a comparison that cannot be made counts as a violation.
-    """
-
-    center: np.ndarray | None = None
-    max_offset_mm: float | None = None
-    max_rotation_deg: float | None = None
-    box_min_mm: tuple[float, float, float] | None = None
-    box_max_mm: tuple[float, float, float] | None = None
-    max_speed_mm_s: float | None = None
-    max_accel_mm_s2: float | None = None
-    tool_points_mm: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        put = object.__setattr__
-        for name in ("max_offset_mm", "max_rotation_deg", "max_speed_mm_s", "max_accel_mm_s2"):
-            put(self, name, _limit(name, getattr(self, name)))
-        if self.center is not None:
-            c = np.array(self.center, dtype=np.float64)
-            if c.shape != (4, 4) or not np.isfinite(c).all():
-                raise ValueError(f"Envelope.center: expected a finite 4×4 pose (mm), got shape "
-                                 f"{c.shape}")
-            c.setflags(write=False)
-            put(self, "center", c)
-        if (self.box_min_mm is None) != (self.box_max_mm is None):
-            raise ValueError("Envelope: give both box_min_mm and box_max_mm, or neither")
-        if self.box_min_mm is not None:
-            lo = _points("box_min_mm", self.box_min_mm, 1)[0]
-            hi = _points("box_max_mm", self.box_max_mm, 1)[0]
-            if not (lo < hi).all():
-                raise ValueError(f"Envelope: box_min_mm {lo.tolist()} must be below box_max_mm "
-                                 f"{hi.tolist()} on every axis")
-            put(self, "box_min_mm", tuple(float(x) for x in lo))
-            put(self, "box_max_mm", tuple(float(x) for x in hi))
-        if self.tool_points_mm is not None:
-            put(self, "tool_points_mm", _points("tool_points_mm", self.tool_points_mm))
-
-    def violations(self, pose: np.ndarray) -> list[str]:
-        """Every limit this base_from_flange pose (mm) breaks, as readable strings. A pose that
-        is not a finite rigid 4×4 is one violation; a NaN comparison is a violation."""
-        from ..geometry import angle_between, check_pose
-
-        try:
-            p = check_pose(pose, "pose")
-        except (ValueError, TypeError) as e:
-            return [f"pose is not a finite rigid 4×4 matrix ({e})"]
-        out: list[str] = []
-        t = p[:3, 3]
-        if self.center is not None:
-            c = self.center
-            if self.max_offset_mm is not None:
-                d = float(np.linalg.norm(t - c[:3, 3]))
-                if not d <= self.max_offset_mm + 1e-9:
-                    out.append(f"offset from P0 {d:.1f} mm > max_offset_mm {self.max_offset_mm}")
-            if self.max_rotation_deg is not None:
-                ang = float(np.degrees(angle_between(c, p)))
-                if not ang <= self.max_rotation_deg + 1e-9:
-                    out.append(f"rotation from P0 {ang:.2f}° > max_rotation_deg "
-                               f"{self.max_rotation_deg}")
-        if self.box_min_mm is not None and self.box_max_mm is not None:
-            lo = np.asarray(self.box_min_mm, dtype=np.float64)
-            hi = np.asarray(self.box_max_mm, dtype=np.float64)
-            pts = [("flange origin", t)]
-            if self.tool_points_mm is not None:
-                base = self.tool_points_mm @ p[:3, :3].T + t
-                pts += [(f"tool point {i} {np.round(q, 1).tolist()} (flange frame)", b)
-                        for i, (q, b) in enumerate(zip(self.tool_points_mm, base))]
-            for what, b in pts:
-                if not (np.all(b >= lo - 1e-9) and np.all(b <= hi + 1e-9)):
-                    out.append(f"{what} at {np.round(b, 1).tolist()} mm outside workspace box "
-                               f"{lo.tolist()}..{hi.tolist()}")
-        return out
-
-    def check_pose(self, pose: np.ndarray, what: str = "pose") -> None:
-        """Raise ``SafetyError`` naming the pose and the limits it breaks."""
-        v = self.violations(pose)
-        if v:
-            raise SafetyError(f"{what} refused: " + "; ".join(v))
-
-    def check_speed(self, speed_mm_s: float, accel_mm_s2: float | None = None) -> None:
-        """Raise ``SafetyError`` if a speed (mm/s) or acceleration (mm/s²) is not a positive
-        finite number or exceeds its cap."""
-        if not _positive_finite(speed_mm_s):
-            raise SafetyError(f"speed {speed_mm_s!r} mm/s is not a positive finite number")
-        if self.max_speed_mm_s is not None and not speed_mm_s <= self.max_speed_mm_s + 1e-9:
-            raise SafetyError(f"speed {speed_mm_s} mm/s > max_speed_mm_s {self.max_speed_mm_s}")
-        if accel_mm_s2 is None:
-            return
-        if not _positive_finite(accel_mm_s2):
-            raise SafetyError(f"acceleration {accel_mm_s2!r} mm/s² is not a positive finite "
-                              "number")
-        if self.max_accel_mm_s2 is not None and not accel_mm_s2 <= self.max_accel_mm_s2 + 1e-9:
-            raise SafetyError(f"acceleration {accel_mm_s2} mm/s² > max_accel_mm_s2 "
-                              f"{self.max_accel_mm_s2}")
-
-
-def _positive_finite(x: Any) -> bool:
-    """True for a real number (not bool) that is finite and > 0."""
-    if isinstance(x, bool) or not isinstance(x, int | float | np.integer | np.floating):
-        return False
-    try:
-        return math.isfinite(float(x)) and float(x) > 0
-    except OverflowError:
-        return False
-
-
 class Robot(_Device):
     """A robot arm. ``flange_pose()`` is base_from_flange 4×4 mm; ``move_to(pose, speed)``
-    sends a linear move (speed in mm/s) after checking the safety envelope, and returns only
-    when the controller reports the motion finished; ``stop()`` halts motion.
+    moves the flange there after checking the whole way against the safety envelope, and
+    returns only when the controller reports the motion finished; ``stop()`` halts motion.
+
+    A driver declares how its controller executes a Cartesian move (``motion_law``: the frame
+    it interpolates, the path and how it times a move that also turns) and fills
+    ``_move_to(pose, speed_mm_s, accel_mm_s2)``, which sends ONE motion; the base class plans
+    the move (:func:`tmscal.safety.plan_move`) and sends its legs.
 
     One tmscal process per robot: ``open()`` first takes the lock of the robot's address
     (:meth:`lock_address`, :class:`~tmscal.drivers.robot_lock.RobotLock`), so a second opener
@@ -412,11 +270,26 @@ class Robot(_Device):
             raise DeviceError(f"{self.name}: flange_pose() on a robot that is not open")
         return self._flange_pose()
 
-    def move_to(self, pose: np.ndarray, speed_mm_s: float | None = None) -> None:
-        """Move the flange linearly to ``pose`` (base_from_flange, 4×4 mm) at ``speed_mm_s``
-        (default: the configured speed). Raises ``SafetyError`` before sending anything if the
-        pose or speed is outside the envelope; ``RobotFault`` / ``DeviceTimeout`` if the
-        controller does not report the motion finished."""
+    def motion_law(self) -> MotionLaw:
+        """How this controller executes one Cartesian move (:class:`tmscal.safety.MotionLaw`):
+        the frame it moves, its path, how it times a move that turns. The default is the most
+        cautious law (a straight move of the flange whose rotation only its translation
+        times); drivers override it with their controller's."""
+        return DEFAULT_LAW
+
+    def move_to(self, pose: np.ndarray, speed_mm_s: float | None = None) -> Route:
+        """Move the flange to ``pose`` (base_from_flange, 4×4 mm) at most at ``speed_mm_s``
+        (default: the configured speed) and the configured acceleration.
+
+        Before anything is sent: the speed and acceleration against the caps, the target
+        against the envelope; then the robot's pose now (one read of the controller) and the
+        whole path the controller will take from there (:func:`tmscal.safety.plan_move`): the
+        flange origin and every tool point in the box, the offset and rotation from P0, all
+        the way. A path that leaves the envelope is split through P0 (translate, turn,
+        translate), or refused. Each leg's speed and acceleration are lowered so that every
+        tool point keeps under the caps. Raises ``SafetyError`` (nothing sent) when refused;
+        ``RobotFault`` / ``DeviceTimeout`` if the controller does not report a leg finished
+        (the later legs are not sent). Returns the :class:`tmscal.safety.Route` sent."""
         if not self._opened:
             raise DeviceError(f"{self.name}: move_to() on a robot that is not open")
         speed = self.speed_mm_s if speed_mm_s is None else speed_mm_s
@@ -426,7 +299,15 @@ class Robot(_Device):
         except (TypeError, ValueError) as e:
             raise SafetyError(f"move_to target refused: not a 4×4 pose ({e})") from None
         self.envelope.check_pose(target, "move_to target")
-        self._move_to(target, float(speed))
+        start = self.flange_pose()
+        route = plan_move(self.envelope, start, target, self.motion_law(), float(speed),
+                          self.accel_mm_s2, f"{self.name} move")
+        if route.split:
+            log.info("%s: the straight move leaves the envelope (%s); going through P0 in %d "
+                     "legs", self.name, route.why, len(route.legs))
+        for leg in route.legs:
+            self._move_to(leg.target, leg.speed_mm_s, leg.accel_mm_s2)
+        return route
 
     def joint_positions(self) -> np.ndarray:
         """The joint angles now (rad, one per axis), for the session (``joints_rad``) and
@@ -444,7 +325,10 @@ class Robot(_Device):
     def _flange_pose(self) -> np.ndarray: ...
 
     @abstractmethod
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None: ...
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
+        """Send ONE motion of the flange to ``pose`` (base_from_flange 4×4 mm) at
+        ``speed_mm_s`` and ``accel_mm_s2`` as the controller's own move (the one
+        ``motion_law`` describes); return when the controller reports it finished."""
 
     @abstractmethod
     def _stop(self) -> None: ...
@@ -474,8 +358,8 @@ class ForceTorque(_Device):
 
 
 __all__ = [
-    "ToolState", "TrackerFrame", "Tracker", "Robot", "ForceTorque", "Envelope", "DriverSpec",
-    "driver_class",
+    "ToolState", "TrackerFrame", "Tracker", "Robot", "ForceTorque", "Envelope", "MotionLaw",
+    "Route", "DriverSpec", "driver_class",
     "ConfigError", "ConnectionLost", "DeviceError", "DeviceTimeout",
     "ProtocolError", "RobotFault", "SafetyError", "SessionError", "TmscalError",
 ]

@@ -39,6 +39,7 @@ import numpy as np
 
 from ...errors import ConnectionLost, DeviceError, ProtocolError
 from ...geometry import denso_p_from_matrix, matrix_from_denso_p
+from ...safety import LinearPath, MotionLaw, SharedProfile
 from ..base import Envelope, Robot
 from ..robot_lock import host_port
 from .arm import denso_arm
@@ -161,6 +162,7 @@ class DensoRobot(Robot):
         self._motor = False
         self._controller_info: dict[str, Any] = {}
         self._type_name: str | None = None
+        self._ext_accel_pct: float | None = None   # the ExtSpeed accel % sent at open
 
     @property
     def client(self) -> BCAPClient:
@@ -182,6 +184,7 @@ class DensoRobot(Robot):
         self._arm = True
         accel = self.accel_percent()
         c.ext_speed(self._robot, self.ext_speed_percent, accel, accel)
+        self._ext_accel_pct = accel
         log.info("DENSO ExtSpeed %s %%, accel = decel = %s %% of %g mm/s²",
                  _pct_text(self.ext_speed_percent), _pct_text(accel),
                  self.max_linear_accel_mm_s2)
@@ -264,6 +267,7 @@ class DensoRobot(Robot):
         self._client = None
         self._robot = self._ctrl = None
         self._service = self._arm = self._motor = False
+        self._ext_accel_pct = None
 
     def lock_address(self) -> str:
         """``host:port`` of the controller (and the robot name when not "Arm"): one tmscal
@@ -308,12 +312,34 @@ class DensoRobot(Robot):
                                 f"expected at least {self.arm_axes}", device=self.name)
         return np.radians(np.array(v[:self.arm_axes], dtype=np.float64))
 
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
-        """Blocking MOVE L to base_from_flange ``pose`` (4×4 mm) at ``speed_mm_s``."""
+    def open_accel_mm_s2(self) -> float:
+        """The acceleration (mm/s²) that the ExtSpeed sent at open set (its percentage of
+        ``max_linear_accel_mm_s2``; before open, the one it would send). A move's
+        ``ACCEL``/``DECEL`` percentages scale it."""
+        pct = self.accel_percent() if self._ext_accel_pct is None else self._ext_accel_pct
+        return pct / 100.0 * self.max_linear_accel_mm_s2
+
+    def motion_law(self) -> MotionLaw:
+        """``MOVE L`` moves the flange (no tool selected) on a straight line and the rotation
+        geodesic, timed by its translation only (the mock's model; docs/safety.md: CHECK at
+        a rig), so a turn without translation is refused when tool points would move. The
+        slowest it can be commanded: SPEED 0.01 % and ACCEL 0.01 %."""
+        return MotionLaw(LinearPath(), SharedProfile(
+            0.0, min_speed_mm_s=self.max_linear_speed_mm_s * 1e-4,
+            min_accel_mm_s2=self.open_accel_mm_s2() * 1e-4, name="a DENSO MOVE L"))
+
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
+        """Blocking MOVE L to base_from_flange ``pose`` (4×4 mm) at ``speed_mm_s``; an
+        ``accel_mm_s2`` below the one set at open adds ``ACCEL``/``DECEL`` percentages of it
+        (rounded down)."""
         assert self._robot is not None
         p = [float(x) for x in denso_p_from_matrix(pose)]
         target = to_variant([p + [self.fig], "P", "@E"])  # reply when reached and settled
         option = speed_option(speed_mm_s, self.max_linear_speed_mm_s)
+        full = self.open_accel_mm_s2()
+        if accel_mm_s2 < full:
+            pct = _pct_text(max(_percent_down(accel_mm_s2, full), 0.01))
+            option += f",ACCEL={pct},DECEL={pct}"
         log.debug("DENSO MOVE L %s %s", np.round(p, 3).tolist(), option)
         # a failure HRESULT raises RobotFault (code = HRESULT); timeouts and drops their own
         self.client.robot_move(self._robot, 2, target, option, timeout_s=self.timeout_s)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import logging
+import math
 import re
 import threading
 from collections.abc import Iterator
@@ -39,9 +40,10 @@ from typing import Any
 import numpy as np
 
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, MissingExtraError, RobotFault
+from ...safety import AxisPath, AxisProfile, MotionLaw
 from ...timing import Deadline
 from ..base import Envelope, Robot
-from .frames import base_from_flange, dynamics_factors, ee_target, matrix_m
+from .frames import MIN_FACTOR, base_from_flange, dynamics_factors, ee_target, matrix_m
 
 log = logging.getLogger(__name__)
 
@@ -195,7 +197,28 @@ class FrankaRobot(Robot):
             state = self._robot.state
         return self._convert(lambda: base_from_flange(state.O_T_EE, state.F_T_EE), "O_T_EE")
 
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
+    def motion_law(self) -> MotionLaw:
+        """franky plans a Cartesian motion of the end effector (``F_T_EE``, read now) per
+        axis (x, y, z of the start frame and the rotation vector's components, each monotone,
+        all ending together: not a straight line), each within the relative factor × its
+        limit: the path is the hull of those axes (``AxisPath``) and the rotation turns at
+        most at speed × rotation limit / translation limit (``AxisProfile``). The slowest it
+        can be commanded: a factor of ``MIN_FACTOR``."""
+        with self._translated("read the robot state and limits"):
+            state = self._robot.state
+            vlim = float(self._robot.translation_velocity_limit.get())
+            alim = float(self._robot.translation_acceleration_limit.get())
+            rvlim = float(self._robot.rotation_velocity_limit.get())
+            ralim = float(self._robot.rotation_acceleration_limit.get())
+        f_t_ee = self._convert(lambda: matrix_m(state.F_T_EE, "F_T_EE"), "F_T_EE").copy()
+        f_t_ee[:3, 3] *= 1000.0
+        return MotionLaw(AxisPath(f_t_ee), AxisProfile(
+            1000.0 * vlim / rvlim, 1000.0 * alim / ralim,
+            min_speed_mm_s=MIN_FACTOR * math.sqrt(3.0) * vlim * 1000.0,
+            min_accel_mm_s2=MIN_FACTOR * math.sqrt(3.0) * alim * 1000.0,
+            name="franky's Cartesian motion"))
+
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
         franky = _franky()
         self._check_state("move_to")
         with self._translated("prepare the motion"):
@@ -204,7 +227,7 @@ class FrankaRobot(Robot):
             alim = float(self._robot.translation_acceleration_limit.get())
         target = self._convert(lambda: ee_target(pose, state.F_T_EE), "F_T_EE")
         try:
-            fv, fa, fj = dynamics_factors(speed_mm_s, self.accel_mm_s2, vlim, alim)
+            fv, fa, fj = dynamics_factors(speed_mm_s, accel_mm_s2, vlim, alim)
         except ValueError as e:
             raise RobotFault(f"franka {self.host}: move_to refused: {e}",
                              device=self.name) from None

@@ -34,6 +34,7 @@ from ...errors import (
     RobotFault,
 )
 from ...geometry import invert, pose_from_rotvec, rotvec_pose_from_matrix
+from ...safety import LinearPath, MotionLaw, SharedProfile
 from ...timing import Deadline
 from ..base import Envelope, Robot
 from .arm import ur_arm
@@ -58,6 +59,11 @@ _POLL_S = 0.005          # how often a wait looks at the worker or the receive s
 _FRESH_POLL_S = 0.0005   # how often a wait for new data looks at the timestamp (s)
 _DIAGNOSE_S = 1.0        # longest wait for the receive stream to show why a move failed (s)
 _SCRIPT_START_S = 5.0    # longest wait for a re-uploaded control script to run (ur_rtde's 5 s)
+#: moveL's rotation caps: this many rad/s (rad/s²) per m/s (m/s²) of its tool speed
+#: (acceleration); the controller runs the longer of the translation and rotation profiles
+#: (an answer on the Universal Robots forum, "MoveL: Tool Angular Speed"; not in UR's script
+#: manual: CHECK at a rig; docs/devices.md, docs/safety.md)
+MOVEL_RAD_PER_M = 4.0
 
 
 def base_from_flange_from_tcp(tcp_pose: Any, flange_from_tcp: np.ndarray) -> np.ndarray:
@@ -331,12 +337,19 @@ class URRobot(RTDECalls, Robot):
             self._wrench_sensors[kind] = sensor
         return sensor.read(n).mean(axis=0)
 
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float) -> None:
+    def motion_law(self) -> MotionLaw:
+        """``moveL`` moves the TCP (``flange_from_tcp``, read at open) on a straight line and
+        the rotation geodesic with one path share, timed by the longer of its translation and
+        rotation profiles (:data:`MOVEL_RAD_PER_M`: 250 mm of translation per rad)."""
+        return MotionLaw(LinearPath(self.flange_from_tcp),
+                         SharedProfile(1000.0 / MOVEL_RAD_PER_M, name="a UR moveL"))
+
+    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
         self._check_connected("move_to")
         self._check_safety("move_to")
         self._ensure_script("move_to")
         target = tcp_pose_from_base_from_flange(pose, self.flange_from_tcp)
-        speed, accel = speed_mm_s / 1000.0, self.accel_mm_s2 / 1000.0
+        speed, accel = speed_mm_s / 1000.0, accel_mm_s2 / 1000.0
         log.debug("ur %s: moveL %s at %.4f m/s, %.4f m/s²", self.host, target, speed, accel)
         # asynchronous, so that stop() can halt it: a synchronous moveL cannot be stopped
         # until it ends (ur_rtde's move_async example); the wait below polls its progress

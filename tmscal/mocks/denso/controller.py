@@ -15,6 +15,7 @@ import logging
 import math
 import re
 import threading
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -50,7 +51,7 @@ from ...sim.rig import SimRig, straight_path
 from ..clock import Clock
 from . import args
 from .args import PCT_MIN, Refusal
-from .state import DensoFaults, Job, Session
+from .state import DensoFaults, Executed, Job, Session
 
 log = logging.getLogger(__name__)
 
@@ -138,6 +139,9 @@ class DensoController:
         #: base_from_flange, mm) that the rig's true flange follows until the arm is still
         self.path: Callable[[float], np.ndarray] | None = None
         self._profile = Trapezoid(0.0, 1.0, 1.0)   # the last move's (see _duration)
+        #: every move the arm started, oldest first (bounded), with the path and profile it
+        #: follows (``Executed.pose_at_time``), for tests of the path and its speed
+        self.trajectory: deque[Executed] = deque(maxlen=10_000)
         #: modelled duration (s) of the last move's trapezoidal profile (see ``_duration``),
         #: computed on both clocks (the fast clock does not wait for it)
         self.last_motion_s: float | None = None
@@ -455,6 +459,9 @@ class DensoController:
             raise Refusal(E_INVALIDARG, f"pose {p}: no inverse kinematics solution within "
                           "the joint limits (out of reach)")
         duration = self._duration(target, pct, accel, decel)
+        assert self.last_motion_s is not None
+        self.trajectory.append(Executed(self.rig.reported_flange().copy(), target.copy(),
+                                        self._profile, self.last_motion_s))
         self.move_accel, self.move_decel = accel, decel
         with self._lock:
             self.move_speed_log = [*self.move_speed_log[-999:], pct]

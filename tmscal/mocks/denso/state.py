@@ -1,5 +1,6 @@
 """The DENSO mock's data: injected faults (:class:`DensoFaults`), a motion in progress
-(:class:`Job`) and one client connection (:class:`Session`)."""
+(:class:`Job`), one client connection (:class:`Session`) and the record of an executed move
+(:class:`Executed`)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ import numpy as np
 from ...drivers.denso.hresult import E_EMERGENCY_STOP
 from ...drivers.denso.packet import FUNCTION_NAMES, PacketFramer, encode_packet
 from ...drivers.denso.variant import Variant
+from ...motion import Trapezoid
+from ...sim.rig import straight_path
 
 #: Values of ``DensoFaults.bad_curpos``.
 BAD_CURPOS = ("nan", "inf", "short", "long", "bstr", "bool_array", "empty", "nested_bstr")
@@ -66,6 +69,27 @@ class DensoFaults:
         if not 0 < self.stuck_keepalive_s <= 10:  # also refuses NaN
             raise ValueError(f"stuck_keepalive_s must be in (0, 10] s, got "
                              f"{self.stuck_keepalive_s!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class Executed:
+    """A move the mock executed: the flange from ``start`` to ``target`` (base_from_flange
+    4×4 mm) on the straight line and the rotation geodesic, its share of the way following
+    ``profile`` (the translation's trapezoid) stretched to ``duration_s`` (the modelled
+    duration, ``motion_time_s`` when set), on both clocks."""
+
+    start: np.ndarray
+    target: np.ndarray
+    profile: Trapezoid
+    duration_s: float
+
+    def pose_at_time(self, t: float) -> np.ndarray:
+        """base_from_flange (mm) ``t`` s after the move started (the fast clock too)."""
+        if self.duration_s <= 0 or self.profile.duration <= 0:
+            f = 1.0 if t > 0 or self.duration_s <= 0 else 0.0
+        else:
+            f = self.profile.fraction(t * self.profile.duration / self.duration_s)
+        return straight_path(self.start, self.target, f)
 
 
 @dataclass(eq=False)

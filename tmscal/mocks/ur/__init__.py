@@ -27,8 +27,11 @@ move puts the rig's flange at ``pose_from_rotvec(pose)``; in real time it runs o
 trapezoidal profile of :mod:`tmscal.motion` at movel's v and a (rotation: 4·v rad/s, 4·a
 rad/s², docs/devices.md) and the flange follows the path; on the fast clock it is immediate
 (its modelled duration is still recorded in ``last_motion_s``). ``actual_TCP_pose`` is
-``rotvec_pose_from_matrix(rig.reported_flange())``: the mock's TCP offset is zero, so TCP =
-flange. Without ``mock.kinematics`` joint values are placeholders; with it, the rig's joints
+``rotvec_pose_from_matrix(rig.reported_flange() · tcp_offset)``: the TCP offset is zero unless
+``URMock(tcp_offset=…)`` sets one (``getTCPOffset`` answers it, and ``moveL`` then moves the TCP
+on the straight line). Every move the controller starts is kept in ``trajectory`` (its
+``Motion`` gives the flange at any time of the modelled profile, on the fast clock too).
+Without ``mock.kinematics`` joint values are placeholders; with it, the rig's joints
 (docs/selfcal.md).
 
 Because ur_rtde's ports are fixed, each mock binds its own loopback address (127.0.0.2,

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ...geometry import (
+    invert,
     pose_from_rotvec,
     rotvec_pose_from_matrix,
 )
@@ -51,6 +52,7 @@ JOINT_RUNNING_MODE = 253
 # ur_rtde command ids (input_int_register_0)
 CMD_NO_CMD, CMD_MOVEJ, CMD_MOVEJ_IK, CMD_MOVEL, CMD_MOVEL_FK = 0, 1, 2, 3, 4
 CMD_STOPL, CMD_STOPJ, CMD_WATCHDOG, CMD_STOP_SCRIPT = 33, 34, 99, 255
+CMD_GET_TCP_OFFSET = 40
 #: commands the script processes and acknowledges with "ready" at once (servo, speed, …)
 REALTIME_CMDS = frozenset({24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71})
 MOVE_CMDS = {CMD_MOVEJ: "moveJ", CMD_MOVEJ_IK: "moveJ_IK", CMD_MOVEL: "moveL",
@@ -132,8 +134,17 @@ class URController:
 
     def __init__(self, rig: SimRig, clock: Clock = REAL_TIME, faults: URFaults = URFaults(),
                  program_running: bool = True, robot_mode: int = ROBOT_MODE_RUNNING,
-                 remote_control: bool = True) -> None:
+                 remote_control: bool = True, tcp_offset: np.ndarray | None = None) -> None:
         self.rig = rig
+        #: the active TCP, flange_from_tcp 4×4 mm (``getTCPOffset``; None: TCP = flange):
+        #: RTDE reports and moveL commands the TCP, which moves on the straight line
+        self.flange_from_tcp = np.eye(4) if tcp_offset is None else \
+            np.array(tcp_offset, dtype=np.float64)
+        if self.flange_from_tcp.shape != (4, 4) or not np.isfinite(self.flange_from_tcp).all():
+            raise ValueError("URController: tcp_offset must be a finite 4×4 pose (mm)")
+        #: every move the controller started, oldest first (bounded): each ``Motion`` gives
+        #: the flange it executes at any time (``pose_at_time``), for tests of the path
+        self.trajectory: deque[Motion] = deque(maxlen=10_000)
         self.clock = clock
         self.faults = faults
         self.move_count = 0
@@ -216,7 +227,7 @@ class URController:
     def tcp_pose(self) -> list[float]:
         """actual_TCP_pose as UR reports it: [x, y, z (m), rx, ry, rz (rad)]."""
         with self._lock:
-            T = self._flange_now(self.clock.now())
+            T = self._flange_now(self.clock.now()) @ self.flange_from_tcp
         return [float(v) for v in rotvec_pose_from_matrix(T)]
 
     # --- RTDE variables -----------------------------------------------------------------------
@@ -278,7 +289,7 @@ class URController:
         return self.target_q if q is None else [float(v) for v in q]
 
     def _tcp_vector(self, now: float) -> list[float]:
-        return list(rotvec_pose_from_matrix(self._flange_now(now)))
+        return list(rotvec_pose_from_matrix(self._flange_now(now) @ self.flange_from_tcp))
 
     def _target_tcp_vector(self, now: float) -> list[float]:
         m = self._motion
@@ -499,6 +510,10 @@ class URController:
         elif cmd == CMD_STOP_SCRIPT:
             # the script ends without signalling done
             self._stop_program("STOP_SCRIPT command")
+        elif cmd == CMD_GET_TCP_OFFSET:   # get_tcp_offset() into output_double_register_0..5
+            self.out_double[0:6] = [float(v) for v in
+                                    rotvec_pose_from_matrix(self.flange_from_tcp)]
+            self.out_int[0] = 2
         else:
             # getters answer zeros in output_double_register_0.. (e.g. getTCPOffset: zero TCP)
             log.debug("UR mock: command %d acknowledged without effect", cmd)
@@ -508,12 +523,13 @@ class URController:
 
     def _start_motion(self, target: np.ndarray, speed: float, accel: float,
                       asynchronous: bool, now: float, what: str, resumed: bool = False) -> None:
-        """Start a linear move of the flange to ``target`` (base_from_flange 4×4 mm) on a
-        trapezoidal profile capped at ``speed`` m/s and ``accel`` m/s² (rad/s, rad/s² for the
-        rotation; see :mod:`.motion`). Its modelled duration goes to ``last_motion_s`` on
-        every clock; on the real-time clock the rig's flange follows the profile. A
-        synchronous move signals done when it ends (see ``_advance``)."""
-        start = self._flange_now(now)
+        """Start a linear move of the TCP to ``target`` (base_from_tcp 4×4 mm; the flange
+        when TCP = flange) on a trapezoidal profile capped at ``speed`` m/s and ``accel`` m/s²
+        (rad/s, rad/s² for the rotation; see :mod:`.motion`). Its modelled duration goes to
+        ``last_motion_s`` on every clock, the motion to ``trajectory``; on the real-time
+        clock the rig's flange follows the profile. A synchronous move signals done when it
+        ends (see ``_advance``)."""
+        start = self._flange_now(now) @ self.flange_from_tcp
         speed = speed if speed > 0 else 0.25
         accel = accel if accel > 0 else 1.2
         target = np.asarray(target, dtype=np.float64).copy()
@@ -521,14 +537,16 @@ class URController:
             self._runtime_error(f"{what}: target not finite")
             return
         try:   # a speed or acceleration too large to scale (e.g. 1e307 m/s) is refused
-            m = Motion(start, target, now, asynchronous, speed, accel, instant=self.clock.fast)
+            m = Motion(start, target, now, asynchronous, speed, accel, instant=self.clock.fast,
+                       flange_from_tcp=self.flange_from_tcp)
         except ValueError as e:
             self._runtime_error(f"{what}: {e}")
             return
         if not math.isfinite(m.modelled_s):
             self._runtime_error(f"{what}: duration not finite ({m.modelled_s} s)")
             return
-        if self.rig.reach(target) is None:   # an arm (mock.kinematics) that cannot get there
+        # an arm (mock.kinematics) that cannot get there
+        if self.rig.reach(target @ invert(self.flange_from_tcp)) is None:
             self._runtime_error(f"{what}: no inverse kinematics solution for the target "
                                 "within the joint limits (out of reach)")
             return
@@ -538,6 +556,7 @@ class URController:
         elif not resumed and self.faults.power_off_at_move == self.move_count:
             m.stop_fraction, m.stop_kind = 0.5, "power_off"
         self._motion = m
+        self.trajectory.append(m)
         self.last_motion_s = m.modelled_s
         self.motion_log.append(m.modelled_s)
         if m.duration > 0:

@@ -1,6 +1,7 @@
-"""A linear move of the UR mock's flange on a trapezoidal velocity profile
-(:mod:`tmscal.motion`): the straight line and the rotation geodesic, both driven by one path
-parameter, and the TCP speed it implies.
+"""A linear move of the UR mock's TCP on a trapezoidal velocity profile (:mod:`tmscal.motion`):
+the straight line and the rotation geodesic of the TCP, both driven by one path parameter, the
+flange that follows from it (``flange_from_tcp``; identity: TCP = flange), and the TCP speed
+it implies.
 
 The caps are ``movel``'s: tool speed ``speed`` (m/s) and acceleration ``accel`` (m/s²) for
 the translation, and ``ROTATION_FACTOR`` (4) times the same numbers as rad/s and rad/s² for
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...geometry import rotvec_from_matrix
+from ...geometry import invert, rotvec_from_matrix
 from ...motion import Trapezoid
 from ...sim.rig import straight_path
 
@@ -30,12 +31,14 @@ _DT = 1e-4
 
 @dataclass
 class Motion:
-    """A linear move of the flange (base_from_flange 4×4 mm) under way, started at ``t0``
-    (the mock clock's seconds). ``modelled_s`` is the profile's duration (s) on every clock;
-    ``duration`` is 0 when ``instant`` (the fast clock: the move completes at once)."""
+    """A linear move of the TCP (base_from_tcp 4×4 mm) under way, started at ``t0`` (the
+    mock clock's seconds). ``modelled_s`` is the profile's duration (s) on every clock;
+    ``duration`` is 0 when ``instant`` (the fast clock: the move completes at once).
+    ``flange_from_tcp`` (4×4 mm) is the controller's TCP offset: ``pose_at`` gives the
+    flange."""
 
-    start: np.ndarray          # base_from_flange 4×4 mm at the start
-    target: np.ndarray         # base_from_flange 4×4 mm commanded
+    start: np.ndarray          # base_from_tcp 4×4 mm at the start
+    target: np.ndarray         # base_from_tcp 4×4 mm commanded
     t0: float
     asynchronous: bool
     speed: float               # m/s (× ROTATION_FACTOR: rad/s for the rotation)
@@ -43,6 +46,7 @@ class Motion:
     instant: bool = False
     stop_fraction: float | None = None   # a fault stops the motion at this fraction
     stop_kind: str = "protective"        # that fault: "protective" stop or "power_off"
+    flange_from_tcp: np.ndarray = field(default_factory=lambda: np.eye(4))
     modelled_s: float = field(init=False)
     _profile: Trapezoid = field(init=False, repr=False)
 
@@ -75,10 +79,21 @@ class Motion:
             return 1.0
         return self._share(now - self.t0)
 
-    def pose_at(self, f: float) -> np.ndarray:
-        """base_from_flange (mm) at path share ``f``: the straight line for the translation,
-        the geodesic for the rotation."""
+    def tcp_at(self, f: float) -> np.ndarray:
+        """base_from_tcp (mm) at path share ``f``: the straight line for the translation, the
+        geodesic for the rotation."""
         return straight_path(self.start, self.target, f)
+
+    def pose_at(self, f: float) -> np.ndarray:
+        """base_from_flange (mm) at path share ``f`` (the TCP's path carried to the
+        flange)."""
+        return self.tcp_at(f) @ invert(self.flange_from_tcp)
+
+    def pose_at_time(self, t: float) -> np.ndarray:
+        """base_from_flange (mm) ``t`` s after the start on the modelled profile (on the fast
+        clock too, where the move itself is instant): what the controller executes, for a
+        trajectory recorder."""
+        return self.pose_at(self._share(t))
 
     def velocity(self, now: float) -> list[float]:
         """TCP speed [vx, vy, vz (m/s), wx, wy, wz (rad/s)] in the base frame (zero when

@@ -13,6 +13,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from ...net import loopback_family
 from ...sim.rig import SimRig
 from ..clock import REAL_TIME, Clock
@@ -91,7 +93,7 @@ class URMock(URController, MockDevice):
     ----------
     rig:
         The simulated rig; moves call ``rig.move_flange`` (base_from_flange 4×4 mm) and the
-        reported TCP pose is ``rig.reported_flange()`` (TCP offset zero: TCP = flange).
+        reported TCP pose is ``rig.reported_flange()`` · ``tcp_offset``.
     host:
         Loopback address to bind (127.0.0.0/8, ::1 or localhost; anything else raises
         ``ConfigError``); ports are UR's fixed ones.
@@ -129,6 +131,10 @@ class URMock(URController, MockDevice):
         PC at ``urcap_host:urcap_port``, sends ``request_program``, and runs the script that
         ur_rtde's script sender (``FLAG_USE_EXT_UR_CAP``) answers. Nothing is fetched over the
         script port. ``play_when_ready=True`` presses Play as soon as the PC answers.
+    tcp_offset:
+        The active TCP, flange_from_tcp 4×4 mm (default None: zero, TCP = flange), as
+        ``getTCPOffset`` answers it: RTDE reports the TCP pose and ``moveL`` moves the TCP on
+        the straight line (the flange then turns about it).
     """
 
     def __init__(self, rig: SimRig, host: str = "127.0.0.2", clock: Clock = REAL_TIME,
@@ -137,7 +143,8 @@ class URMock(URController, MockDevice):
                  serial: str | None = None, model: str | None = None,
                  program_running: bool = True, robot_mode: int = ROBOT_MODE_RUNNING,
                  remote_control: bool = True, urcap_port: int | None = None,
-                 urcap_host: str = "127.0.0.1", play_when_ready: bool = False) -> None:
+                 urcap_host: str = "127.0.0.1", play_when_ready: bool = False,
+                 tcp_offset: np.ndarray | None = None) -> None:
         loopback_family(host, "URMock host")  # refuses a non-loopback host at once
         loopback_family(urcap_host, "URMock urcap_host")
         version, serial, model = _identity(rig, version, serial, model)
@@ -145,7 +152,8 @@ class URMock(URController, MockDevice):
             raise ValueError(f"version must be (major, minor, bugfix, build), got {version!r}")
         super().__init__(rig, clock=clock, faults=faults,
                          program_running=program_running and urcap_port is None,
-                         robot_mode=robot_mode, remote_control=remote_control)
+                         robot_mode=robot_mode, remote_control=remote_control,
+                         tcp_offset=tcp_offset)
         self._stop = threading.Event()
         self.urcap = ExternalControl(self, urcap_host, urcap_port, play_when_ready,
                                      self._stop) if urcap_port is not None else None

@@ -1,0 +1,179 @@
+"""A small fixed set of realistic bugs ("mutants") in the motion-safety code (issue 22: the
+envelope over the whole motion): each is applied to a fresh copy of the repository, and the
+tests that guard that code must FAIL on it. A mutant that survives means a test is missing.
+
+    .venv/bin/python benchmarks/mutation.py            # every mutant (about 3 minutes)
+    .venv/bin/python benchmarks/mutation.py --list     # names only
+    .venv/bin/python benchmarks/mutation.py --only sag-margin --only tcp-frame
+    .venv/bin/python benchmarks/mutation.py --baseline # the unmutated copy must pass first
+
+Exit status 0 when every mutant was killed (and, with --baseline, the copy passed), 1
+otherwise, so CI can run it. The copy holds tmscal/, tests/ and pyproject.toml; pytest runs
+in it with PYTHONPATH pointing there (checked: ``tmscal.__file__`` must be in the copy), so
+the child processes the e2e tests start import the mutated code too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class Mutant:
+    """``old`` (exactly once in ``path``) replaced by ``new``; ``tests``: the pytest node ids
+    that must fail."""
+
+    name: str
+    what: str
+    path: str
+    old: str
+    new: str
+    tests: tuple[str, ...]
+
+
+PM = "tests/unit/test_path_math.py::"
+PL = "tests/unit/test_path_laws.py::"
+E2E = "tests/e2e/test_path_safety.py::"
+
+MUTANTS = [
+    Mutant("rotation-peak", "wrong inequality: a rotation peak inside the move is never looked at",
+           "tmscal/safety/paths.py", "if 0.0 < u < geo.theta:", "if 0.0 < u > geo.theta:",
+           (PM + "test_the_rotation_from_p0_can_peak_mid_path",)),
+    Mutant("sag-margin", "the chord-sag margin between samples dropped",
+           "tmscal/safety/paths.py",
+           "        margin = weight[None] * ((fb - fa) ** 2)[:, None]\n        bad =",
+           "        margin = 0.0 * weight[None]\n        bad =",
+           (PM + "test_a_wall_between_two_samples_is_found_by_the_sag_margin",)),
+    Mutant("tcp-frame", "the UR driver declares the flange, not its TCP, as what moveL moves",
+           "tmscal/drivers/ur/robot.py", "LinearPath(self.flange_from_tcp)", "LinearPath()",
+           (E2E + "test_a_tcp_offset_makes_the_flange_swing_round_the_tcp",)),
+    Mutant("speed-times-r", "×r dropped from the tool point's speed bound",
+           "tmscal/safety/laws.py", "    way = d + theta * rho\n    if D <= 0:",
+           "    way = d + theta\n    if D <= 0:",
+           (PL + "test_the_audits_coil_speed_before_and_after",)),
+    Mutant("inversion", "dropped inversion: the flange from the controller's frame taken as "
+           "the frame from the flange", "tmscal/safety/paths.py",
+           "A[:3, :3].copy(), theta, n,\n                           phi, invert(phi))",
+           "A[:3, :3].copy(), theta, n,\n                           phi, phi)",
+           (PM + "test_a_controller_that_moves_the_tcp_swings_the_flange_instead",)),
+    Mutant("deg-for-rad", "unit slip: the rotation timed in degrees where radians are meant",
+           "tmscal/safety/laws.py",
+           "    D = max(d, law.rotation_mm_per_rad * theta)\n    way",
+           "    D = max(d, law.rotation_mm_per_rad * math.degrees(theta))\n    way",
+           (PL + "test_a_ur_turn_on_the_spot_is_timed_by_its_rotation",)),
+    Mutant("split-condition", "wrong inequality: the split route replaces the straight path "
+           "when that one is fine, never when it leaves", "tmscal/safety/route.py",
+           "    if straight is not None:", "    if straight is None:",
+           (PM + "test_the_split_route_goes_through_p0_and_stays_inside",
+            E2E + "test_the_audits_127_degree_turn_leaves_the_box_on_a_straight_movel_but_"
+            "not_through_tmscal")),
+    Mutant("denso-accel", "wrong inequality: the DENSO driver never sends a lower ACCEL",
+           "tmscal/drivers/denso/robot.py", "if accel_mm_s2 < full:", "if accel_mm_s2 > full:",
+           (E2E + "test_denso_lowers_the_acceleration_of_a_turning_move_for_the_coil",)),
+    Mutant("box-wall-sign", "wrong sign: the box's upper walls checked the wrong way round",
+           "tmscal/safety/paths.py", "g = np.stack([lo - pts, pts - hi], axis=-1)",
+           "g = np.stack([lo - pts, hi - pts], axis=-1)",
+           (PM + "test_the_audit_sweep_leaves_the_box_mid_path_although_both_ends_are_inside",
+            PM + "test_a_controller_that_moves_the_tcp_swings_the_flange_instead")),
+]
+
+
+def _copy() -> Path:
+    """A fresh copy of what the tests need, in a temporary directory."""
+    d = Path(tempfile.mkdtemp(prefix="tmscal-mutant-"))
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
+    for name in ("tmscal", "tests"):
+        shutil.copytree(ROOT / name, d / name, ignore=ignore, symlinks=True)
+    shutil.copy2(ROOT / "pyproject.toml", d / "pyproject.toml")
+    return d
+
+
+def _env(copy: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(copy), "PYTHONDONTWRITEBYTECODE": "1"}
+
+
+def _imports_the_copy(copy: Path) -> bool:
+    out = subprocess.run([sys.executable, "-c", "import tmscal; print(tmscal.__file__)"],
+                         cwd=copy, env=_env(copy), capture_output=True, text=True)
+    return out.returncode == 0 and out.stdout.strip().startswith(str(copy))
+
+
+def _pytest(copy: Path, tests: tuple[str, ...]) -> tuple[int, str]:
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider",
+                           *tests], cwd=copy, env=_env(copy), capture_output=True, text=True,
+                          timeout=900)
+    tail = (proc.stdout.strip().splitlines() or ["(no output)"])[-1]
+    return proc.returncode, tail
+
+
+def run(mutants: list[Mutant], baseline: bool) -> bool:
+    ok = True
+    if baseline:
+        copy = _copy()
+        try:
+            if not _imports_the_copy(copy):
+                print("baseline: the copy's tmscal is not the one imported")
+                return False
+            tests = tuple(dict.fromkeys(t for m in mutants for t in m.tests))
+            code, tail = _pytest(copy, tests)
+            print(f"{'baseline':16s} {'passes' if code == 0 else 'FAILS'}  ({tail})")
+            ok = code == 0
+        finally:
+            shutil.rmtree(copy, ignore_errors=True)
+    for m in mutants:
+        copy = _copy()
+        try:
+            f = copy / m.path
+            text = f.read_text()
+            if text.count(m.old) != 1:
+                print(f"{m.name:16s} NOT APPLIED: the text to replace occurs "
+                      f"{text.count(m.old)} times in {m.path}")
+                ok = False
+                continue
+            f.write_text(text.replace(m.old, m.new))
+            if not _imports_the_copy(copy):
+                print(f"{m.name:16s} NOT RUN: the copy's tmscal is not the one imported")
+                ok = False
+                continue
+            t0 = time.monotonic()
+            code, tail = _pytest(copy, m.tests)
+            killed = code != 0
+            ok &= killed
+            print(f"{m.name:16s} {'killed' if killed else 'SURVIVED'} in "
+                  f"{time.monotonic() - t0:5.1f} s  {m.what}  ({tail})")
+        finally:
+            shutil.rmtree(copy, ignore_errors=True)
+    return ok
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", action="append", metavar="NAME", help="run only this mutant")
+    ap.add_argument("--list", action="store_true", help="list the mutants and exit")
+    ap.add_argument("--baseline", action="store_true",
+                    help="first check that the unmutated copy passes the tests")
+    args = ap.parse_args()
+    if args.list:
+        for m in MUTANTS:
+            print(f"{m.name:16s} {m.path}: {m.what}")
+        return 0
+    chosen = [m for m in MUTANTS if not args.only or m.name in args.only]
+    unknown = set(args.only or []) - {m.name for m in MUTANTS}
+    if unknown:
+        print(f"unknown mutant(s): {', '.join(sorted(unknown))}", file=sys.stderr)
+        return 2
+    return 0 if run(chosen, args.baseline) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
