@@ -38,6 +38,9 @@ def pytest_addoption(parser) -> None:
     group.addoption("--rig-no-start-mocks", action="store_true", default=False,
                     help="a config with a mock: section is served by mocks that are already "
                          "running (tmscal mock CONFIG); by default the suite starts them")
+    group.addoption("--rig-rate-tolerance", metavar="FRACTION", type=float, default=0.10,
+                    help="how far the measured tracker frame rate may be from "
+                         "tracker.frame_rate_hz, as a fraction (default 0.10: 10 %%)")
     group.addoption("--rig-frames", metavar="N", type=int, default=100,
                     help="distinct tracker frames read by the tool-visibility check "
                          "(default 100)")

@@ -101,7 +101,8 @@ def rig(request: pytest.FixtureRequest) -> Iterator[RigUnderTest]:
     cfg = load_config(path)
     start = cfg.mock is not None and not opt("--rig-no-start-mocks")
     fast = cfg.mock is not None and cfg.mock.clock == "fast"
-    settings = Settings(frames=opt("--rig-frames"), real_time=not fast)
+    settings = Settings(frames=opt("--rig-frames"), real_time=not fast,
+                        rate_tolerance=opt("--rig-rate-tolerance"))
     meta = {"host": platform.node(),
             "devices": (f"mocks started by the suite (clock: {cfg.mock.clock})" if start
                         else f"mocks already running (clock: {cfg.mock.clock})"
