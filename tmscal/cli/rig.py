@@ -115,8 +115,10 @@ class _StopFlag:
 @click.argument("config", type=INPUT_FILE)
 @click.option("--transport", type=click.Choice(["config", "pty", "tcp"]), default="config",
               show_default=True,
-              help="Tracker transport: config = TCP on the config's socket:// port (else a "
-                   "pty); pty = a new /dev/pts; tcp = an ephemeral loopback port.")
+              help="Tracker transport: config = TCP at the config's tracker address when it "
+                   "is a host and port (else a pty); pty = a new /dev/pts; tcp = an "
+                   "ephemeral loopback port. A tracker that speaks TCP only (igtl) is served "
+                   "on TCP.")
 @click.option("--json", "as_json", is_flag=True,
               help='Print the endpoints as one JSON object on the first line, e.g. '
                    '{"tracker": "/dev/pts/7", "robot": "127.0.0.2"}.')
@@ -407,8 +409,9 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
               help="Keep the session here (default: a temporary file).")
 @click.option("--transport", type=click.Choice(["tcp", "pty"]), default="tcp",
               show_default=True,
-              help="How the Polaris mock is reached: loopback TCP (socket://, as NDI's network "
-                   "trackers) or a pty (as a serial port).")
+              help="How the tracker mock is reached: loopback TCP (an NDI's socket://, an "
+                   "OpenIGTLink host:port) or a pty (an NDI as a serial port; a tracker that "
+                   "speaks TCP only stays on TCP).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the solve result (with the mock rig's truth) as one JSON object; "
                    "with --adaptive it adds robot_time_s (moving, settling, sampling, "
@@ -419,7 +422,7 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
          transport: str, as_json: bool, force: bool, adaptive: bool,
          **overrides: Any) -> None:
-    """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
+    """The whole job on the built-in mock rig: start the mock robot and tracker, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth.
 
     With --adaptive: the adaptive run (docs/adaptive.md), its robot time, the predicted

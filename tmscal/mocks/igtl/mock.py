@@ -9,6 +9,7 @@ import socket
 import threading
 import time
 from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
@@ -83,6 +84,9 @@ class IGTLTrackerMock(MockDevice):
     * ``send_invalid``: also send unseen tools, as the identity with their status
       (PlusServer's ``SendValidTransformsOnly="FALSE"``; its default sends valid ones only).
     """
+
+    #: OpenIGTLink runs over TCP: the mock rig serves it on TCP whatever transport is asked
+    TRANSPORTS: ClassVar[tuple[str, ...]] = ("tcp",)
 
     def __init__(self, rig: SimRig, tools: Mapping[str, str] | None = None, *,
                  host: str = "127.0.0.1", port: int = DEFAULT_PORT, clock: Clock = REAL_TIME,
