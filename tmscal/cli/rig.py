@@ -150,7 +150,8 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
 @main.command()
 @click.argument("config", type=INPUT_FILE)
 @click.option("--port", "port", default=None,
-              help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
+              help="Tracker address (overrides the config's): an NDI's /dev/ttyUSB0, pty or "
+                   "socket://host:port; an OpenIGTLink source's host:port.")
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many distinct frames (default: until Ctrl-C).")
 @click.option("--plain", is_flag=True,
@@ -177,10 +178,14 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
     try:
         ident = tr.identity()
         click.echo("tracker: " + ", ".join(f"{k} {v}" for k, v in ident.items() if v))
-        handles = getattr(tr, "handles", {})
+        handles = getattr(tr, "handles", {})  # an NDI's port handles
+        names = ident.get("tools") if isinstance(ident.get("tools"), dict) else {}
         for name in tr.tools:
             h = handles.get(name)
-            click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
+            if h is None and name in names:  # what the driver knows it by (a TRANSFORM name)
+                click.echo(f"  tool {name:<8} device {names[name]}")
+            else:
+                click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
         view = TrackView(sys.stdout, plain=plain)
         view.header()
         frames_in = tr.distinct_frames(frames, stall_s=5.0)
@@ -278,7 +283,9 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
               help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
 @click.option("--dry-run", is_flag=True,
               help="Print the plan's extent and estimated duration; move nothing.")
-@click.option("--tracker-port", default=None, help="Tracker port (overrides the config).")
+@click.option("--tracker-port", default=None,
+              help="Tracker address (overrides the config's): an NDI's device path or "
+                   "socket://host:port; an OpenIGTLink source's host:port.")
 @click.option("--robot-host", default=None, help="Robot address (overrides the config).")
 @adaptive_options
 @handle_errors
