@@ -30,7 +30,9 @@ __all__ = ["IGTLSettings"]
 @dataclass(frozen=True)
 class IGTLSettings(TrackerSettings):
     """Where the OpenIGTLink source is and how long to wait for it: ``host``, ``port``
-    (TCP), ``timeout_s`` (s), and ``tools`` (our tool name → TRANSFORM device name)."""
+    (TCP), ``timeout_s`` (s), and ``tools`` (our tool name → TRANSFORM device name). The
+    base class's ``kwargs()`` gives ``IGTLTracker`` these as they are (``make_tracker`` adds
+    ``frame_rate_hz`` and the options)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host", "port", "timeout_s")
     #: the options the driver accepts beside KEYS
@@ -91,11 +93,6 @@ class IGTLSettings(TrackerSettings):
             raise err(src, "tracker.port", "expected a TCP port 1…65535 (PlusServer's "
                       f"default {DEFAULT_PORT}), got {show(v)}")
         return v
-
-    def kwargs(self) -> dict[str, Any]:
-        """The ``IGTLTracker`` keyword arguments: ``tools``, ``host``, ``port``,
-        ``timeout_s`` (``make_tracker`` adds ``frame_rate_hz`` and the options)."""
-        return super().kwargs()
 
     def address(self) -> str:
         """``host:port`` (an IPv6 host in brackets)."""
