@@ -16,6 +16,7 @@ import numpy as np
 import yaml
 
 from tmscal.acquisition.progress import Progress
+from tmscal.config import load_config, settings_class
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, Truth, simulate, tms_rig_truth
 from tmscal.timing import Deadline
 
@@ -28,11 +29,24 @@ NOISE_FREE_MOCK = {"fiducial_sigma_mm": 0.0, "robot_rot_sigma_deg": 0.0,
                    "robot_trans_sigma_mm": 0.0}
 
 
+def portable_tools(data: dict[str, Any], base_dir: Path) -> None:
+    """Make ``data``'s ``tracker.tools`` load from any folder: each value as the tracker
+    driver reads it from ``base_dir`` (its settings' ``parse_tool``: an NDI's ROM file made
+    absolute, an OpenIGTLink TRANSFORM name kept). No tracker section: nothing to do."""
+    t = data.get("tracker")
+    if not t or not t.get("tools"):
+        return
+    cls = settings_class("tracker", t.get("driver", "ndi"))
+    t["tools"] = {k: cls.parse_tool(k, v, "<test>", base_dir, False)
+                  for k, v in t["tools"].items()}
+
+
 def write_config(tmp_path: Path, base: str, **changes: Any) -> Path:
-    """A copy of the shipped config ``configs/<base>`` in ``tmp_path``, ROM paths made
-    absolute, each keyword a section: a dict updates that section, anything else replaces it."""
+    """A copy of the shipped config ``configs/<base>`` in ``tmp_path``, tool values made
+    portable (``portable_tools``), each keyword a section: a dict updates that section,
+    anything else replaces it."""
     data = yaml.safe_load((CONFIGS / base).read_text())
-    data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
+    portable_tools(data, CONFIGS)
     for section, values in changes.items():
         if isinstance(values, dict) and isinstance(data.get(section), dict):
             data[section].update(values)
@@ -44,9 +58,16 @@ def write_config(tmp_path: Path, base: str, **changes: Any) -> Path:
 
 
 def point_config(cfg_path: Path, ep: dict[str, str], name: str = "run.yaml") -> Path:
-    """A copy of a config whose tracker port and robot address are the running mocks'."""
+    """A copy of a config whose tracker and robot addresses are the running mocks': the
+    tracker's through its driver's settings (``with_address``: an NDI's ``port``, an
+    OpenIGTLink source's ``host`` and ``port``)."""
     data = yaml.safe_load(cfg_path.read_text())
-    data["tracker"]["port"] = ep["tracker"]
+    tracker = load_config(cfg_path, check_files=False).tracker
+    if tracker is not None and "tracker" in ep:
+        moved = tracker.settings.with_address(ep["tracker"])
+        for key in moved.KEYS:
+            if getattr(moved, key) != getattr(tracker.settings, key):
+                data["tracker"][key] = getattr(moved, key)
     host, _, port = ep["robot"].partition(":")
     data["robot"]["host"] = host
     if port:

@@ -6,6 +6,7 @@ real drivers and client libraries). The real-time runs take a few seconds each."
 from __future__ import annotations
 
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +20,12 @@ from ..rigs import REPO
 pytestmark = pytest.mark.e2e
 
 
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
 def run_suite(cwd: Path, *args: str) -> tuple[int, str]:
     """``python -m pytest tests/acceptance ARGS`` from ``cwd``; (exit code, stdout+stderr)."""
     cmd = [sys.executable, "-m", "pytest", str(REPO / "tests" / "acceptance"), "-q", "-ra",
@@ -28,10 +35,11 @@ def run_suite(cwd: Path, *args: str) -> tuple[int, str]:
     return p.returncode, p.stdout + p.stderr
 
 
-def check_report(text: str, cfg: Path, robot: str, verdicts: dict[str, str]) -> None:
+def check_report(text: str, cfg: Path, robot: str, verdicts: dict[str, str],
+                 tracker: str = "ndi") -> None:
     """The report names the config, both identities and every check with its verdict."""
     assert f"config: {cfg}" in text and "date: " in text
-    assert f"driver: {robot}" in text and "driver: ndi" in text
+    assert f"driver: {robot}" in text and f"driver: {tracker}" in text
     for key, title in CHECK_NAMES.items():
         assert f"[{verdicts.get(key, 'PASS')}] {title}" in text, (key, text)
     assert "frame_rate_hz: " in text and "configured_rate_hz: 60.0" in text
@@ -56,14 +64,21 @@ def test_suite_passes_on_real_time_mock_rig(tmp_path, mock_config, base, robot):
     assert "rig acceptance report" in out and f"report written to {report}" in out
 
 
-def test_fast_clock_skips_only_the_stop_check(tmp_path, mock_config):
-    cfg = mock_config("mock-denso-polaris.yaml", robot={"port": 0})
+@pytest.mark.parametrize("base, robot, tracker", [
+    pytest.param("mock-denso-polaris.yaml", "denso", "ndi", id="denso"),
+    pytest.param("mock-ur-igtl.yaml", "ur", "igtl", id="ur-igtl"),
+])
+def test_fast_clock_skips_only_the_stop_check(tmp_path, mock_config, base, robot, tracker):
+    if tracker == "igtl":  # the UR on an address of its own, the OpenIGTLink mock on a free port
+        cfg = mock_config(base, robot={"host": "127.0.23.11"}, tracker={"port": _free_port()})
+    else:
+        cfg = mock_config(base, robot={"port": 0})
     report = tmp_path / "report.txt"
     rc, out = run_suite(tmp_path, "--rig", str(cfg), "--rig-report", str(report))
     assert rc == 0 and re.search(r"^4 passed, 1 skipped in ", out, re.M), out
     assert "the mock's fast clock completes a move at once" in out
     text = report.read_text()
-    check_report(text, cfg, "denso", {"stop": "SKIP"})
+    check_report(text, cfg, robot, {"stop": "SKIP"}, tracker)
     assert "rate_error: " not in text  # the fast clock's rate is reported, never judged
 
 

@@ -19,6 +19,8 @@ from tmscal.errors import ConfigError
 from tmscal.mocks.rig import start_mock_rig
 from tmscal.net import loopback_family
 
+from ..rigs import portable_tools
+
 pytestmark = pytest.mark.e2e
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -26,14 +28,13 @@ TMSCAL = Path(sys.executable).with_name("tmscal")
 
 
 def _config(tmp_path: Path, base: str, **changes: Any) -> Path:
-    """A copy of ``configs/<base>`` with ``changes`` ({"robot.host": …}) and absolute ROMs."""
+    """A copy of ``configs/<base>`` with ``changes`` ({"robot.host": …}) and its tool values
+    made portable (an NDI's ROM files absolute)."""
     data = yaml.safe_load((ROOT / "configs" / base).read_text())
     for key, value in changes.items():
         section, _, field = key.partition(".")
         data[section][field] = value
-    if data.get("tracker"):
-        data["tracker"]["tools"] = {k: str(ROOT / "configs" / v)
-                                    for k, v in data["tracker"]["tools"].items()}
+    portable_tools(data, ROOT / "configs")
     path = tmp_path / "rig.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
@@ -61,6 +62,8 @@ def test_other_addresses_are_refused(host: str) -> None:
     ("mock-ur-polaris.yaml", {"robot.host": "192.168.56.101"},
      "key 'robot.host' (192.168.56.101)"),
     ("mock-franka-polaris.yaml", {"robot.host": "0.0.0.0"}, "key 'robot.host' (0.0.0.0)"),
+    ("mock-ur-igtl.yaml", {"tracker.host": "0.0.0.0"}, "key 'tracker.host' (0.0.0.0:18945)"),
+    ("mock-ur-igtl.yaml", {"tracker.host": "::"}, "key 'tracker.host' ([::]:18945)"),
 ])
 def test_tmscal_mock_refuses_non_loopback_endpoints(tmp_path: Path, base: str,
                                                     changes: dict[str, str],
@@ -108,15 +111,34 @@ def _free_port() -> int:
                               "robot.host": "127.0.0.88"}),
     ("mock-franka-polaris.yaml", {"tracker.port": "socket://127.0.0.1:{}",
                                   "robot.host": "127.0.0.89"}),
+    ("mock-ur-igtl.yaml", {"tracker.host": "localhost", "tracker.port": "{}",
+                           "robot.host": "127.0.23.7"}),
 ])
 def test_started_servers_listen_on_loopback_only(tmp_path: Path, base: str,
                                                  changes: dict[str, Any]) -> None:
     filled: dict[str, Any] = {k: v.format(_free_port()) for k, v in changes.items()}
-    if "robot.port" in filled:
-        filled["robot.port"] = int(filled["robot.port"])
+    for key in ("robot.port", "tracker.port"):
+        if filled.get(key, "").isdigit():
+            filled[key] = int(filled[key])
     cfg = load_config(_config(tmp_path, base, **filled))
     with start_mock_rig(cfg) as mr:
         addrs = _bound(mr)
         assert len(addrs) >= 2
         assert all(ipaddress.ip_address(a).is_loopback for a in addrs), addrs
         assert set(mr.endpoints) == {"tracker", "robot"}
+
+
+@pytest.mark.parametrize("transport", ["tcp", "pty"])
+def test_a_tcp_only_tracker_mock_is_served_on_loopback_tcp_whatever_the_transport(
+        tmp_path: Path, transport: str) -> None:
+    """An OpenIGTLink tracker has no serial line: asked for a pty (or an ephemeral port) the
+    mock rig serves it on a loopback TCP port, and the driver's settings take the endpoint
+    back as its address (``with_address``, as ``--tracker-port`` does)."""
+    cfg = load_config(_config(tmp_path, "mock-ur-igtl.yaml", **{"robot.host": "127.0.23.8"}))
+    with start_mock_rig(cfg, tracker_transport=transport) as mr:
+        host, _, port = mr.endpoints["tracker"].rpartition(":")
+        assert ipaddress.ip_address(host).is_loopback and int(port) != cfg.tracker.settings.port
+        moved = cfg.tracker.settings.with_address(mr.endpoints["tracker"])
+        assert (moved.host, moved.port) == (host, int(port))
+        with socket.create_connection((host, int(port)), timeout=5):
+            pass

@@ -86,6 +86,7 @@ def tour_folder(tmp_path: Path) -> Path:
     _patch(ur, "host: 127.0.0.2", f"host: 127.91.{os.getpid() % 250}.2")
     _patch(ur, "socket://127.0.0.1:8765", f"socket://127.0.0.1:{_free_port()}")
     _patch(configs / "mock-denso-polaris.yaml", "port: 5007", f"port: {_free_port()}")
+    _patch(configs / "mock-ur-igtl.yaml", "host: 127.0.0.2", f"host: 127.93.{os.getpid() % 250}.2")
     ati = configs / "mock-ur-ati.yaml"
     _patch(ati, "host: 127.0.0.180", f"host: 127.92.{os.getpid() % 250}.180")
     _patch(ati, "socket://127.0.0.1:8768", f"socket://127.0.0.1:{_free_port()}")

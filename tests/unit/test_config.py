@@ -17,7 +17,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 @pytest.mark.parametrize("name", ["mock-ur-polaris.yaml", "mock-denso-polaris.yaml",
                                   "mock-polaris.yaml", "mock-ur.yaml", "mock-denso.yaml",
                                   "mock-ur-polaris-realtime.yaml",
-                                  "mock-franka-polaris.yaml", "mock-ur-ati.yaml"])
+                                  "mock-franka-polaris.yaml", "mock-ur-ati.yaml",
+                                  "mock-ur-igtl.yaml"])
 def test_shipped_mock_configs_load(name):
     cfg = load_config(CONFIGS / name)
     assert cfg.mock is not None
@@ -31,6 +32,23 @@ def test_shipped_mock_configs_load(name):
 def test_templates_name_the_rom_to_fix(name):
     with pytest.raises(ConfigError, match=r"key 'tracker.tools.marker': ROM file not found"):
         load_config(CONFIGS / name)
+
+
+def test_igtl_template_loads_and_marks_what_to_check():
+    """The OpenIGTLink template needs no file to load; its source address, transform names
+    and frame rate are marked CHECK, and it builds the driver it names (not opened)."""
+    from tmscal.acquisition.devices import make_tracker
+
+    path = CONFIGS / "ur-igtl.yaml"
+    cfg = load_config(path)
+    assert cfg.tracker.driver == "igtl" and set(cfg.tracker.tools) == {"marker", "probe"}
+    tracker_lines = path.read_text().split("\ntracker:\n")[1].split("\nplan:")[0]
+    for key in ("host:", "port:", "frame_rate_hz:", "marker:", "probe:"):
+        line = next(ln for ln in tracker_lines.splitlines() if ln.strip().startswith(key))
+        assert "CHECK" in line, line
+    t = make_tracker(cfg)
+    s = cfg.tracker.settings
+    assert (t.host, t.port, t.device_names) == (s.host, s.port, s.tools)
 
 
 #: a complete safety section (a config that drives a robot must set every limit)

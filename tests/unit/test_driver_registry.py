@@ -36,7 +36,7 @@ def test_registered_mock_loads(name):
 
 def test_names_by_kind():
     assert registry.driver_names("robot")[:2] == ["ur", "denso"]
-    assert "ndi" in registry.driver_names("tracker")
+    assert registry.driver_names("tracker") == ["ndi", "igtl"]
     with pytest.raises(ConfigError, match=r"unknown tracker driver 'ur'; known tracker drivers"):
         registry.get_spec("ur", "tracker")
 
@@ -119,7 +119,7 @@ def test_spec_is_checked():
 
 def test_unknown_driver_lists_the_known_ones():
     with pytest.raises(ConfigError, match=r"unknown driver 'kuka'; known drivers: ati, denso, "
-                                          r"franka, ndi, ur, ur_wrench"):
+                                          r"franka, igtl, ndi, ur, ur_wrench"):
         driver_class("kuka")
 
 

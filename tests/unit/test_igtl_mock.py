@@ -102,6 +102,23 @@ def test_real_time_stamps_are_utc_seconds() -> None:
     assert abs(t.timestamp - time.time()) < 60.0
 
 
+def test_a_late_real_time_sender_sends_the_frames_it_missed_each_with_its_own_stamp() -> None:
+    """The sender held up for 0.3 s (its lock taken, as by a busy host) sends the frames it
+    missed when it runs again, as PlusServer sends the frames since its last one: the stamps
+    stay one period apart across the hold, none missing."""
+    with served(clock=REAL_TIME, rate_hz=50.0) as m:
+        r = Reader(m.port)
+        first = r.transforms(10)
+        with m._lock:  # the sender cannot make a frame meanwhile
+            time.sleep(0.3)
+        rest = r.transforms(60)
+        r.close()
+    stamps = sorted({t.stamp for t in first + rest})
+    steps = np.diff([s / 2**32 for s in stamps])
+    assert len(stamps) >= 35
+    np.testing.assert_allclose(steps, 1 / 50.0, atol=1e-6)
+
+
 def test_fast_stamps_are_a_nominal_period_apart() -> None:
     with served(rate_hz=50.0) as m:
         r = Reader(m.port)

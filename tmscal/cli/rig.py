@@ -115,8 +115,10 @@ class _StopFlag:
 @click.argument("config", type=INPUT_FILE)
 @click.option("--transport", type=click.Choice(["config", "pty", "tcp"]), default="config",
               show_default=True,
-              help="Tracker transport: config = TCP on the config's socket:// port (else a "
-                   "pty); pty = a new /dev/pts; tcp = an ephemeral loopback port.")
+              help="Tracker transport: config = TCP at the config's tracker address when it "
+                   "is a host and port (else a pty); pty = a new /dev/pts; tcp = an "
+                   "ephemeral loopback port. A tracker that speaks TCP only (igtl) is served "
+                   "on TCP.")
 @click.option("--json", "as_json", is_flag=True,
               help='Print the endpoints as one JSON object on the first line, e.g. '
                    '{"tracker": "/dev/pts/7", "robot": "127.0.0.2"}.')
@@ -148,7 +150,8 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
 @main.command()
 @click.argument("config", type=INPUT_FILE)
 @click.option("--port", "port", default=None,
-              help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
+              help="Tracker address (overrides the config's): an NDI's /dev/ttyUSB0, pty or "
+                   "socket://host:port; an OpenIGTLink source's host:port.")
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many distinct frames (default: until Ctrl-C).")
 @click.option("--plain", is_flag=True,
@@ -175,10 +178,14 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
     try:
         ident = tr.identity()
         click.echo("tracker: " + ", ".join(f"{k} {v}" for k, v in ident.items() if v))
-        handles = getattr(tr, "handles", {})
+        handles = getattr(tr, "handles", {})  # an NDI's port handles
+        names = ident.get("tools") if isinstance(ident.get("tools"), dict) else {}
         for name in tr.tools:
             h = handles.get(name)
-            click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
+            if h is None and name in names:  # what the driver knows it by (a TRANSFORM name)
+                click.echo(f"  tool {name:<8} device {names[name]}")
+            else:
+                click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
         view = TrackView(sys.stdout, plain=plain)
         view.header()
         frames_in = tr.distinct_frames(frames, stall_s=5.0)
@@ -276,7 +283,9 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
               help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
 @click.option("--dry-run", is_flag=True,
               help="Print the plan's extent and estimated duration; move nothing.")
-@click.option("--tracker-port", default=None, help="Tracker port (overrides the config).")
+@click.option("--tracker-port", default=None,
+              help="Tracker address (overrides the config's): an NDI's device path or "
+                   "socket://host:port; an OpenIGTLink source's host:port.")
 @click.option("--robot-host", default=None, help="Robot address (overrides the config).")
 @adaptive_options
 @handle_errors
@@ -407,8 +416,9 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
               help="Keep the session here (default: a temporary file).")
 @click.option("--transport", type=click.Choice(["tcp", "pty"]), default="tcp",
               show_default=True,
-              help="How the Polaris mock is reached: loopback TCP (socket://, as NDI's network "
-                   "trackers) or a pty (as a serial port).")
+              help="How the tracker mock is reached: loopback TCP (an NDI's socket://, an "
+                   "OpenIGTLink host:port) or a pty (an NDI as a serial port; a tracker that "
+                   "speaks TCP only stays on TCP).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the solve result (with the mock rig's truth) as one JSON object; "
                    "with --adaptive it adds robot_time_s (moving, settling, sampling, "
@@ -419,7 +429,7 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
          transport: str, as_json: bool, force: bool, adaptive: bool,
          **overrides: Any) -> None:
-    """The whole job on the built-in mock rig: start the mock robot and Polaris, acquire
+    """The whole job on the built-in mock rig: start the mock robot and tracker, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth.
 
     With --adaptive: the adaptive run (docs/adaptive.md), its robot time, the predicted

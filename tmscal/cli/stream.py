@@ -95,7 +95,8 @@ def _check_host(host: str, allow_remote: bool) -> None:
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many tracker frames (default: until Ctrl-C).")
 @click.option("--tracker-port", default=None,
-              help="Tracker port (overrides the config): /dev/ttyUSB0, a pty, socket://…")
+              help="Tracker address (overrides the config's): an NDI's /dev/ttyUSB0, pty or "
+                   "socket://host:port; an OpenIGTLink source's host:port.")
 @handle_errors
 def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: bool,
            rate_hz: float | None, max_clients: int, frames: int | None,

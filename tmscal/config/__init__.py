@@ -4,8 +4,9 @@ was expected.
 A config describes one rig (see ``configs/*.yaml`` for commented examples)::
 
     robot:    {driver: ur|denso|franka, host, port, speed_mm_s, accel_mm_s2, options: {...}}
-    tracker:  {driver: ndi, tools: {marker: file.rom, probe: file.rom}, frame_rate_hz,
-               options: {...}, + the driver's keys (ndi: port, baud, reply, log_wire)}
+    tracker:  {driver: ndi|igtl, tools: {marker: ..., probe: ...}, frame_rate_hz,
+               options: {...}, + the driver's keys (ndi: port, baud, reply, log_wire, the
+               tools' ROM files; igtl: host, port, timeout_s, the tools' TRANSFORM names)}
     plan:     {kind: eq14|sphere, poses, radius_mm, rotation_deg, seed, start}
     sampling: {samples, settle_s, min_share, max_frames_factor, robot_reads, settle,
                still_window_s, still_tol_mm, min_samples, sem_mm}

@@ -90,8 +90,9 @@ def _arm(cfg: RigConfig) -> ArmPair | None:
 
 
 class MockRig:
-    """Running mock devices: ``endpoints`` ({"tracker": pty path or socket URL, "robot":
-    host or host:port, ...}), ``rig`` (the SimRig; its truth is ``rig.truth``), ``close()``."""
+    """Running mock devices: ``endpoints`` ({"tracker": pty path, socket URL or host:port,
+    "robot": host or host:port, ...}), ``rig`` (the SimRig; its truth is ``rig.truth``),
+    ``close()``."""
 
     def __init__(self, rig: SimRig) -> None:
         self.rig = rig
@@ -157,7 +158,9 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
 
     ``tracker_transport``: "pty" (a new /dev/pts), "tcp" (an ephemeral loopback port),
     or "config" (TCP at the tracker's address when it is a host and port, e.g. an NDI
-    tracker's ``socket://`` port; else a pty).
+    tracker's ``socket://`` port, or a ``host``/``port`` pair; else a pty).
+    A tracker mock that serves TCP only (its ``TRANSPORTS``) gets an ephemeral loopback port
+    where a pty was asked for.
     ``robot_host``/``robot_port`` override where the robot mock binds (loopback only).
 
     Every endpoint is checked before anything starts: a host that is not a loopback address
@@ -177,11 +180,7 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
                 # fast clock: the rig's time (the settling oscillation) is the tracker's
                 # virtual time, which advances as frames are requested
                 mr.rig.time_s = tm.tracker_time_s
-            if tracker_transport == "pty" or (tracker_transport == "config"
-                                              and tracker_url is None):
-                mr.endpoints["tracker"] = tm.start_pty()
-            else:
-                mr.endpoints["tracker"] = tm.start_tcp(*(tracker_url or ("127.0.0.1", 0)))
+            mr.endpoints["tracker"] = _start_tracker(tm, tracker_transport, tracker_url)
         if cfg.robot is not None:
             rm = _robot_mock(cfg, mr.rig, clock, robot_host, robot_port)
             mr.devices.append(rm)
@@ -192,6 +191,22 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
         mr.close()
         raise
     return mr
+
+
+def _start_tracker(tm: Any, transport: str, url: tuple[str, int] | None) -> str:
+    """Serve the tracker mock ``tm`` and return its endpoint: at the config's TCP address
+    ``url`` (transport "config"), else on a pty when asked for one ("pty", or "config" with a
+    device path) and the mock serves on one (its ``TRANSPORTS``), else on an ephemeral
+    loopback TCP port. A driver whose protocol runs over TCP only thus gets TCP whatever the
+    transport, and its settings take the ``host:port`` back (``with_address``)."""
+    if url is not None:
+        return str(tm.start_tcp(*url))
+    if transport in ("pty", "config") and "pty" in tm.TRANSPORTS:
+        return str(tm.start_pty())
+    if transport == "pty":
+        log.info("the %s serves TCP only: serving it on loopback TCP, not a pty",
+                 type(tm).__name__)
+    return str(tm.start_tcp("127.0.0.1", 0))
 
 
 def _ft_mock(cfg: RigConfig, mr: MockRig, clock: Clock) -> None:

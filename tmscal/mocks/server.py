@@ -14,7 +14,7 @@ import socket
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any
+from typing import Any, ClassVar
 
 from ..net import loopback_family, url_host
 
@@ -151,7 +151,14 @@ class TCPListener:
 class MockDevice(ABC):
     """The lifecycle every mock shares: ``start()`` serves and returns the endpoint string
     the matching driver connects to; ``close()`` stops serving (safe twice, and safe after a
-    failed start); ``with mock:`` starts and closes."""
+    failed start); ``with mock:`` starts and closes.
+
+    ``TRANSPORTS`` says what a tracker's mock can serve on, through ``start_pty()`` (a new
+    pty, as a serial line) and ``start_tcp(host, port)`` (loopback TCP): the mock rig
+    (``mocks.rig``) serves a tracker on a pty only when "pty" is listed, else on TCP."""
+
+    #: the transports the mock serves on: "tcp" (loopback), "pty" (a serial line)
+    TRANSPORTS: ClassVar[tuple[str, ...]] = ("tcp",)
 
     _started = False
 

@@ -9,6 +9,7 @@ import socket
 import threading
 import time
 from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
@@ -31,6 +32,9 @@ _POLL_S = 0.05
 #: how long a send to one client may block before the client is dropped (PlusServer:
 #: ``DefaultClientSendTimeoutSec`` 0.5 s)
 _SEND_TIMEOUT_S = 0.5
+#: the most frames sent at once by a sender that woke up late (PlusServer:
+#: ``MaxNumberOfIgtlMessagesToSend`` 100)
+_MAX_BURST = 100
 _GARBAGE = b"\xde\xad\xbe\xef not OpenIGTLink " * 4
 
 
@@ -84,6 +88,9 @@ class IGTLTrackerMock(MockDevice):
       (PlusServer's ``SendValidTransformsOnly="FALSE"``; its default sends valid ones only).
     """
 
+    #: OpenIGTLink runs over TCP: the mock rig serves it on TCP whatever transport is asked
+    TRANSPORTS: ClassVar[tuple[str, ...]] = ("tcp",)
+
     def __init__(self, rig: SimRig, tools: Mapping[str, str] | None = None, *,
                  host: str = "127.0.0.1", port: int = DEFAULT_PORT, clock: Clock = REAL_TIME,
                  volume: Volume | None = MeasurementVolume(),
@@ -124,7 +131,7 @@ class IGTLTrackerMock(MockDevice):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._served = 0  # frames generated (the fast clock's tracker time)
-        self._t0_utc = time.time()
+        self._t0_utc, self._t0_mono = time.time(), time.monotonic()
 
     # --- lifecycle ---------------------------------------------------------------------------
     def _start(self) -> str:
@@ -190,27 +197,46 @@ class IGTLTrackerMock(MockDevice):
     # --- streaming ---------------------------------------------------------------------------
     def _broadcast(self) -> None:
         """Generate frames at the clock's pace while any client is connected, and send each
-        to every client (PlusServer's data sender thread)."""
+        to every client (PlusServer's data sender thread). On the real-time clock frame k of a
+        stream is due, and stamped, at ``k / rate_hz`` s after the stream started (a tracker's
+        own clock); a sender that wakes up late sends the frames it missed at once, each with
+        its own stamp, at most ``_MAX_BURST`` (PlusServer sends the tracked frames since the
+        last one it sent, up to ``MaxNumberOfIgtlMessagesToSend``), so the stream keeps
+        ``rate_hz`` on a busy host. The fast clock's rate is a pace: a late frame is not made
+        up."""
         period = 1.0 / (self.fast_rate_hz if self.clock.fast else self.rate_hz)
         due = time.monotonic()
         while not self._stop.is_set():
             wait = due - time.monotonic()
             if wait > 0 and self._stop.wait(wait):
                 return
+            n = 1
+            if not self.clock.fast:
+                behind = int((time.monotonic() - due) / period)
+                if behind >= _MAX_BURST:  # the oldest are gone, as from a tracker's buffer
+                    due += (behind - _MAX_BURST + 1) * period
+                    behind = _MAX_BURST - 1
+                n += behind
             with self._lock:  # a frame counts only for the clients connected when it is made
                 clients = [c for c in self._clients if not c.closed]
-                frame = self._next_frame() if clients else None
-            if frame is None:
+                frames = ([self._next_frame(due + i * period) for i in range(n)]
+                          if clients else [])
+            if not frames:
                 self._stop.wait(_POLL_S)
                 due = time.monotonic()
                 continue
-            due = max(due + period, time.monotonic() - period)
+            due = (max(due + period, time.monotonic() - period) if self.clock.fast
+                   else due + n * period)
             for c in clients:
-                self._send_frame(c, frame)
+                for frame in frames:
+                    self._send_frame(c, frame)
 
-    def _next_frame(self) -> Frame:
+    def _next_frame(self, when: float) -> Frame:
+        """The next frame; on the real-time clock stamped as made at ``when`` (monotonic s),
+        as UTC. On the fast clock frames are stamped ``1 / rate_hz`` apart."""
         k = self._served
-        t = self._t0_utc + k / self.rate_hz if self.clock.fast else time.time()
+        t = (self._t0_utc + k / self.rate_hz if self.clock.fast
+             else self._t0_utc + (when - self._t0_mono))
         sec, frac = wire.timestamp_parts(t)
         frame = self._frames.frame(k, (sec << 32) | frac)
         self._served += 1

@@ -11,6 +11,7 @@ import socket
 import threading
 import tty
 from collections.abc import Callable
+from typing import ClassVar
 
 from ..server import MockDevice, TCPListener
 from .firmware import PolarisFirmware
@@ -101,6 +102,8 @@ class PolarisMock(PolarisFirmware, MockDevice):
     call returns the running one). ``endpoints``: {"pty": path, "tcp": url} of those
     serving. ``close()`` stops both, safe twice.
     """
+
+    TRANSPORTS: ClassVar[tuple[str, ...]] = ("pty", "tcp")
 
     _pty: _PtyServer | None = None
     _tcp: TCPListener | None = None
