@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 
 from tmscal.calib.selfcal.model import forward
@@ -146,9 +147,11 @@ def test_session_joints_in_the_order_asked_or_the_first_pose_without(tmp_path) -
 
 
 def test_calib_check_on_recomputed_poses(tmp_path) -> None:
-    """A calibration solved with --kinematics checks well on the same poses recomputed the
-    same way (hold-out errors at the noise level) and badly on the controller's poses (the
-    hidden errors are back in A)."""
+    """A calibration solved with --kinematics KIN carries that arm (docs/kinematics.md,
+    "Using it"): checked on the same session it recomputes the robot poses from the joints
+    by itself (hold-out errors at the noise level), the same file without its arm section
+    checks badly on the controller's poses (the hidden errors are back in A), and --calib
+    with --kinematics is refused (the file says which arm applies)."""
     s = tmp_path / "s.jsonl"
     rig = _session(s, "paper", n=30)
     kin = tmp_path / "kin.yaml"
@@ -156,9 +159,16 @@ def test_calib_check_on_recomputed_poses(tmp_path) -> None:
     cal = tmp_path / "calib.yaml"
     code, out = _solve(str(s), "--kinematics", str(kin), "-o", str(cal))
     assert code == 0, out
-    code, with_kin = _solve(str(s), "--calib", str(cal), "--kinematics", str(kin), "--json")
-    assert code == 0, with_kin
-    code, without = _solve(str(s), "--calib", str(cal), "--json")
+    code, with_arm = _solve(str(s), "--calib", str(cal), "--json")
+    assert code == 0, with_arm
+    doc = yaml.safe_load(cal.read_text())
+    assert doc["arm"]["source"] == str(kin) and doc["arm"]["nominal"] == "ur5e"
+    del doc["arm"]
+    bare = tmp_path / "bare.yaml"
+    bare.write_text(yaml.safe_dump(doc))
+    code, without = _solve(str(s), "--calib", str(bare), "--json")
     assert code == 0, without
-    e_t = [json.loads(o)["errors"]["e_t_mm"] for o in (with_kin, without)]
+    e_t = [json.loads(o)["errors"]["e_t_mm"] for o in (with_arm, without)]
     assert e_t[0] < 0.5 and e_t[1] > 10 * e_t[0], e_t
+    code, both = _solve(str(s), "--calib", str(cal), "--kinematics", str(kin))
+    assert code == 2 and "carries its own identified arm" in both
