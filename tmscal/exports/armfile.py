@@ -140,9 +140,11 @@ def parse_arm_section(v: Any, src: str) -> ArmCalibration:
         raise CalibrationError(str(e)) from None
     kf = parse_kinematics(v["kinematics"], f"{src}, arm.kinematics")
     arm = kf.model
-    if (arm.n_joints, arm.convention) != (nominal.n_joints, nominal.convention):
-        raise bad(src, "arm.kinematics", f"{arm.n_joints} joints, {arm.convention} DH; the "
-                  f"nominal {nominal.name} has {nominal.n_joints}, {nominal.convention}")
+    if (arm.name, arm.n_joints, arm.convention) != \
+            (nominal.name, nominal.n_joints, nominal.convention):
+        raise bad(src, "arm.kinematics", f"the {arm.name} arm ({arm.n_joints} joints, "
+                  f"{arm.convention} DH) is not a {nominal.name} ({nominal.n_joints}, "
+                  f"{nominal.convention}), the nominal arm named in arm.nominal")
     M = check_matrix(v["controller_frame"], src, "arm.controller_frame", rigid=True)
     seeds = _seeds(v.get("seeds_deg"), src, nominal.n_joints)
     ident = v["kinematics"].get("identification")
