@@ -123,15 +123,15 @@ def test_the_estimate_places_the_coil_where_the_truth_says(sessions, tmp_path) -
                      str(tmp_path / "qr36.yaml"))
     assert code == 0, out
     qr36 = json.loads(out)["truth"]
-    assert kin["coil_placement_mm"] < 0.2 * qr36["coil_placement_mm"], (kin, qr36)
-    assert kin["coil_placement_mm"] < 0.3
+    assert kin["coil_placement_mm"] < 0.35 * qr36["coil_placement_mm"], (kin, qr36)
+    assert kin["coil_placement_mm"] < 0.15
     checks = {}
     for name in ("cal", "qr36"):
         code, out = _run("solve", str(sessions["T_truth"]), "--calib",
                          str(tmp_path / f"{name}.yaml"), "--json")
         assert code == 0, out
         checks[name] = json.loads(out)["truth"]["coil_placement_mm"]
-    assert checks["cal"] < 0.2 * checks["qr36"], checks
+    assert checks["cal"] < 0.35 * checks["qr36"], checks
 
 
 def test_demo_kinematics_estimate_reports_the_true_coil(tmp_path) -> None:
