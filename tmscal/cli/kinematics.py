@@ -37,6 +37,6 @@ def demo_report(session: Any, acquired: Any, as_json: bool) -> None:
     click.echo(format_result(result))
     ours, theirs = coil(result), coil(nominal)
     if ours is not None and theirs is not None:
-        click.echo(f"\ntrue coil placement (mean over the session's {result.n_test} probe "
-                   f"poses as targets): {ours:.4f} mm with the estimated arm's flange "
-                   f"commands; {theirs:.4f} mm with QR36 on the controller's nominal poses")
+        click.echo(f"\ntrue coil placement, mean over the session's {result.n_test} probe "
+                   f"poses as targets:\n  {ours:.4f} mm with the estimated arm's flange "
+                   f"commands\n  {theirs:.4f} mm with QR36 on the controller's nominal poses")

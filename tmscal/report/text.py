@@ -113,8 +113,8 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
             lines.append(_row(f"  {lv}", float(c["e_t_mm"]), float(c["se_mm"])) + mark)
     tol = arm.get("tolerances") or {}
     if tol:
-        lines += _wrap(f"prior: each length deviation N(0, {tol.get('length_mm'):g} mm²), each "
-                       f"angle N(0, {tol.get('angle_deg'):g}°²); combinations below in "
+        lines += _wrap(f"prior: each length deviation N(0, ({tol.get('length_mm'):g} mm)²), "
+                       f"each angle N(0, ({tol.get('angle_deg'):g}°)²); combinations below in "
                        "tolerance units (deviation / tolerance), ± their posterior σ")
     for key, head in (("identified", "identified (σ_data ≥ 1: the poses know it better than "
                                      "the tolerance)"),
