@@ -257,7 +257,8 @@ def read_calibration(path: str | Path) -> CalibrationFile:
 def load_calibration(path: str | Path) -> Calibration:
     """The :class:`tmscal.calib.Calibration` stored in a calibration file: the YAML ``tmscal
     solve -o`` writes or the JSON of ``tmscal export --format json`` (X, Y, Z, raw matrices,
-    method, poses, applied, uncertainty, distortion, covariance where present; 4×4 mm; see
+    method, poses, applied, uncertainty, distortion, covariance and the identified arm
+    (``Calibration.arm``) where present; 4×4 mm; see
     :func:`read_calibration`). Raises CalibrationError naming the file and the key for a file
     that is not a calibration."""
     return read_calibration(path).calibration

@@ -1,7 +1,10 @@
 """The kinematics file (KIN.yaml): a robot arm's calibrated kinematic parameters, as
 ``tmscal selfcal identify -o`` writes them, read back into a
 :class:`tmscal.calib.selfcal.model.ArmModel` (``tmscal solve --kinematics`` recomputes the
-robot poses A from recorded joint values with it; docs/selfcal.md).
+robot poses A from recorded joint values with it; docs/selfcal.md). The same format holds the
+arm a calibration identified from the tracker (``tmscal solve --kinematics estimate``, the
+``arm.kinematics`` of a calibration file, :mod:`.armfile`; docs/kinematics.md): an arm without
+a wrist sensor, read back into an :class:`tmscal.calib.kinematics.Arm`.
 
 The file, YAML (or JSON), units at the edge as docs/conventions.md says (mm, degrees, N, N·m,
 kg); the model inside the code is in mm and radians::
@@ -12,13 +15,14 @@ kg); the model inside the code is in mm and radians::
     convention: standard           # optional: standard (default) or modified DH
     joints:                        # standard DH, T_i = Rz(θ_i + θ0) Tz(d) Tx(a) Rx(α)
       - {theta_offset_deg: 0.0, d_mm: 162.5, a_mm: 0.0, alpha_deg: 90.0,
-         min_deg: -360.0, max_deg: 360.0}
+         min_deg: -360.0, max_deg: 360.0}   # + beta_deg: the Hayati angle (optional: 0)
       - …
     base: [[…], [ …], [ …], [0, 0, 0, 1]]   # world ← base, 4×4 mm (world z up)
     flange: [[…], …]                         # optional: last DH frame ← flange (default I)
     flange_from_sensor: [[…], …]             # the F/T sensor's mounting, 4×4 mm
     tool: {mass_kg: 1.2, cog_mm: [0, 0, 60]} # the tool's centre of gravity, sensor frame
     bias: {force_n: [0, 0, 0], torque_nm: [0, 0, 0]}   # the sensor's offsets
+                                   # (these three together, or none: an arm without a sensor)
     identification: {…}            # optional: what was identified, σ, residuals (below)
     session: {path: …, sha256: …}  # optional: the session it was identified on
 
@@ -31,7 +35,9 @@ the flange at the last DH frame.
 ``estimate``, ``std`` and ``nominal`` (one number per name, in the units of
 :meth:`ArmModel.vector`: rad, mm, N, N·m, mm), ``covariance`` (their covariance, same
 units), ``not_identified`` ({name: reason}), ``iterations``, ``converged``,
-``residual_rms`` ({channel: N or N·m}), ``configurations``.
+``residual_rms`` ({channel: N or N·m}), ``configurations``. An arm identified from the
+tracker has ``method: tracker`` and the estimate's report there (:mod:`.armfile`); its
+``parameters`` may name the Hayati angles ``beta_i`` too.
 
 Every problem is one :class:`~tmscal.errors.CalibrationError` naming the file and the
 dotted key (``"kin.yaml: key 'joints[2].d_mm': …"``); the document is bounded as the rig
