@@ -157,6 +157,10 @@ def test_files_without_an_arm_still_load(solved, tmp_path) -> None:
     (lambda a: a["kinematics"].update(bias={"force_n": [0, 0, 0], "torque_nm": [0, 0, 0]}),
      "flange_from_sensor"),
     (lambda a: a.update(nominal="ur5e"), "arm.kinematics"),
+    (lambda a: a["kinematics"]["identification"]["tolerances"].update(length_mm="x"),
+     "arm.kinematics.identification.tolerances.length_mm"),
+    (lambda a: a["kinematics"]["identification"].update(cv={"full": {"e_t_mm": -1}}),
+     "arm.kinematics.identification.cv.full.e_t_mm"),
 ])
 def test_a_bad_arm_section_names_its_key(solved, change, key) -> None:
     _, s, _, cal, res = solved

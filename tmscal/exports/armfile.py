@@ -99,6 +99,19 @@ def _combos(v: Any, src: str, key: str) -> list[dict[str, Any]]:
     return [dict(c) for c in v]
 
 
+def _numbers(v: Any, keys: tuple[str, ...], src: str, key: str) -> None:
+    """``v`` is None or a mapping whose ``keys`` are finite numbers ≥ 0."""
+    if v is None:
+        return
+    if not isinstance(v, dict):
+        raise bad(src, key, f"expected a mapping with {', '.join(keys)}")
+    for k in keys:
+        x = v.get(k)
+        if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x) \
+                or x < 0:
+            raise bad(src, f"{key}.{k}", "expected a finite number ≥ 0")
+
+
 def _report(ident: Any, src: str) -> dict[str, Any]:
     """The ArmCalibration.report of an estimated arm's identification (already checked by
     the kinematics reader: names, and estimate/nominal/std of one number per name)."""
@@ -112,9 +125,16 @@ def _report(ident: Any, src: str) -> dict[str, Any]:
         rep[k] = _combos(ident.get(k), src, f"{key}.{k}")
     if not isinstance(rep.get("level"), str):
         raise bad(src, f"{key}.level", "expected the level (none, offsets or full)")
-    for k in ("tolerances", "cv"):
-        if rep.get(k) is not None and not isinstance(rep[k], dict):
-            raise bad(src, f"{key}.{k}", "expected a mapping")
+    if not isinstance(rep.get("reason", ""), str):
+        raise bad(src, f"{key}.reason", "expected a text")
+    _numbers(rep.get("tolerances"), ("length_mm", "angle_deg"), src, f"{key}.tolerances")
+    cv = rep.get("cv")
+    if cv is not None:
+        if not isinstance(cv, dict):
+            raise bad(src, f"{key}.cv", "expected a mapping of level to held-out errors")
+        for lv, c in cv.items():
+            if c is not None:
+                _numbers(c, ("e_t_mm", "se_mm", "folds"), src, f"{key}.cv.{lv}")
     rep["deviations"] = {n: float(e - o) for n, e, o in zip(names, est, nom, strict=True)}
     rep["sd"] = {n: float(s) for n, s in zip(names, sd, strict=True)}
     return rep
