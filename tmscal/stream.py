@@ -8,7 +8,8 @@ TRANSFORM message per name in :data:`TRANSFORMS` (docs/streaming.md):
 ==================== ============================================================
 device name          transform (4×4, mm; Slicer's "FromToTo" naming: maps From into To)
 ==================== ============================================================
-CoilToRobotBase      robot base ← coil centre (probe): Z · C
+CoilToRobotBase      robot base ← coil centre (probe): the coil pose the robot's
+                     controller must be told, A_cmd · Y (Z · C without an arm)
 CoilToTracker        tracker ← coil centre (probe): C, as the tracker measures it
 MarkerToTracker      tracker ← coil marker: B, as the tracker measures it
 TrackerToRobotBase   robot base ← tracker: Z of the calibration
@@ -17,9 +18,18 @@ TrackerToRobotBase   robot base ← tracker: Z of the calibration
 Z is the calibration's orthonormal base_from_tracker (the ``Z`` of ``tmscal solve -o``). With a
 tracker distortion in the calibration (the ``ml`` solver), CoilToRobotBase is Z applied to the
 undistorted probe pose, as the robot would place the coil (``Calibration.placement``); the
-tracker poses are sent as measured. A body that is missing or (partly) out of the tracker's
-volume in a frame is not sent for that frame, as PlusServer does by default: the client keeps
-the last pose it received (docs/streaming.md says how to notice).
+tracker poses are sent as measured. With an identified arm in the calibration (``tmscal solve
+--kinematics``, docs/kinematics.md), CoilToRobotBase is A_cmd · Y with A_cmd =
+``Calibration.flange_command(C)``: the flange pose the controller's own (nominal) kinematics
+must be told so that the real arm puts the coil where the probe is (inverse kinematics on
+the identified arm, forward on the nominal one), times the coil's Y, i.e. the coil pose to
+send to a controller whose tool frame is Y. Without an arm that is Z · C (the placement
+rule; exactly for orthonormal matrices), which is what is sent. A probe pose the identified
+arm cannot reach gets no CoilToRobotBase in that frame.
+
+A body that is missing or (partly) out of the tracker's volume in a frame is not sent for that
+frame, as PlusServer does by default: the client keeps the last pose it received
+(docs/streaming.md says how to notice).
 
 OpenIGTLink carries float32: about 1e-4 mm at 1,500 mm from the tracker.
 
@@ -47,6 +57,7 @@ import pyigtl
 
 from .calib import Calibration
 from .drivers.base import Tracker, TrackerFrame
+from .errors import CalibrationError
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +89,8 @@ _POLL_S = 0.05
 
 #: device name → what it is (frames and formula); the order in which each frame is sent
 TRANSFORMS: dict[str, str] = {
-    "CoilToRobotBase": "robot base ← coil centre (probe): Z · C",
+    "CoilToRobotBase": "robot base ← coil centre (probe): the coil pose to command, A_cmd · Y "
+                       "(Z · C without an identified arm)",
     "CoilToTracker": "tracker ← coil centre (probe): C as the tracker measures it",
     "MarkerToTracker": "tracker ← coil marker: B as the tracker measures it",
     "TrackerToRobotBase": "robot base ← tracker: Z of the calibration",
@@ -90,19 +102,35 @@ def frame_transforms(frame: TrackerFrame, cal: Calibration, marker: str = "marke
     """The transforms of :data:`TRANSFORMS` for one tracker frame (4×4 float64, mm), by
     device name. TrackerToRobotBase is always there; MarkerToTracker only when the ``marker``
     tool is usable in the frame (present, inside the volume), CoilToTracker and
-    CoilToRobotBase only when the ``probe`` tool is."""
+    CoilToRobotBase only when the ``probe`` tool is (and, with an identified arm in the
+    calibration, CoilToRobotBase only when that arm can reach the probe pose)."""
     Z = np.asarray(cal.Z, dtype=float)
     out: dict[str, np.ndarray] = {}
     C = _usable(frame, probe)
     if C is not None:
-        targets, _, _ = cal.placement(C[None])  # undistorted when the calibration says so
-        out["CoilToRobotBase"] = Z @ targets[0]
+        coil = _coil_command(cal, C)
+        if coil is not None:
+            out["CoilToRobotBase"] = coil
         out["CoilToTracker"] = C
     B = _usable(frame, marker)
     if B is not None:
         out["MarkerToTracker"] = B
     out["TrackerToRobotBase"] = Z
     return out
+
+
+def _coil_command(cal: Calibration, C: np.ndarray) -> np.ndarray | None:
+    """robot base ← coil (4×4 mm) to command for the probe pose C: Z · C' (C' undistorted
+    when the calibration says so) without an identified arm; with one, A_cmd · Y
+    (``Calibration.flange_command``), None when the arm cannot reach it."""
+    if cal.arm is None or cal.Y is None:
+        targets, _, _ = cal.placement(C[None])  # undistorted when the calibration says so
+        return np.asarray(cal.Z, dtype=float) @ targets[0]
+    try:
+        return cal.flange_command(C[None])[0] @ np.asarray(cal.Y, dtype=float)
+    except CalibrationError as e:
+        log.debug("no CoilToRobotBase in this frame: %s", e)
+        return None
 
 
 def _usable(frame: TrackerFrame, tool: str) -> np.ndarray | None:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 
 from tmscal.calib.selfcal.model import forward
@@ -19,7 +20,7 @@ from tmscal.errors import CalibrationError, SessionError
 from tmscal.exports.kinfile import kinematics_yaml
 from tmscal.geometry import make_pose, pose_mean, rot_x
 from tmscal.poses import eq14_poses
-from tmscal.session import PoseRecord, make_header, read_session, write_session
+from tmscal.session import PoseRecord, Session, make_header, read_session, write_session
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, make_arm, tms_rig_truth
 from tmscal.solving.solve import with_kinematics
 
@@ -48,11 +49,16 @@ def _solve(*args: str) -> tuple[int, str]:
     return r.exit_code, r.output
 
 
+@pytest.mark.skipif(not hasattr(Session, "truth_arm"),
+                    reason="the coil placement against a truth whose arm has errors runs that "
+                           "arm's controller: needs the header's truth.arm (Session.truth_arm)")
 @pytest.mark.parametrize("errors", ["paper", "all"])
 def test_true_kinematics_lower_the_truth_errors(tmp_path, errors) -> None:
     """With the true arm's parameters, A is the flange the tracker saw (up to the robot's
     0.05 mm / 0.05° repeatability), so the coil placement and X, Y errors against the truth
-    fall well below the uncorrected solve's, which carries the arm's millimetres."""
+    fall well below the uncorrected solve's, which carries the arm's millimetres: the
+    calibration carries the arm and commands the flange through it, and the truth's
+    controller (its nominal inverse kinematics, the true arm moving) executes the commands."""
     s = tmp_path / "s.jsonl"
     rig = _session(s, errors)
     kin = tmp_path / "kin.yaml"
@@ -146,9 +152,11 @@ def test_session_joints_in_the_order_asked_or_the_first_pose_without(tmp_path) -
 
 
 def test_calib_check_on_recomputed_poses(tmp_path) -> None:
-    """A calibration solved with --kinematics checks well on the same poses recomputed the
-    same way (hold-out errors at the noise level) and badly on the controller's poses (the
-    hidden errors are back in A)."""
+    """A calibration solved with --kinematics KIN carries that arm (docs/kinematics.md,
+    "Using it"): checked on the same session it recomputes the robot poses from the joints
+    by itself (hold-out errors at the noise level), the same file without its arm section
+    checks badly on the controller's poses (the hidden errors are back in A), and --calib
+    with --kinematics is refused (the file says which arm applies)."""
     s = tmp_path / "s.jsonl"
     rig = _session(s, "paper", n=30)
     kin = tmp_path / "kin.yaml"
@@ -156,9 +164,16 @@ def test_calib_check_on_recomputed_poses(tmp_path) -> None:
     cal = tmp_path / "calib.yaml"
     code, out = _solve(str(s), "--kinematics", str(kin), "-o", str(cal))
     assert code == 0, out
-    code, with_kin = _solve(str(s), "--calib", str(cal), "--kinematics", str(kin), "--json")
-    assert code == 0, with_kin
-    code, without = _solve(str(s), "--calib", str(cal), "--json")
+    code, with_arm = _solve(str(s), "--calib", str(cal), "--json")
+    assert code == 0, with_arm
+    doc = yaml.safe_load(cal.read_text())
+    assert doc["arm"]["source"] == str(kin) and doc["arm"]["nominal"] == "ur5e"
+    del doc["arm"]
+    bare = tmp_path / "bare.yaml"
+    bare.write_text(yaml.safe_dump(doc))
+    code, without = _solve(str(s), "--calib", str(bare), "--json")
     assert code == 0, without
-    e_t = [json.loads(o)["errors"]["e_t_mm"] for o in (with_kin, without)]
+    e_t = [json.loads(o)["errors"]["e_t_mm"] for o in (with_arm, without)]
     assert e_t[0] < 0.5 and e_t[1] > 10 * e_t[0], e_t
+    code, both = _solve(str(s), "--calib", str(cal), "--kinematics", str(kin))
+    assert code == 2 and "carries its own identified arm" in both

@@ -35,7 +35,7 @@ from ..geometry import angle_between, invert
 from ..motion import trapezoid_duration
 from .calibration import Calibration
 from .methods import solve
-from .metrics import coil_placement_errors
+from .metrics import placement_errors
 from .ml import ml_solve
 from .ml_model import (
     Problem,
@@ -455,13 +455,14 @@ def candidate_cost_s(current: np.ndarray, pool: np.ndarray, speed_mm_s: float,
 
 
 def true_coil_error(cal: Calibration, truth_Y: np.ndarray, truth_Z: np.ndarray,
-                    region_flange_poses: np.ndarray) -> float:
+                    region_flange_poses: np.ndarray, reached: Any = None) -> float:
     """Mean coil-placement error (mm) of ``cal`` over the region against a known truth: the
     targets are where the coil is when the flange is at each region pose, C_i = Z⁻¹ P_i Y
-    (true Y, Z; tracker_from_probe, no tracker distortion), placed with
-    ``Calibration.placement`` and measured by ``calib.metrics.coil_placement_errors``."""
+    (true Y, Z; tracker_from_probe, no tracker distortion), commanded with
+    ``Calibration.flange_command`` and measured by ``calib.metrics.placement_errors``;
+    ``reached`` (a callable, e.g. the controller of a simulated rig's true arm) says where
+    the flange really goes for the commands (default: exactly there)."""
     P = np.asarray(region_flange_poses, dtype=float).reshape(-1, 4, 4)
     Yt, Zt = np.asarray(truth_Y, dtype=float), np.asarray(truth_Z, dtype=float)
     C = invert(Zt)[None] @ P @ Yt[None]
-    cmd, Y, Z = cal.placement(C)
-    return float(coil_placement_errors(C, Y, Z, Yt, Zt, C_cmd=cmd).mean())
+    return float(placement_errors(cal.flange_command(C), C, Yt, Zt, reached).mean())

@@ -17,7 +17,8 @@ import numpy as np
 from ..errors import CalibrationError
 from .methods import solve
 
-__all__ = ["convergence", "summarize", "threshold_n", "cross_validate"]
+__all__ = ["convergence", "summarize", "threshold_n", "cross_validate", "per_pose_options",
+           "PER_POSE_OPTIONS"]
 
 
 def convergence(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
@@ -100,6 +101,22 @@ def threshold_n(values: Sequence[float], ns: Sequence[int], threshold: float) ->
     return int(ns[0] if len(idx) == 0 else ns[idx[-1] + 1])
 
 
+#: method options with one entry per pose, cut with the poses when they are split
+PER_POSE_OPTIONS = ("joints", "spreads")
+
+
+def per_pose_options(options: dict[str, Any], keep: Any, n: int) -> dict[str, Any]:
+    """``options`` with its per-pose entries (:data:`PER_POSE_OPTIONS`, when they have one
+    entry for each of the ``n`` poses) cut to the poses ``keep`` (indices or a slice)."""
+    out = dict(options)
+    idx = np.arange(n)[keep]
+    for k in PER_POSE_OPTIONS:
+        v = out.get(k)
+        if v is not None and len(v) == n:
+            out[k] = np.asarray(v)[idx] if k == "joints" else [v[i] for i in idx]
+    return out
+
+
 def cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: str = "qr36",
                    k: int = 5, orthonormal: bool = False, **options: Any) -> dict[str, Any]:
     """k-fold cross-validated hold-out errors (docs/methods.md). The poses, in their order,
@@ -108,6 +125,11 @@ def cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: s
     poses, and the errors of Wang et al. (2018) computed on the held-out fold. Contiguous
     folds also expose drift during a session (a block of late poses is tested against a
     calibration that did not see them).
+
+    Options with one entry per pose (``joints`` (n, dof) rad, ``spreads``) are cut with the
+    poses; a calibration that carries an identified arm (``Calibration.arm``: ``ml`` with
+    ``kinematics="estimate"``) is tested on the robot poses it computes from the held-out
+    poses' joints (``Calibration.robot_poses``, docs/kinematics.md).
 
     Returns {"folds": k, "split": "contiguous", "fold_sizes": [..], "per_fold": [{flat
     errors}], "mean": {flat errors}, "sd": {flat errors}}; flat keys as in :func:`convergence`
@@ -131,12 +153,14 @@ def cross_validate(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, method: s
         Ct = None if C is None else C[test]
         try:
             cal = solve(A[train], B[train], None if C is None else C[train], method=method,
-                        orthonormal=orthonormal, **options)
+                        orthonormal=orthonormal, **per_pose_options(options, train, n))
         except CalibrationError as e:
             raise CalibrationError(f"cross-validation fold {j + 1} of {k} (poses "
                                    f"{test[0]}–{test[-1]} held out): {e}; use --in-sample or "
                                    "--train") from None
-        rows.append(_flatten(cal.errors(A[test], B[test], Ct)))
+        q = options.get("joints")
+        At = cal.robot_poses(A[test], None if q is None else np.asarray(q)[test])
+        rows.append(_flatten(cal.errors(At, B[test], Ct)))
     keys = list(rows[0])
     vals = {key: np.array([r[key] for r in rows]) for key in keys}
     return {"folds": k, "split": "contiguous", "fold_sizes": [len(f) for f in folds],

@@ -156,6 +156,7 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     from ..poses import PlanSpec
     from ..report.text import format_prediction, format_result, format_robot_time
     from ..session import read_session
+    from ..solving.kinematics import truth_arm_of, truth_controller
     from ..solving.solve import solve_session
     from .app import _print_json
 
@@ -173,7 +174,9 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     region = PlanSpec.from_header(session.header).with_n(res.settings.region).poses()
     true_mm = None
     if res.prediction is not None and truth.Y is not None:
-        true_mm = true_coil_error(res.prediction.calibration, truth.Y, truth.Z, region)
+        arm = truth_arm_of(session)  # the rig's arm: its controller executes the commands
+        true_mm = true_coil_error(res.prediction.calibration, truth.Y, truth.Z, region,
+                                  None if arm is None else truth_controller(arm, None))
     _, result = solve_session(session, "qr36")
     if as_json:
         out = result.to_json()

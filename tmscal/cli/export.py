@@ -67,6 +67,11 @@ def _notes(fmt: str, cf: object, out_suffix: str) -> list[str]:
     if cal.distortion and fmt in ("plus", "easy-handeye", "invesalius"):
         out.append("the calibration found a tracker distortion; this format holds rigid "
                    "matrices only and does not correct it (the itk and json exports do)")
+    if cal.arm is not None and fmt != "json":
+        out.append(f"the calibration carries an identified {cal.arm.nominal.name} arm "
+                   f"(docs/kinematics.md); {fmt} has no place for it, and X, Y, Z hold with "
+                   "that arm's robot poses, not the controller's nominal ones: command the "
+                   "robot through tmscal (stream's CoilToRobotBase) or read the json export")
     if fmt == "invesalius":
         from ..exports.invesalius import tcp_offset_mm
         x, y, z = tcp_offset_mm(cf)

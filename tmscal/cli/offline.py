@@ -123,6 +123,21 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
 
 # --- solve ----------------------------------------------------------------------------------
 
+class _Kinematics(click.ParamType):
+    """``estimate`` (the keyword), or an existing kinematics file (``./estimate`` for a file
+    of that name)."""
+
+    name = "estimate|file"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> str | Path:
+        if isinstance(value, Path) or value == "estimate":
+            return value
+        return INPUT_FILE.convert(value, param, ctx)
+
+
+_KINEMATICS = _Kinematics()
+
+
 class _MethodChoice(click.Choice):
     """The registered calibration methods (``tmscal.calib.METHODS``), read when used so that
     every method registered is offered."""
@@ -205,51 +220,98 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "the stored ones, coil placement against the truth when the session has "
                    "one, the calibration's provenance. No fitting; the daily check before a "
                    "TMS session.")
-@click.option("--kinematics", "kin_file", type=INPUT_FILE, default=None, metavar="KIN",
-              help="Recompute every robot pose A from the joint angles recorded in the "
-                   "session with the arm's calibrated kinematics (a file of tmscal selfcal "
-                   "identify -o) instead of taking the controller's reported pose: the "
-                   "robot's kinematic error no longer reaches X, Y, Z (docs/selfcal.md). "
-                   "Every pose used needs joint angles.")
+@click.option("--kinematics", "kinematics", type=_KINEMATICS, default=None,
+              metavar="estimate|KIN",
+              help="'estimate': estimate the arm's kinematic deviations together with X, Y, "
+                   "Z (maximum likelihood from the tracker poses and the recorded joints; "
+                   "the calibration then carries the identified arm, and -o stores it; "
+                   "docs/kinematics.md). KIN: recompute every robot pose A from the recorded "
+                   "joints with the arm's calibrated kinematics (a file of tmscal selfcal "
+                   "identify -o) instead of taking the controller's reported pose "
+                   "(docs/selfcal.md). Every pose used needs joint angles.")
+@click.option("--arm", default=None, metavar="NAME",
+              help="With --kinematics estimate: the nominal arm (ur5e, vs060, fr3, …; "
+                   "docs/kinematics.md lists them). Default: the arm the session recorded "
+                   "(its robot driver's devices.robot.arm).")
+@click.option("--level", type=click.Choice(["auto", "none", "offsets", "full"]),
+              default="auto", show_default=True,
+              help="With --kinematics estimate: which deviations to estimate: none (X, Y, Z "
+                   "on the nominal arm), offsets (the joints' zero offsets), full (every DH "
+                   "parameter, and β on parallel axes); auto chooses by held-out error.")
+@click.option("--tolerance-length", type=_Finite(0, lo_open=True), default=None,
+              metavar="MM",
+              help="With --kinematics estimate: the prior σ of each length deviation, mm "
+                   "(default 0.5; docs/kinematics.md).")
+@click.option("--tolerance-angle", type=_Finite(0, lo_open=True), default=None,
+              metavar="DEG",
+              help="With --kinematics estimate: the prior σ of each angle deviation, degrees "
+                   "(default 0.1).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_pose: int | None,
           train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
           output: Path | None, plot: Path | None, calib_file: Path | None,
-          kin_file: Path | None, force: bool, strict: bool) -> None:
+          kinematics: str | Path | None, arm: str | None, level: str,
+          tolerance_length: float | None, tolerance_angle: float | None, force: bool,
+          strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
     docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses.
-    With --calib, check a stored calibration on the session instead (no fitting). With
-    --kinematics, the robot poses come from the recorded joints and the arm's calibrated
-    kinematics."""
-    from ..report.text import calibration_yaml, format_result, plot_residuals
+    With --calib, check a stored calibration on the session instead (no fitting; a
+    calibration with an identified arm recomputes the session's robot poses from its joints
+    first). With --kinematics estimate, the arm's kinematics are estimated with X, Y, Z: the
+    output adds the level chosen and why (the held-out table), the identified combinations
+    of deviations with their σ, the weakly identified and what could not be identified and
+    why (docs/kinematics.md, "Using it"). With --kinematics KIN, the robot poses come from the
+    recorded joints and the arm's calibrated kinematics."""
+    from ..exports.calibfile import calibration_yaml
+    from ..report.text import format_result, plot_residuals
     from ..session import sha256_of
     from ..solving.solve import pose_residuals, solve_session
 
+    estimate = kinematics == "estimate"
+    kin_file = kinematics if isinstance(kinematics, Path) else None
+    if not estimate:
+        for opt, given in (("--arm", arm is not None), ("--level", level != "auto"),
+                           ("--tolerance-length", tolerance_length is not None),
+                           ("--tolerance-angle", tolerance_angle is not None)):
+            if given:
+                raise click.BadParameter("only with --kinematics estimate", param_hint=opt)
     if calib_file is not None:
+        if estimate:
+            raise click.BadParameter("--kinematics estimate solves; --calib only checks a "
+                                     "stored calibration (which applies its own arm)",
+                                     param_hint="--calib")
         _check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
                       fitting=bool(options or handheld_pose is not None or train is not None
                                    or in_sample or orthonormal or method.lower() != "qr36"),
                       kin_file=kin_file)
         return
+    if estimate:
+        src = click.get_current_context().get_parameter_source("method")
+        if src == click.core.ParameterSource.DEFAULT:
+            method = "ml"
     opts = _parse_options(options)
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)
-    session = _with_kinematics(_read_session(session_file, strict), kin_file)
+    session = _read_session(session_file, strict)
     if handheld_pose is not None:
         opts.update(_handheld_options(session, handheld_pose))
     cal, res = solve_session(session, method=method.lower(), train=train,
                              orthonormal=orthonormal, folds=folds, in_sample=in_sample,
-                             options=opts)
+                             options=opts, arm=arm, level=level,
+                             tolerances=_tolerances(tolerance_length, tolerance_angle,
+                                                    estimate),
+                             **_kinematics_args(kinematics))
     if output is not None:
         from ..exports.calibfile import provenance
         _write_atomic(output, calibration_yaml(
             res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
-            parameters=cal.extra.get("parameters"), provenance=provenance(session.header)),
-            force)
+            parameters=cal.extra.get("parameters"), provenance=provenance(session.header),
+            arm=cal.arm), force)
     if plot is not None:
         with _output_files({"plot": plot}, force) as tmp:
-            _plot(plot_residuals, pose_residuals(session, cal), res.n_solve, tmp["plot"],
+            _plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
+                  tmp["plot"],
                   f"{session_file.name}: {res.method.upper()} per-pose errors",
                   outliers=res.outliers)
     pred = _adaptive_prediction(session)
@@ -265,6 +327,26 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
         for f in (output, plot):
             if f is not None:
                 click.echo(f"\nwrote {f}")
+
+
+def _tolerances(length_mm: float | None, angle_deg: float | None, estimate: bool) -> Any:
+    """The prior of ``--kinematics estimate`` (``Tolerances``; its defaults for what is not
+    given), or None."""
+    if not estimate or (length_mm is None and angle_deg is None):
+        return None
+    from ..calib.kinematics.estimate import Tolerances
+
+    d = Tolerances()
+    return Tolerances(length_mm=d.length_mm if length_mm is None else length_mm,
+                      angle_deg=d.angle_deg if angle_deg is None else angle_deg)
+
+
+def _kinematics_args(kinematics: str | Path | None) -> dict[str, Any]:
+    """solve_session's ``kinematics`` (and ``kinematics_source``) for --kinematics."""
+    if kinematics is None or kinematics == "estimate":
+        return {"kinematics": kinematics}
+    from ..exports.kinfile import load_arm
+    return {"kinematics": load_arm(kinematics), "kinematics_source": str(kinematics)}
 
 
 def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
@@ -310,6 +392,10 @@ def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: b
             raise click.BadParameter(f"{opt} solves or writes a calibration; --calib only "
                                      "checks a stored one (leave it out)", param_hint="--calib")
     cf = read_calibration(calib_file)
+    if kin_file is not None and cf.calibration.arm is not None:
+        raise click.BadParameter(f"{calib_file} carries its own identified arm, with which "
+                                 "the robot poses are recomputed; leave --kinematics out",
+                                 param_hint="--kinematics")
     session = _with_kinematics(_read_session(session_file, strict), kin_file)
     res = check_calibration(session, cf, sha256_of(session_file))
     if as_json:

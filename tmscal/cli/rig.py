@@ -29,9 +29,9 @@ from .app import (
 
 # --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
 
-def _default_demo_config() -> Path:
-    """The built-in mock rig, ``mock-ur-polaris.yaml`` of the package data
-    (``tmscal/data/configs/``), loaded through importlib.resources so it works from an
+def _default_demo_config(name: str = "mock-ur-polaris.yaml") -> Path:
+    """A built-in mock rig, ``name`` of the package data (``tmscal/data/configs/``; default
+    ``mock-ur-polaris.yaml``), loaded through importlib.resources so it works from an
     installed wheel. Its ROM paths are relative to it: the whole folder must be on disk."""
     import atexit
     import contextlib
@@ -42,7 +42,7 @@ def _default_demo_config() -> Path:
         stack = contextlib.ExitStack()
         atexit.register(stack.close)
         configs = stack.enter_context(as_file(configs))
-    return Path(configs) / "mock-ur-polaris.yaml"
+    return Path(configs) / name
 
 
 def _matrix_text(T: np.ndarray) -> str:
@@ -407,7 +407,14 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 @main.command()
 @click.option("--config", "config", type=INPUT_FILE, default=None,
               help="Mock rig config (default: the packaged mock-ur-polaris.yaml, in "
-                   "tmscal/data/configs/).")
+                   "tmscal/data/configs/; with --kinematics estimate, "
+                   "mock-ur-polaris-kin.yaml, a UR5e with realistic arm errors).")
+@click.option("--kinematics", type=click.Choice(["estimate"]), default=None,
+              help="Estimate the arm's kinematics with X, Y, Z (ml; docs/kinematics.md, "
+                   "\"Using it\") instead of solving QR36 on the controller's poses, and "
+                   "report the coil placement against the mock rig's truth through the flange "
+                   "commands of the identified arm (true_coil_mm), beside QR36's on the "
+                   "nominal arm. Not with --adaptive.")
 @click.option("--poses", type=click.IntRange(3, 100000), default=None,
               help="Override plan.poses.")
 @click.option("--samples", type=click.IntRange(1), default=None,
@@ -422,18 +429,21 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 @click.option("--json", "as_json", is_flag=True,
               help="Print the solve result (with the mock rig's truth) as one JSON object; "
                    "with --adaptive it adds robot_time_s (moving, settling, sampling, "
-                   "total), poses_used, predicted_coil_mm, true_coil_mm and stop_reason.")
+                   "total), poses_used, predicted_coil_mm, true_coil_mm and stop_reason; with "
+                   "--kinematics estimate it adds the arm, true_coil_mm and nominal "
+                   "{method, true_coil_mm}.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @adaptive_options
 @handle_errors
-def demo(config: Path | None, poses: int | None, samples: int | None, output: Path | None,
-         transport: str, as_json: bool, force: bool, adaptive: bool,
+def demo(config: Path | None, kinematics: str | None, poses: int | None, samples: int | None,
+         output: Path | None, transport: str, as_json: bool, force: bool, adaptive: bool,
          **overrides: Any) -> None:
     """The whole job on the built-in mock rig: start the mock robot and tracker, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth.
 
     With --adaptive: the adaptive run (docs/adaptive.md), its robot time, the predicted
-    coil-placement error and the true one against the mock rig's truth over the same region."""
+    coil-placement error and the true one against the mock rig's truth over the same region.
+    With --kinematics estimate: ml with the arm's kinematics (docs/kinematics.md)."""
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
     from ..mocks.rig import build_sim_rig, spawn_mock_rig
@@ -442,7 +452,12 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
     from ..solving.solve import solve_session
     from .live import AcquireProgress, stderr_to_log
 
-    cfg_path = config or _default_demo_config()
+    if kinematics is not None and adaptive:
+        raise click.BadParameter("--kinematics estimate solves the session once it is "
+                                 "acquired; it does not go with --adaptive",
+                                 param_hint="--kinematics")
+    cfg_path = config or _default_demo_config(
+        "mock-ur-polaris-kin.yaml" if kinematics is not None else "mock-ur-polaris.yaml")
     check_adaptive_flags(adaptive, False, Path(), poses, overrides)
     check_outputs({"--output": output}, [cfg_path], force)
     if output is not None and force:
@@ -471,6 +486,10 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
                                   robot_port=port, progress=bar)
         session = read_session(output)
         session.header["truth"] = truth.as_dict()
+        if kinematics is not None:
+            from .kinematics import demo_report
+            demo_report(session, res, as_json)
+            return
         _, result = solve_session(session, "qr36")
         if as_json:
             _print_json(result.to_json())

@@ -1,8 +1,11 @@
 """Calibration files and exports for the lab's other software (docs/exports.md).
 
-:mod:`.calibfile` reads the calibration file ``tmscal solve -o`` writes (and the ``json``
-export) back into a :class:`tmscal.calib.Calibration` (``load_calibration``; calib itself does
-no I/O); one module per export format:
+:mod:`.calibfile` writes the calibration file of ``tmscal solve -o`` and reads it (and the
+``json`` export) back into a :class:`tmscal.calib.Calibration` (``load_calibration``; calib
+itself does no I/O), its identified arm in the ``arm`` section of :mod:`.armfile`;
+:mod:`.kinfile` is the kinematics file (the arm's kinematics, of ``selfcal identify`` and of
+that section), :mod:`.textfile` what the readers share; :mod:`.check` the daily check; one
+module per export format:
 :mod:`.itk` (3D Slicer / ITK ``.tfm``), :mod:`.plus` (PLUS toolkit device set),
 :mod:`.easy_handeye` (ROS easy_handeye / easy_handeye2), :mod:`.invesalius` (InVesalius'
 robot co-registration) and :mod:`.jsonfmt` (everything, for scripts).

@@ -1,5 +1,7 @@
-"""The calibration file: read what ``tmscal solve -o`` (YAML) and ``tmscal export --format
-json`` write back into the :class:`tmscal.calib.Calibration` that ``solve`` returned.
+"""The calibration file: what ``tmscal solve -o`` writes (YAML, :func:`calibration_yaml`), and
+what it and ``tmscal export --format json`` wrote read back into the
+:class:`tmscal.calib.Calibration` that ``solve`` returned, its identified arm
+(``Calibration.arm``, the ``arm`` section of :mod:`.armfile`) included.
 
 Frames and units (docs/conventions.md): X = flange_from_marker, Y = flange_from_probe,
 Z = base_from_tracker (Z_probe: QR24's separate Z of the probe), 4×4, mm; the orthonormal
@@ -14,11 +16,10 @@ aliases expanded, 4 MB).
 
 from __future__ import annotations
 
-import json
-import math
+import datetime as _dt
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -26,17 +27,22 @@ import yaml
 from ..calib import Applied, Calibration
 from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
-from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
+from ..geometry import orthonormalize
+from .armfile import arm_section, parse_arm_section
+from .textfile import MAX_BYTES, read_text_file
+from .textfile import bad as _bad
+from .textfile import check_matrix as _matrix
+from .textfile import load_text as _load_text
 
-__all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "read_calibration",
-           "parse_calibration", "load_calibration", "provenance"]
+if TYPE_CHECKING:
+    from ..calib.kinematics.calibrated import ArmCalibration
+    from ..solving.solve import SolveResult
+
+__all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "calibration_yaml",
+           "read_calibration", "parse_calibration", "load_calibration", "provenance"]
 
 FORMAT = "tmscal-calibration"
 VERSION = 1
-MAX_BYTES = 4_000_000
-#: the solver's general (raw) matrices may be affine; this bounds them to something a
-#: calibration can be (|entries of the 3×3 block| ≤ 10, a non-singular block)
-_RAW_LIMIT = 10.0
 _MATRICES = ("X", "Y", "Z", "Z_probe")
 
 
@@ -60,35 +66,6 @@ class CalibrationFile:
         """When the file was written (ISO 8601, UTC), if recorded."""
         c = self.doc.get("created")
         return str(c) if c is not None else None
-
-
-def _bad(src: str, key: str, msg: str) -> CalibrationError:
-    return CalibrationError(f"{src}: key '{key}': {msg}")
-
-
-def _matrix(v: Any, src: str, key: str, rigid: bool) -> np.ndarray:
-    """A 4×4 matrix (mm) from nested lists: finite numbers, last row 0 0 0 1; ``rigid``: an
-    orthonormal rotation (det +1); otherwise a non-singular, bounded 3×3 block."""
-    if not isinstance(v, list) or len(v) != 4 or not all(
-            isinstance(r, list) and len(r) == 4 for r in v):
-        raise _bad(src, key, "expected a 4×4 matrix (four rows of four numbers)")
-    for i, r in enumerate(v):
-        for j, x in enumerate(r):
-            if isinstance(x, bool) or not isinstance(x, int | float):
-                raise _bad(src, f"{key}[{i}][{j}]", f"{x!r:.40} is not a number")
-            if not math.isfinite(x):
-                raise _bad(src, f"{key}[{i}][{j}]", f"{x!r} is not a finite number")
-    M = np.array(v, dtype=float)
-    try:
-        check_pose(M, "matrix", rigid=rigid, tol=RIGID_TOL_DEFAULT)
-    except ValueError as e:
-        raise _bad(src, key, str(e).removeprefix("matrix: ").replace("pose 0 ", "")) from None
-    if not rigid:
-        R = M[:3, :3]
-        if np.abs(R).max() > _RAW_LIMIT or abs(np.linalg.det(R)) < 1e-6:
-            raise _bad(src, key, "the 3×3 block is singular or implausibly large for a "
-                       "calibration")
-    return M
 
 
 def _number_matrix(v: Any, src: str, key: str, shape: tuple[int, ...] | None) -> np.ndarray:
@@ -145,6 +122,54 @@ def _uncertainty(u: Any, src: str) -> dict[str, Any] | None:
             out[k] = dict(v, covariance=_number_matrix(v["covariance"], src,
                                                        f"uncertainty.{k}.covariance", (3, 3)))
     return out
+
+
+def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
+                     covariance: Any = None, parameters: list[str] | None = None,
+                     provenance: dict[str, Any] | None = None,
+                     arm: ArmCalibration | None = None) -> str:
+    """The calibration YAML (docs/conventions.md, docs/exports.md): X, Y, Z orthonormal (and
+    QR24's Z_probe), raw matrices, method, poses used, the errors (cross-validated by default,
+    with their SD over folds), the outlier poses, the session's SHA-256; a statistical
+    solver's parameter ``covariance`` with the ``parameters`` it is ordered by; the
+    ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices); the
+    identified ``arm`` (``Calibration.arm``: the ``arm`` section of :mod:`.armfile`, in the
+    kinematics format). Units mm. :func:`load_calibration` reads it back."""
+    j = res.to_json()
+    doc = {
+        "format": "tmscal-calibration",
+        "version": 1,
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "units": {"length": "mm", "angles": "deg"},
+        "frames": {"X": "flange_from_marker", "Y": "flange_from_probe",
+                   "Z": "base_from_tracker"},
+        "method": j["method"],
+        "applied": j["applied"],
+        "session": {"path": session_path, "sha256": session_sha256},
+        "poses": {"solve": j["n_solve"], "test": j["n_test"],
+                  "errors_on": j["errors_on"]},
+        "cross_validation": j["cv"],
+        "errors_sd": j["errors_sd"],
+        "outlier_poses": [o["index"] for o in j["outliers"]],
+        "X": j["X"], "Y": j["Y"], "Z": j["Z"],
+        **({"Z_probe": j["Z_probe"]} if "Z_probe" in j else {}),
+        "raw": j["raw"],
+        "errors": j["errors"],
+    }
+    if res.truth is not None:
+        doc["truth_errors"] = res.truth
+    for k in ("uncertainty", "distortion", "options"):
+        if k in j:
+            doc[k] = j[k]
+    if covariance is not None:
+        doc["covariance"] = np.asarray(covariance, dtype=float).tolist()
+        if parameters is not None:
+            doc["parameters"] = [str(p) for p in parameters]
+    if provenance is not None:
+        doc["provenance"] = provenance
+    if arm is not None:
+        doc["arm"] = arm_section(arm)
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
 
 
 def _header(doc: Any, src: str) -> tuple[str, Applied, int]:
@@ -212,45 +237,9 @@ def parse_calibration(doc: Any, src: str = "<calibration>") -> Calibration:
             raise _bad(src, "parameters", f"{len(params)} names for a "
                        f"{len(cal.covariance)}×{len(cal.covariance)} covariance")
         cal.extra["parameters"] = list(params)
+    if doc.get("arm") is not None:
+        cal.arm = parse_arm_section(doc["arm"], src)
     return cal
-
-
-def _load_text(text: str, src: str) -> Any:
-    """The document of a YAML or JSON file (JSON when it starts with '{')."""
-    if text.lstrip().startswith("{"):
-        def no_constant(c: str) -> None:
-            raise ValueError(f"{c} is not a finite number")
-        try:
-            return json.loads(text, parse_constant=no_constant)
-        except (ValueError, RecursionError) as e:
-            raise CalibrationError(f"{src}: invalid JSON ({str(e)[:120]})") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f", line {mark.line + 1}" if mark is not None else ""
-        raise CalibrationError(f"{src}{where}: invalid YAML "
-                               f"({getattr(e, 'problem', None) or e})") from None
-    except RecursionError:
-        raise CalibrationError(f"{src}: invalid YAML (nested too deeply)") from None
-    except (ValueError, OverflowError, TypeError) as e:
-        raise CalibrationError(f"{src}: invalid YAML ({str(e)[:120]})") from None
-
-
-def read_text_file(p: Path, what: str) -> str:
-    """The UTF-8 text of regular file ``p`` of at most ``MAX_BYTES``; CalibrationError naming
-    the file otherwise (``what`` it should have been, e.g. "calibration file")."""
-    src = str(p)
-    try:
-        if not p.is_file():
-            raise CalibrationError(f"{src}: not a regular file")
-        if p.stat().st_size > MAX_BYTES:
-            raise CalibrationError(f"{src}: larger than {MAX_BYTES:,} bytes; not a {what}")
-        return p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise CalibrationError(f"{src}: cannot read ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise CalibrationError(f"{src}: not a UTF-8 text file") from None
 
 
 def read_calibration(path: str | Path) -> CalibrationFile:
@@ -268,7 +257,8 @@ def read_calibration(path: str | Path) -> CalibrationFile:
 def load_calibration(path: str | Path) -> Calibration:
     """The :class:`tmscal.calib.Calibration` stored in a calibration file: the YAML ``tmscal
     solve -o`` writes or the JSON of ``tmscal export --format json`` (X, Y, Z, raw matrices,
-    method, poses, applied, uncertainty, distortion, covariance where present; 4×4 mm; see
+    method, poses, applied, uncertainty, distortion, covariance and the identified arm
+    (``Calibration.arm``) where present; 4×4 mm; see
     :func:`read_calibration`). Raises CalibrationError naming the file and the key for a file
     that is not a calibration."""
     return read_calibration(path).calibration

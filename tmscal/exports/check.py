@@ -5,7 +5,10 @@ Every usable pose of the session is a hold-out pose for the stored X, Y, Z: the 
 Wang et al. (2018) (docs/methods.md) as ``Calibration.errors`` computes them, the per-pose
 errors with the outlier rule of ``tmscal solve``, the coil placement error against the truth
 when the session has one (simulated sessions), and the calibration's provenance beside the
-errors it was stored with. Units mm and degrees.
+errors it was stored with. A calibration that carries an identified arm (docs/kinematics.md,
+"Using it") recomputes the session's robot poses from its joints with that arm before
+anything is evaluated, and says how far the controller's frame is from the one it was
+calibrated in. Units mm and degrees.
 """
 
 from __future__ import annotations
@@ -13,14 +16,24 @@ from __future__ import annotations
 import textwrap
 from typing import Any
 
+import numpy as np
+
+from ..calib.kinematics.calibrated import controller_frame
 from ..errors import CalibrationError
 from ..escape import visible
+from ..geometry import rotation_angle
 from ..session import Session
+from ..solving.kinematics import applied_arrays
 from ..solving.outliers import find_outliers
 from ..solving.solve import pose_residuals, truth_errors_of
 from .calibfile import CalibrationFile
 
-__all__ = ["check_calibration", "format_check"]
+__all__ = ["check_calibration", "format_check", "FRAME_MOVED_MM", "FRAME_MOVED_DEG"]
+
+#: the controller's frame on the checked session this far from the calibration's is reported
+#: as moved (mm, deg): a tenth of what ``controller_frame`` tolerates within one session
+FRAME_MOVED_MM = 0.1
+FRAME_MOVED_DEG = 0.01
 
 
 def _errors(err: dict[str, Any]) -> dict[str, Any]:
@@ -43,17 +56,31 @@ def check_calibration(session: Session, cf: CalibrationFile,
     that wrote it), "session"
     (path, SHA-256, poses used, skipped), "same_session" (True when the SHA-256s match: then
     the errors are in-sample, not a check), "errors" (e_t_mm, theta_t_deg, per body trans_mm
-    and rot_deg, e_z/θ_z for QR24), "outliers", "truth" (None without one). Raises
-    CalibrationError when the session has no usable pose or lacks the marker."""
+    and rot_deg, e_z/θ_z for QR24), "outliers", "truth" (None without one), and "arm" (None
+    without an identified arm): {"nominal", "source", "frame_change_mm", "frame_change_deg":
+    how far the controller's frame found on this session (``controller_frame``) is from the
+    stored one}. Raises CalibrationError when the session has no usable pose or lacks the
+    marker, and, for a calibration with an arm, when a pose has no joints or the recorded
+    poses are not that arm's nominal kinematics."""
     cal = cf.calibration
     if "marker" not in session.bodies:
         raise CalibrationError(f"{session.path}: the session has no marker poses (bodies: "
                                f"{', '.join(session.bodies) or 'none'})")
     with_probe = cal.Y is not None and "probe" in session.bodies
-    A, B, C, _ = session.arrays(need_probe=with_probe)
+    A, B, C, _, q = applied_arrays(session, cal, need_probe=with_probe)
     if len(A) == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
     C = C if with_probe else None
+    arm = None
+    if cal.arm is not None and q is not None:
+        M = controller_frame(cal.arm.nominal, session.arrays(need_probe=with_probe)[0], q,
+                             str(session.path or "session"))
+        D = np.linalg.inv(cal.arm.controller_frame) @ M
+        arm = {"nominal": cal.arm.nominal.name,
+               "source": "estimated" if "deviations" in cal.arm.report else
+               str(cal.arm.report.get("source", "given")),
+               "frame_change_mm": float(np.linalg.norm(D[:3, 3])),
+               "frame_change_deg": float(np.degrees(rotation_angle(D[None])[0]))}
     stored = cf.session
     return {
         "calibration": {"file": str(cf.path), "method": cal.method, "n_poses": cal.n_poses,
@@ -67,7 +94,8 @@ def check_calibration(session: Session, cf: CalibrationFile,
         "same_session": bool(session_sha256 and stored.get("sha256") == session_sha256),
         "errors": _errors(cal.errors(A, B, C)),
         "outliers": find_outliers(pose_residuals(session, cal)),
-        "truth": truth_errors_of(session, cf.calibration, C),
+        "truth": truth_errors_of(session, cf.calibration, C, q),
+        "arm": arm,
     }
 
 
@@ -91,6 +119,15 @@ def format_check(res: dict[str, Any]) -> str:
                     + f", {c['applied']} matrices applied"),
             f"  this session: {s['n_poses']} usable poses ({', '.join(s['bodies'])})"
             + (f", {s['n_skipped']} skipped at acquisition" if s["n_skipped"] else "")]
+    arm = res.get("arm")
+    if arm:
+        head.append(visible(f"  robot poses recomputed from this session's joints with the "
+                            f"calibration's identified {arm['nominal']} arm ({arm['source']}); "
+                            f"the controller's frame is {arm['frame_change_mm']:.3f} mm, "
+                            f"{arm['frame_change_deg']:.3f}° from the calibration's"))
+        if arm["frame_change_mm"] > FRAME_MOVED_MM or arm["frame_change_deg"] > FRAME_MOVED_DEG:
+            head.append("  WARNING: the controller's frame has moved since the calibration "
+                        "(a new work coordinate system or base mounting?): recalibrate")
     if res["same_session"]:
         head.append("  WARNING: this is the session the calibration was solved on: the "
                     "errors below are in-sample, not a check")

@@ -1,7 +1,10 @@
 """The kinematics file (KIN.yaml): a robot arm's calibrated kinematic parameters, as
 ``tmscal selfcal identify -o`` writes them, read back into a
 :class:`tmscal.calib.selfcal.model.ArmModel` (``tmscal solve --kinematics`` recomputes the
-robot poses A from recorded joint values with it; docs/selfcal.md).
+robot poses A from recorded joint values with it; docs/selfcal.md). The same format holds the
+arm a calibration identified from the tracker (``tmscal solve --kinematics estimate``, the
+``arm.kinematics`` of a calibration file, :mod:`.armfile`; docs/kinematics.md): an arm without
+a wrist sensor, read back into an :class:`tmscal.calib.kinematics.Arm`.
 
 The file, YAML (or JSON), units at the edge as docs/conventions.md says (mm, degrees, N, N·m,
 kg); the model inside the code is in mm and radians::
@@ -12,13 +15,14 @@ kg); the model inside the code is in mm and radians::
     convention: standard           # optional: standard (default) or modified DH
     joints:                        # standard DH, T_i = Rz(θ_i + θ0) Tz(d) Tx(a) Rx(α)
       - {theta_offset_deg: 0.0, d_mm: 162.5, a_mm: 0.0, alpha_deg: 90.0,
-         min_deg: -360.0, max_deg: 360.0}
+         min_deg: -360.0, max_deg: 360.0}   # + beta_deg: the Hayati angle (optional: 0)
       - …
     base: [[…], [ …], [ …], [0, 0, 0, 1]]   # world ← base, 4×4 mm (world z up)
     flange: [[…], …]                         # optional: last DH frame ← flange (default I)
     flange_from_sensor: [[…], …]             # the F/T sensor's mounting, 4×4 mm
     tool: {mass_kg: 1.2, cog_mm: [0, 0, 60]} # the tool's centre of gravity, sensor frame
     bias: {force_n: [0, 0, 0], torque_nm: [0, 0, 0]}   # the sensor's offsets
+                                   # (these three together, or none: an arm without a sensor)
     identification: {…}            # optional: what was identified, σ, residuals (below)
     session: {path: …, sha256: …}  # optional: the session it was identified on
 
@@ -31,7 +35,9 @@ the flange at the last DH frame.
 ``estimate``, ``std`` and ``nominal`` (one number per name, in the units of
 :meth:`ArmModel.vector`: rad, mm, N, N·m, mm), ``covariance`` (their covariance, same
 units), ``not_identified`` ({name: reason}), ``iterations``, ``converged``,
-``residual_rms`` ({channel: N or N·m}), ``configurations``.
+``residual_rms`` ({channel: N or N·m}), ``configurations``. An arm identified from the
+tracker has ``method: tracker`` and the estimate's report there (:mod:`.armfile`); its
+``parameters`` may name the Hayati angles ``beta_i`` too.
 
 Every problem is one :class:`~tmscal.errors.CalibrationError` naming the file and the
 dotted key (``"kin.yaml: key 'joints[2].d_mm': …"``); the document is bounded as the rig
@@ -52,7 +58,9 @@ import yaml
 from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..session import plain
-from .calibfile import _load_text, _matrix, read_text_file
+from .textfile import check_matrix as _matrix
+from .textfile import load_text as _load_text
+from .textfile import read_text_file
 
 __all__ = ["FORMAT", "VERSION", "KinematicsFile", "kinematics_doc", "kinematics_yaml",
            "parse_kinematics", "read_kinematics", "load_arm"]
@@ -113,19 +121,25 @@ def _floats(a: Any) -> Any:
 def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
                    session: dict[str, Any] | None = None,
                    provenance: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The kinematics document (plain types) of ``model`` (an ``ArmModel``: DH rows
-    [θ0 rad, d mm, a mm, α rad] in its convention, base = world ← base, flange = last DH frame
-    ← flange and flange_from_sensor 4×4 mm, tool mass
-    kg and centre of gravity mm in the sensor frame, bias [f0 N, τ0 N·m], joint limits rad),
-    with the optional ``identification`` (see the module docstring), ``session`` ({path,
-    sha256}) and ``provenance`` entries."""
+    """The kinematics document (plain types) of ``model`` (an :class:`~tmscal.calib.
+    kinematics.Arm`: DH rows [θ0 rad, d mm, a mm, α rad] in its convention, Hayati angles β
+    rad, base = world ← base, flange = last DH frame ← flange 4×4 mm, joint limits rad; an
+    ``ArmModel`` adds flange_from_sensor 4×4 mm, tool mass kg and centre of gravity mm in the
+    sensor frame, bias [f0 N, τ0 N·m]), with the optional ``identification`` (see the module
+    docstring), ``session`` ({path, sha256}) and ``provenance`` entries. ``beta_deg`` is
+    written per joint only when some β is not zero, the sensor entries only for an
+    ``ArmModel``."""
     dh = np.asarray(model.dh, dtype=float)
     lim = np.asarray(model.joint_limits_rad, dtype=float)
+    beta = np.asarray(getattr(model, "beta", None) if getattr(model, "beta", None) is not None
+                      else np.zeros(len(dh)), dtype=float)
     joints = [{"theta_offset_deg": float(np.degrees(r[0])), "d_mm": float(r[1]),
                "a_mm": float(r[2]), "alpha_deg": float(np.degrees(r[3])),
                "min_deg": float(np.degrees(lo)), "max_deg": float(np.degrees(hi))}
               for r, (lo, hi) in zip(dh, lim, strict=True)]
-    bias = np.asarray(model.bias, dtype=float)
+    if np.any(beta != 0):
+        for j, b in zip(joints, beta, strict=True):
+            j["beta_deg"] = float(np.degrees(b))
     doc: dict[str, Any] = {
         "format": FORMAT, "version": VERSION,
         "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
@@ -136,10 +150,14 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
         "joints": joints,
         "base": _floats(model.base),
         "flange": _floats(getattr(model, "flange", np.eye(4))),
-        "flange_from_sensor": _floats(model.flange_from_sensor),
-        "tool": {"mass_kg": float(model.tool_mass_kg), "cog_mm": _floats(model.tool_cog_mm)},
-        "bias": {"force_n": bias[:3].tolist(), "torque_nm": bias[3:].tolist()},
     }
+    if hasattr(model, "flange_from_sensor"):
+        bias = np.asarray(model.bias, dtype=float)
+        doc.update({
+            "flange_from_sensor": _floats(model.flange_from_sensor),
+            "tool": {"mass_kg": float(model.tool_mass_kg),
+                     "cog_mm": _floats(model.tool_cog_mm)},
+            "bias": {"force_n": bias[:3].tolist(), "torque_nm": bias[3:].tolist()}})
     if identification is not None:
         doc["identification"] = plain(identification)
     if session is not None:
@@ -147,8 +165,6 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
     if provenance is not None:
         doc["provenance"] = plain(provenance)
     return doc
-
-
 
 
 def kinematics_yaml(model: Any, **kw: Any) -> str:
@@ -186,27 +202,33 @@ def _vec(v: Any, src: str, key: str, n: int, bound: float) -> np.ndarray:
     return np.array([_num(x, src, f"{key}[{i}]", bound) for i, x in enumerate(v)])
 
 
-def _mapping(v: Any, src: str, key: str, keys: tuple[str, ...]) -> dict[str, Any]:
-    """A mapping with exactly ``keys`` (a missing or unknown key is named)."""
+def _mapping(v: Any, src: str, key: str, keys: tuple[str, ...],
+             optional: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A mapping with exactly ``keys`` and perhaps ``optional`` ones (a missing or unknown key
+    is named)."""
     if not isinstance(v, dict):
         raise _bad(src, key, f"expected a mapping with {', '.join(keys)}")
     for k in v:
-        if k not in keys:
-            raise _bad(src, f"{key}.{k}", f"unknown key; expected one of: {', '.join(keys)}")
+        if k not in keys and k not in optional:
+            raise _bad(src, f"{key}.{k}", "unknown key; expected one of: "
+                       f"{', '.join(keys + optional)}")
     for k in keys:
         if k not in v:
             raise _bad(src, f"{key}.{k}", "missing")
     return v
 
 
-def _joints(v: Any, src: str) -> tuple[np.ndarray, np.ndarray]:
-    """DH rows [θ0 rad, d mm, a mm, α rad] and joint limits [min, max] rad."""
+def _joints(v: Any, src: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """DH rows [θ0 rad, d mm, a mm, α rad], joint limits [min, max] rad and the Hayati angles
+    β rad (``beta_deg``, optional: 0)."""
     if not isinstance(v, list) or not 1 <= len(v) <= MAX_JOINTS:
         raise _bad(src, "joints", f"expected a list of 1 to {MAX_JOINTS} joints")
-    dh, lim = [], []
+    dh, lim, beta = [], [], []
     for i, j in enumerate(v):
         key = f"joints[{i}]"
-        j = _mapping(j, src, key, _JOINT_KEYS)
+        j = _mapping(j, src, key, _JOINT_KEYS, optional=("beta_deg",))
+        beta.append(math.radians(_num(j.get("beta_deg", 0.0), src, f"{key}.beta_deg",
+                                      _ANGLE_DEG)))
         t0 = _num(j["theta_offset_deg"], src, f"{key}.theta_offset_deg", _ANGLE_DEG)
         d = _num(j["d_mm"], src, f"{key}.d_mm", _LENGTH_MM)
         a = _num(j["a_mm"], src, f"{key}.a_mm", _LENGTH_MM)
@@ -217,7 +239,7 @@ def _joints(v: Any, src: str) -> tuple[np.ndarray, np.ndarray]:
             raise _bad(src, f"{key}.max_deg", f"{hi:g} is not above min_deg {lo:g}")
         dh.append([math.radians(t0), d, a, math.radians(al)])
         lim.append([math.radians(lo), math.radians(hi)])
-    return np.array(dh), np.array(lim)
+    return np.array(dh), np.array(lim), np.array(beta)
 
 
 def _header(doc: Any, src: str) -> str:
@@ -242,31 +264,43 @@ def _header(doc: Any, src: str) -> str:
     return arm
 
 
+_SENSOR_KEYS = ("flange_from_sensor", "tool", "bias")
+
+
 def _fields(doc: Any, src: str) -> dict[str, Any]:
-    """The ArmModel's fields (mm, rad) from a document."""
+    """The arm's fields (mm, rad) from a document: an ``Arm``'s, and an ``ArmModel``'s sensor
+    and tool when the document has them (``flange_from_sensor``, ``tool`` and ``bias``
+    together, or none of them)."""
     try:
         check_tree(doc, src)  # the rig config's bounds; its ConfigError becomes ours
     except ConfigError as e:
         raise CalibrationError(str(e)) from None
     name = _header(doc, src)
-    dh, lim = _joints(doc.get("joints"), src)
+    dh, lim, beta = _joints(doc.get("joints"), src)
     base = _matrix(doc.get("base"), src, "base", rigid=True)
     convention = doc.get("convention", "standard")
     if convention not in ("standard", "modified"):
         raise _bad(src, "convention", f"expected standard or modified, got {_show(convention)}")
     flange = np.eye(4) if doc.get("flange") is None else \
         _matrix(doc.get("flange"), src, "flange", rigid=True)
+    out = {"name": name, "dh": dh, "base": base, "convention": convention, "flange": flange,
+           "joint_limits_rad": lim, "beta": beta}
+    given = [k for k in _SENSOR_KEYS if doc.get(k) is not None]
+    if not given:
+        return out
+    if len(given) < len(_SENSOR_KEYS):
+        missing = next(k for k in _SENSOR_KEYS if k not in given)
+        raise _bad(src, missing, f"missing: {', '.join(_SENSOR_KEYS)} (the wrist sensor and "
+                   "its tool) go together, or none of them for an arm without one")
     mount = _matrix(doc.get("flange_from_sensor"), src, "flange_from_sensor", rigid=True)
     tool = _mapping(doc.get("tool"), src, "tool", ("mass_kg", "cog_mm"))
     bias = _mapping(doc.get("bias"), src, "bias", ("force_n", "torque_nm"))
-    return {"name": name, "dh": dh, "base": base, "convention": convention, "flange": flange,
-            "flange_from_sensor": mount,
+    return {**out, "flange_from_sensor": mount,
             "tool_mass_kg": _num(tool["mass_kg"], src, "tool.mass_kg", _MASS_KG, lo=0.0),
             "tool_cog_mm": _vec(tool["cog_mm"], src, "tool.cog_mm", 3, _COG_MM),
             "bias": np.concatenate([_vec(bias["force_n"], src, "bias.force_n", 3, _FORCE_N),
                                     _vec(bias["torque_nm"], src, "bias.torque_nm", 3,
-                                         _TORQUE_NM)]),
-            "joint_limits_rad": lim}
+                                         _TORQUE_NM)])}
 
 
 def _identification(v: Any, src: str, names: list[str]
@@ -306,16 +340,28 @@ def _identification(v: Any, src: str, names: list[str]
     return list(params), std, cov
 
 
+def _parameter_names(model: Any) -> list[str]:
+    """The names an identification may give: an ``ArmModel``'s parameter vector, or an arm's
+    DH parameters (θ0, d, a, α per joint), and β of every joint (the tracker-based
+    estimate's Hayati angles)."""
+    n = model.n_joints
+    per = (list(model.parameter_names()) if hasattr(model, "parameter_names") else
+           [f"{k}_{i}" for i in range(1, n + 1) for k in ("theta0", "d", "a", "alpha")])
+    return per + [f"beta_{i}" for i in range(1, n + 1)]
+
+
 def parse_kinematics(doc: Any, src: str = "<kinematics>") -> KinematicsFile:
     """A :class:`KinematicsFile` from a parsed document (a dict as the file holds it); its
-    ``model`` is an ``ArmModel`` in mm and rad. Raises CalibrationError naming ``src`` and
-    the key."""
+    ``model`` is an ``ArmModel`` (mm, rad) when the document has the wrist sensor and its
+    tool, else an :class:`~tmscal.calib.kinematics.Arm`. Raises CalibrationError naming
+    ``src`` and the key."""
+    from ..calib.kinematics.model import Arm
     from ..calib.selfcal.model import ArmModel
 
     f = _fields(doc, src)
     try:
-        model = ArmModel(**f)
-        names = list(model.parameter_names())
+        model = ArmModel(**f) if "bias" in f else Arm(**f)
+        names = _parameter_names(model)
     except (TypeError, ValueError) as e:
         raise CalibrationError(f"{src}: not a valid arm model ({e})") from None
     params, std, cov = _identification(doc.get("identification"), src, names)

@@ -35,9 +35,11 @@ from ..calib import Calibration, solve
 from ..errors import CalibrationError
 from ..escape import html_text
 from ..session import Session, skip_cause
+from ..solving.kinematics import applied_arrays
 from ..solving.outliers import find_outliers
 from ..solving.solve import (
     SolveResult,
+    arm_summary,
     flat_errors,
     pose_residuals,
     solve_session,
@@ -226,8 +228,10 @@ def _samples(session: Session) -> str:
 def _stored_result(session: Session, cal: Calibration, doc: dict[str, Any],
                    sha256: str) -> SolveResult:
     """A stored calibration evaluated on every usable pose of ``session``: held out, unless
-    the calibration file names this very session (then in-sample)."""
-    A, B, C, _ = session.arrays(need_probe=cal.Y is not None and "probe" in session.bodies)
+    the calibration file names this very session (then in-sample); with an identified arm,
+    the robot poses recomputed from the joints (``solving.kinematics.applied_arrays``)."""
+    A, B, C, _, q = applied_arrays(session, cal, need_probe=cal.Y is not None
+                                   and "probe" in session.bodies)
     if len(A) == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
     if cal.Y is None or "probe" not in session.bodies:
@@ -239,9 +243,10 @@ def _stored_result(session: Session, cal: Calibration, doc: dict[str, Any],
         errors_on="in-sample" if same else "held-out",
         n_skipped=sum(p.skipped is not None for p in session.poses), X=cal.X, Y=cal.Y,
         Z=cal.Z, raw=raw, errors=flat_errors(cal.errors(A, B, C)), Z_probe=cal.Z_probe,
-        truth=truth_errors_of(session, cal, C),
+        truth=truth_errors_of(session, cal, C, q),
         outliers=find_outliers(pose_residuals(session, cal)),
-        uncertainty=cal.uncertainty, distortion=cal.distortion)
+        uncertainty=cal.uncertainty, distortion=cal.distortion,
+        arm=None if cal.arm is None else arm_summary(cal.arm))
 
 
 def _ml_uncertainty(session: Session, res: SolveResult) -> tuple[SolveResult | None, str]:

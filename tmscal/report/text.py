@@ -1,5 +1,5 @@
-"""Human-readable tables and the calibration YAML export (the plots are in
-:mod:`tmscal.report.plots`, re-exported here).
+"""Human-readable tables (the plots are in :mod:`tmscal.report.plots`, re-exported here; the
+calibration file is written by :func:`tmscal.exports.calibfile.calibration_yaml`).
 
 Units: mm and degrees, named in every column header. Text that comes from a file (a method
 or distortion model name of a calibration file, its notes) is shown with control characters
@@ -8,12 +8,10 @@ and bidirectional overrides as visible escapes (``tmscal.escape.visible``).
 
 from __future__ import annotations
 
-import datetime as _dt
 import textwrap
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import yaml
 
 from ..escape import visible
 from .plots import plot_residuals, plot_study
@@ -21,8 +19,8 @@ from .plots import plot_residuals, plot_study
 if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
-__all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "plot_residuals",
-           "format_matrix", "distortion_text"]
+__all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
+           "format_matrix", "distortion_text", "arm_rows"]
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
@@ -84,6 +82,50 @@ def _error_rows(res: SolveResult) -> list[str]:
     if two_z:
         add("Z_P vs Z_M  e_z, θ_z", "e_z_mm", "theta_z_deg")
     add(f"total  e_t, θ_t  (= {_parts(e)})", "e_t_mm", "theta_t_deg")
+    return lines
+
+
+def _wrap(text: str, indent: str = "  ", more: str = "      ") -> list[str]:
+    return textwrap.wrap(visible(text), 98, initial_indent=indent, subsequent_indent=more) \
+        or [indent]
+
+
+def arm_rows(arm: dict[str, Any]) -> list[str]:
+    """The arm of a calibration (``solving.solve.arm_summary``) as text: which arm and where it
+    came from; for an estimated one the level chosen and why (the held-out table), the prior,
+    the identified combinations of deviations with their σ, the weakly identified ones and
+    what could not be identified and why (docs/kinematics.md)."""
+    named = f", named by {arm['named_by']}" if arm.get("named_by") else ""
+    if arm.get("source") != "estimated":
+        return _wrap(f"arm: {arm['nominal']}{named}: robot poses recomputed from the joints "
+                     f"with {arm['source']}; the calibration carries it and commands the "
+                     "robot through it (docs/kinematics.md)")
+    lines = _wrap(f"arm: {arm['nominal']}{named}, its kinematic deviations estimated with X, "
+                  "Y, Z (maximum likelihood; docs/kinematics.md)")
+    lines += _wrap(f"level: {arm.get('level')} ({arm.get('reason', '')})")
+    cv = {k: v for k, v in (arm.get("cv") or {}).items() if v}
+    if cv:
+        k = int(next(iter(cv.values())).get("folds", 0))
+        lines.append(f"  {'held-out e_t by level (' + str(k) + ' interleaved folds)':<{_W}}"
+                     f"{'mean mm':>15}{'± SE mm':>15}")
+        for lv, c in cv.items():
+            mark = "  ← chosen" if lv == arm.get("level") else ""
+            lines.append(_row(f"  {lv}", float(c["e_t_mm"]), float(c["se_mm"])) + mark)
+    tol = arm.get("tolerances") or {}
+    if tol:
+        lines += _wrap(f"prior: each length deviation N(0, ({tol.get('length_mm'):g} mm)²), "
+                       f"each angle N(0, ({tol.get('angle_deg'):g}°)²); combinations below in "
+                       "tolerance units (deviation / tolerance), ± their posterior σ")
+    for key, head in (("identified", "identified (σ_data ≥ 1: the poses know it better than "
+                                     "the tolerance)"),
+                      ("weak", "weakly identified (the prior decides; spread the joints "
+                               "further)"),
+                      ("unidentified", "not identifiable, left at the nominal value")):
+        combos = arm.get(key) or []
+        if not combos:
+            continue
+        lines.append(f"  {head}: {len(combos)}")
+        lines += [w for c in combos for w in _wrap(c.get("text", "?"), "    ", "        ")]
     return lines
 
 
@@ -180,8 +222,10 @@ def _legend(res: SolveResult) -> list[str]:
                      " e_z = ‖t(Z_P) − t(Z_M)‖ mm, θ_z = the angle between their rotations")
     if res.truth and "coil_placement_mm" in res.truth:
         lines.append("  coil placement: to put the coil at a tracked pose C the robot "
-                     "commands A = Ẑ C Ŷ⁻¹; the error is how far the coil centre then lands "
-                     "from where it was wanted, with the true Y, Z (mm)")
+                     "commands A = Ẑ C Ŷ⁻¹ (with an identified arm, the pose its controller "
+                     "must be told for the real arm to reach A); the error is how far the coil "
+                     "centre then lands from where it was wanted, with the true Y, Z (and the "
+                     "true arm, when the simulated rig has one) (mm)")
     if res.uncertainty:
         lines.append("  predicted uncertainty: propagated from the solver's parameter "
                      "covariance (linearised); 1-σ is the RMS error, 95 % the radius holding "
@@ -209,6 +253,8 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
     extra = _uncertainty_rows(res)
     if extra:
         lines += [""] + extra
+    if res.arm is not None:
+        lines += [""] + arm_rows(res.arm)
     if res.truth is not None:
         lines += [""] + _truth_rows(res)
     lines += [""] + _outlier_lines(res) + [""] + _legend(res)
@@ -253,50 +299,6 @@ def format_study(study: dict[str, Any], paper: dict[str, Any] | None = None) -> 
     out.append("  e_t, θ_t: hold-out translation (mm) and rotation (deg) errors, marker + probe "
                "(+ e_z, θ_z for QR24); docs/methods.md")
     return "\n".join(out)
-
-
-def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
-                     covariance: Any = None, parameters: list[str] | None = None,
-                     provenance: dict[str, Any] | None = None) -> str:
-    """The calibration YAML (docs/conventions.md, docs/exports.md): X, Y, Z orthonormal (and
-    QR24's Z_probe), raw matrices, method, poses used, the errors (cross-validated by default,
-    with their SD over folds), the outlier poses, the session's SHA-256; a statistical
-    solver's parameter ``covariance`` with the ``parameters`` it is ordered by; the
-    ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices). Units mm.
-    ``tmscal.exports.load_calibration`` reads it back."""
-    j = res.to_json()
-    doc = {
-        "format": "tmscal-calibration",
-        "version": 1,
-        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-        "units": {"length": "mm", "angles": "deg"},
-        "frames": {"X": "flange_from_marker", "Y": "flange_from_probe",
-                   "Z": "base_from_tracker"},
-        "method": j["method"],
-        "applied": j["applied"],
-        "session": {"path": session_path, "sha256": session_sha256},
-        "poses": {"solve": j["n_solve"], "test": j["n_test"],
-                  "errors_on": j["errors_on"]},
-        "cross_validation": j["cv"],
-        "errors_sd": j["errors_sd"],
-        "outlier_poses": [o["index"] for o in j["outliers"]],
-        "X": j["X"], "Y": j["Y"], "Z": j["Z"],
-        **({"Z_probe": j["Z_probe"]} if "Z_probe" in j else {}),
-        "raw": j["raw"],
-        "errors": j["errors"],
-    }
-    if res.truth is not None:
-        doc["truth_errors"] = res.truth
-    for k in ("uncertainty", "distortion", "options"):
-        if k in j:
-            doc[k] = j[k]
-    if covariance is not None:
-        doc["covariance"] = np.asarray(covariance, dtype=float).tolist()
-        if parameters is not None:
-            doc["parameters"] = [str(p) for p in parameters]
-    if provenance is not None:
-        doc["provenance"] = provenance
-    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
 
 
 def format_robot_time(rt: dict[str, float]) -> str:

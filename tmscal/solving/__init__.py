@@ -7,9 +7,14 @@ it imports none of them (docs/architecture.md). No I/O: sessions come in as
 :class:`tmscal.session.Session` objects.
 
 - :mod:`.solve`: ``solve_session`` (the calibration and its cross-validated, held-out or
-  in-sample errors, the truth errors, the outlier poses: ``SolveResult``), ``pose_residuals``,
+  in-sample errors, the truth errors, the outlier poses: ``SolveResult``; with
+  ``kinematics="estimate"`` the arm's kinematics estimated with X, Y, Z), ``pose_residuals``,
   ``truth_errors_of``, ``with_kinematics`` (A recomputed from the joints under an identified
   arm model).
+- :mod:`.kinematics`: the arm in the service (docs/kinematics.md, "Using it"): a session's
+  joints and recorded arm, the robot poses a calibration with an arm applies, a kinematics
+  file's arm made the calibration's, and the coil placement against a truth through the flange
+  commands and the truth arm's controller.
 - :mod:`.study`: ``study_session``, the convergence study of Wang et al. (2018).
 - :mod:`.compare`: ``compare_session`` / ``compare_arrays``, the method comparison of
   ``tmscal compare``.

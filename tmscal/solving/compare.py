@@ -22,6 +22,7 @@ from .. import calib
 from ..calib import solve, truth_errors
 from ..errors import CalibrationError
 from ..session import Session
+from .kinematics import coil_placement, truth_arm_of, usable_joints
 
 __all__ = ["compare_session", "compare_arrays", "default_ns", "find_bound",
            "handheld_options", "session_noise"]
@@ -90,11 +91,12 @@ def compare_session(session: Session, methods: Sequence[str] | None = None,
     """The comparison on a session's usable poses (probe poses when every one has them).
     Returns the dict of :func:`compare_arrays` with "session" (its path) added."""
     need_probe = "probe" in session.bodies
-    A, B, C, _ = session.arrays(need_probe=need_probe)
+    A, B, C, idx = session.arrays(need_probe=need_probe)
     if len(A) == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
     out = compare_arrays(A, B, C, methods, ns=ns, folds=folds, truth=session.truth,
-                         noise=session_noise(session), progress=progress)
+                         noise=session_noise(session), progress=progress,
+                         truth_arm=truth_arm_of(session), joints=usable_joints(session, idx))
     out["session"] = str(session.path)
     return out
 
@@ -113,7 +115,9 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
                    methods: Sequence[str] | None = None, ns: Sequence[int] | None = None,
                    folds: int = 5, truth: dict[str, np.ndarray] | None = None,
                    noise: dict[str, Any] | None = None,
-                   progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
+                   progress: Callable[[int], Any] | None = None,
+                   truth_arm: dict[str, Any] | None = None,
+                   joints: np.ndarray | None = None) -> dict[str, Any]:
     """Compare methods on poses A, B[, C] (n, 4, 4) mm.
 
     Returns {"n_poses", "folds", "fold_sizes", "ns", "bodies", "methods": {name: {"n": [..],
@@ -124,7 +128,10 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
     translation error, mm, on the first fold's training poses) or None, "truth": bool}; the
     bound needs ``truth`` and ``noise`` (the robot and tracker noise as ``ml``'s options).
     Errors are the hold-out errors of docs/methods.md
-    (e_t = marker + probe (+ e_z for QR24), θ_t likewise); time is wall time per solve."""
+    (e_t = marker + probe (+ e_z for QR24), θ_t likewise); time is wall time per solve. The
+    coil placement commands ``Calibration.flange_command``; with the truth's arm
+    (``truth_arm``, ``Session.truth_arm``) and the poses' ``joints`` (n, dof) rad, the flange
+    goes where that arm's controller takes it (``solving.kinematics.coil_placement``)."""
     methods = list(calib.METHODS) if methods is None else [m.lower() for m in methods]
     unknown = [m for m in methods if m not in calib.METHODS]
     if unknown:
@@ -144,7 +151,7 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
                            "methods": {}, "skipped": {}, "truth": bool(truth), "bound": None}
     for m in methods:
         try:
-            res = _compare_method(m, A, B, C, fs, ns, truth, progress)
+            res = _compare_method(m, A, B, C, fs, ns, truth, progress, truth_arm, joints)
         except CalibrationError as e:
             out["skipped"][m] = str(e)
             continue
@@ -156,7 +163,9 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
 
 def _compare_method(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
                     fs: list[np.ndarray], ns: Sequence[int], truth: dict[str, Any] | None,
-                    progress: Callable[[int], Any] | None) -> dict[str, Any]:
+                    progress: Callable[[int], Any] | None,
+                    truth_arm: dict[str, Any] | None = None,
+                    joints: np.ndarray | None = None) -> dict[str, Any]:
     """One method's curves. Raises CalibrationError (the method is skipped) when it fails at
     every n, e.g. a method that needs probe poses on a marker-only session."""
     rows: dict[str, list[list[float]]] = {}
@@ -166,7 +175,7 @@ def _compare_method(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
         for test in fs:
             train = np.setdiff1d(np.arange(len(A)), test)[:n]
             try:
-                vals = _one_solve(m, A, B, C, train, test, truth)
+                vals = _one_solve(m, A, B, C, train, test, truth, truth_arm, joints)
             except CalibrationError as e:
                 failed[n] = str(e)
                 vals = {}
@@ -191,7 +200,8 @@ def _compare_method(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
 
 
 def _one_solve(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
-               train: np.ndarray, test: np.ndarray, truth: dict[str, Any] | None
+               train: np.ndarray, test: np.ndarray, truth: dict[str, Any] | None,
+               truth_arm: dict[str, Any] | None = None, joints: np.ndarray | None = None
                ) -> dict[str, float]:
     """Solve on ``train``, test on ``test``: {"e_t_mm", "theta_t_deg", "time_ms",
     "truth:<k>"…}."""
@@ -208,9 +218,8 @@ def _one_solve(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
             vals[f"truth:{k}_trans_mm"] = d["trans_mm"]
             vals[f"truth:{k}_rot_deg"] = d["rot_deg"]
         if C is not None and cal.Y is not None and truth.get("Y") is not None:
-            Cc, Yc, Zc = cal.placement(C[test])
-            coil = calib.coil_placement_errors(C[test], Yc, Zc, truth["Y"], truth["Z"],
-                                               C_cmd=Cc)
+            coil = coil_placement(cal, C[test], truth, truth_arm,
+                                  None if joints is None else joints[test])
             vals["truth:coil_placement_mm"] = float(coil.mean())
     return vals
 

@@ -1,6 +1,7 @@
-"""Solve a session and assemble the result object that ``tmscal solve --json`` prints; the
-per-pose residuals of a calibration on a session; a session's robot poses recomputed from its
-joints under an identified kinematic model.
+"""Solve a session and assemble the result object that ``tmscal solve --json`` prints, the
+arm's kinematics estimated with X, Y, Z or given as a model when asked (docs/kinematics.md,
+"Using it"); the per-pose residuals of a calibration on a session; a session's robot poses
+recomputed from its joints under an identified kinematic model.
 
 Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
 X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
@@ -13,16 +14,28 @@ from typing import Any
 
 import numpy as np
 
-from ..calib import Calibration, coil_placement_errors, solve, truth_errors
+from ..calib import Calibration, solve, truth_errors
+from ..calib.kinematics.calibrated import ArmCalibration
+from ..calib.kinematics.estimate import Tolerances
+from ..calib.kinematics.model import Arm
 from ..calib.metrics import body_errors
-from ..calib.study import cross_validate
+from ..calib.study import cross_validate, per_pose_options
 from ..errors import CalibrationError
 from ..session import Session, plain
+from .kinematics import (
+    applied_arrays,
+    choose_arm,
+    coil_placement,
+    given_arm,
+    session_joints,
+    truth_arm_of,
+    usable_joints,
+)
 from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
 
 __all__ = ["SolveResult", "solve_session", "session_arrays", "pose_residuals",
-           "with_kinematics", "truth_errors_of", "flat_errors"]
+           "with_kinematics", "truth_errors_of", "flat_errors", "arm_summary"]
 
 
 def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarray,
@@ -41,6 +54,24 @@ def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarra
                                "--method qr24")
     A, B, C, _ = session.arrays(need_probe=need_probe)
     return A, B, C
+
+
+def arm_summary(ac: ArmCalibration, named_by: str | None = None) -> dict[str, Any]:
+    """What ``tmscal solve`` reports of a calibration's arm (plain types): "nominal" (its
+    registry name), "named_by" (--arm or the session header), "source" ("estimated" or the
+    kinematics file), "controller_frame" (4×4 mm), "seeds" (how many), and for an estimated
+    arm its report: level and reason, the held-out table "cv" {level: {e_t_mm, se_mm,
+    folds}}, the tolerances, the identified / weak / unidentified combinations (text, σ in
+    tolerance units), the deviations (rad, mm) and their SD (docs/kinematics.md)."""
+    rep = dict(ac.report or {})
+    out: dict[str, Any] = {"nominal": ac.nominal.name,
+                           "source": "estimated" if "deviations" in rep else
+                           rep.pop("source", "given")}
+    if named_by is not None:
+        out["named_by"] = named_by
+    out["controller_frame"] = _mat(ac.controller_frame)
+    out["seeds"] = 0 if ac.seeds is None else int(len(ac.seeds))
+    return plain({**out, **rep})
 
 
 def _mat(M: np.ndarray | None) -> list | None:
@@ -84,6 +115,13 @@ class SolveResult:
     distortion: dict[str, Any] | None = None
     #: the method options the calibration was solved with (e.g. the handheld measurement)
     options: dict[str, Any] | None = None
+    #: the calibration's arm (``arm_summary``: estimated with X, Y, Z, or given as a
+    #: kinematics file; docs/kinematics.md); None when the controller's poses are taken as
+    #: they are
+    arm: dict[str, Any] | None = None
+    #: the per-pose residuals the outliers were found on (``pose_residuals`` of the poses as
+    #: solved, e.g. recomputed from a kinematics file); not part of ``to_json``
+    residuals: dict[str, Any] | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
@@ -99,7 +137,7 @@ class SolveResult:
             out["Z_probe"] = _mat(self.Z_probe)
         if self.truth is not None:
             out["truth"] = self.truth
-        for k in ("uncertainty", "distortion", "options"):
+        for k in ("uncertainty", "distortion", "options", "arm"):
             if getattr(self, k) is not None:
                 out[k] = plain(getattr(self, k))
         return out
@@ -138,9 +176,24 @@ def with_kinematics(session: Session, model: Any, source: str = "the kinematics"
     return replace(session, poses=poses)
 
 
+def _spreads(session: Session, indices: list[int], bodies: list[str]
+             ) -> list[dict[str, Any]] | None:
+    """Each pose's sample spreads and counts (ml's ``spreads``: the tracker noise per pose)
+    when every pose ``indices`` recorded them for ``bodies``; else None."""
+    by_index = {p.index: p for p in session.poses}
+    use = [by_index[i] for i in indices]
+    if not use or not all(all(b in (p.spread or {}) for b in bodies) for p in use):
+        return None
+    return [{"spread": p.spread, "samples": p.samples} for p in use]
+
+
 def solve_session(session: Session, method: str = "qr36", train: int | None = None,
                   orthonormal: bool = False, folds: int = 5, in_sample: bool = False,
-                  options: dict[str, Any] | None = None) -> tuple[Calibration, SolveResult]:
+                  options: dict[str, Any] | None = None, kinematics: Any = None,
+                  arm: str | None = None, level: str = "auto",
+                  tolerances: Tolerances | None = None,
+                  kinematics_source: str = "the kinematics file"
+                  ) -> tuple[Calibration, SolveResult]:
     """Solve a session and estimate its errors (docs/methods.md).
 
     The reported calibration is solved on poses [0, train) (default: all). Its errors are:
@@ -148,10 +201,36 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     solved on (optimistic); by default, ``folds``-fold cross-validated
     (``calib.study.cross_validate``: contiguous folds, mean and SD over folds). Returns the
     Calibration and a ``SolveResult`` (also the errors against the truth when the session has
-    one, and the outlier poses). ``options`` go to the method (``calib.solve``). Raises
-    CalibrationError for unusable data or bad counts."""
-    A, B, C = session_arrays(session, method)
+    one, and the outlier poses). ``options`` go to the method (``calib.solve``).
+
+    ``kinematics`` (docs/kinematics.md, "Using it"): ``"estimate"`` estimates the arm's
+    kinematic deviations with X, Y, Z (``method`` must be "ml"): the joints of every usable
+    pose, the nominal arm ``arm`` (a registry name) or else the one the session header
+    records, the ``level`` ("auto", "none", "offsets", "full") and the prior
+    ``tolerances``; the tracker noise from the poses' sample spreads when every pose
+    recorded them. The errors are computed on the robot poses of the identified arm at the
+    held-out joints; the cross-validation folds keep the level chosen on all poses. An
+    :class:`~tmscal.calib.kinematics.Arm` instead recomputes every robot pose from its joints
+    with that arm (``kinematics_source`` names it), which the calibration then carries when
+    it is a registered arm the recorded poses follow (``kinematics.given_arm``). Raises
+    CalibrationError for unusable data, bad counts, a pose without joints, an unknown arm."""
     options = dict(options or {})
+    estimate = isinstance(kinematics, str) and kinematics == "estimate"
+    if kinematics is not None and not estimate and not isinstance(kinematics, Arm):
+        raise CalibrationError(f"kinematics: expected 'estimate' or an arm model, got "
+                               f"{kinematics!r:.40}")
+    if estimate and method != "ml":
+        raise CalibrationError(f"--kinematics estimate is the maximum-likelihood solve (ml) "
+                               f"of X, Y, Z with the arm; --method {method} does not estimate "
+                               "an arm (leave --method out)")
+    if not estimate and (arm is not None or level != "auto" or tolerances is not None):
+        raise CalibrationError("--arm, --level and --tolerance-length/--tolerance-angle go "
+                               "with --kinematics estimate")
+    given = None
+    if isinstance(kinematics, Arm):
+        session, given = given_arm(session, kinematics, kinematics_source)
+    A, B, C = session_arrays(session, method)
+    idx = session.arrays(need_probe=method == "qr36")[3]
     n = len(A)
     if n == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
@@ -163,49 +242,79 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         raise CalibrationError(f"--train {train}: need at least 3 poses to solve")
     if n_solve > n:
         raise CalibrationError(f"--train {train}: the session has only {n} usable poses")
+    q = None
+    named_by = None
+    if estimate:
+        q = session_joints(session, idx, "--kinematics estimate")
+        nominal, named_by = choose_arm(session, arm)
+        if q.shape[1] != nominal.n_joints:
+            raise CalibrationError(f"{session.path}: the poses have {q.shape[1]} joint angles; "
+                                   f"the {nominal.name} arm ({named_by}) has "
+                                   f"{nominal.n_joints}")
+        options.update(kinematics="estimate", joints=q, arm=nominal, level=level, folds=folds)
+        if tolerances is not None:
+            options["tolerances"] = tolerances
+        sp = _spreads(session, idx, ["marker"] + ([] if C is None else ["probe"]))
+        if sp is not None and options.get("tracker_cov") is None:
+            options.setdefault("spreads", sp)
     cal = solve(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
-                orthonormal=orthonormal, **options)
+                orthonormal=orthonormal, **per_pose_options(options, slice(0, n_solve), n))
+    if given is not None:
+        cal.arm = given
+    A_eval = A if estimate is False else cal.robot_poses(A, q)
     sd = cv = None
     if train is None and not in_sample:
+        cv_opts = options if not estimate else {**options, "level": cal.arm.report["level"]}
         r = cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal,
-                           **options)
+                           **cv_opts)
         errors, sd = _nest(r["mean"]), _nest(r["sd"])
         cv = {"folds": r["folds"], "split": r["split"], "fold_sizes": r["fold_sizes"]}
         errors_on, n_test = f"cross-validated ({r['folds']} folds)", n
     elif n_solve < n:
-        errors = flat_errors(cal.errors(A[n_solve:], B[n_solve:],
+        errors = flat_errors(cal.errors(A_eval[n_solve:], B[n_solve:],
                                          None if C is None else C[n_solve:]))
         errors_on, n_test = "held-out", n - n_solve
     else:
-        errors = flat_errors(cal.errors(A, B, C))
+        errors = flat_errors(cal.errors(A_eval, B, C))
         errors_on, n_test = "in-sample", n
     raw = {"X": cal.X_raw, "Y": cal.Y_raw, "Z": cal.Z_raw}
     if cal.Z_probe is not None:
         raw["Z_probe"] = cal.Z_probe_raw
+    residuals = pose_residuals(session, cal)
+    opts_shown = {k: plain(v) for k, v in options.items()
+                  if k not in ("kinematics", "joints", "arm", "spreads", "tolerances", "level",
+                               "folds")}
     res = SolveResult(
         method=cal.method, applied=cal.applied, n_solve=int(n_solve), n_test=int(n_test),
         errors_on=errors_on, n_skipped=sum(p.skipped is not None for p in session.poses),
         X=cal.X, Y=cal.Y, Z=cal.Z, raw=raw, errors=errors, Z_probe=cal.Z_probe,
-        truth=truth_errors_of(session, cal, C), errors_sd=sd, cv=cv,
-        outliers=find_outliers(pose_residuals(session, cal)),
-        uncertainty=cal.uncertainty, distortion=cal.distortion,
-        options={k: plain(v) for k, v in options.items()} or None)
+        truth=truth_errors_of(session, cal, C, q if q is not None
+                              else usable_joints(session, idx)),
+        errors_sd=sd, cv=cv, outliers=find_outliers(residuals), residuals=residuals,
+        uncertainty=cal.uncertainty, distortion=cal.distortion, options=opts_shown or None,
+        arm=None if cal.arm is None else arm_summary(cal.arm, named_by))
     return cal, res
 
 
-def truth_errors_of(session: Session, cal: Calibration,
-                  C: np.ndarray | None) -> dict[str, Any] | None:
+def truth_errors_of(session: Session, cal: Calibration, C: np.ndarray | None,
+                    joints: np.ndarray | None = None) -> dict[str, Any] | None:
     """Errors of X, Y, Z against a session's truth, and the coil placement error (mean and
     max over every usable pose's probe pose as a target, mm); None without truth. The robot is
-    commanded as ``Calibration.placement`` says (targets undistorted when the calibration
-    found a tracker distortion), as ``tmscal compare`` does."""
+    commanded ``Calibration.flange_command`` (the placement rule: targets undistorted when
+    the calibration found a tracker distortion; with an identified arm, the pose its
+    controller must be told), as ``tmscal compare`` does; when the truth has an arm
+    (``Session.truth_arm``) the flange goes where that arm's controller takes it
+    (``kinematics.coil_placement``). ``joints`` (n, dof) rad: those of the targets' poses
+    (the seeds of the inverse kinematics; default: the session's usable poses' when every
+    one has them)."""
     truth = session.truth
     if not truth:
         return None
     out: dict[str, Any] = dict(truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth))
     if C is not None and cal.Y is not None and "Y" in truth:
-        C_cmd, Y_cmd, Z_cmd = cal.placement(C)
-        coil = coil_placement_errors(C, Y_cmd, Z_cmd, truth["Y"], truth["Z"], C_cmd=C_cmd)
+        if joints is None:
+            joints = usable_joints(session, session.arrays(need_probe=True)[3])
+        coil = coil_placement(cal, C, truth, truth_arm_of(session), joints)
         out["coil_placement_mm"] = float(coil.mean())
         out["coil_placement_max_mm"] = float(coil.max())
         out["coil_placement_n"] = int(len(coil))
@@ -239,8 +348,10 @@ def flat_errors(err: dict[str, Any]) -> dict[str, Any]:
 def pose_residuals(session: Session, cal: Calibration) -> dict[str, Any]:
     """Per-pose errors of a calibration on every usable pose of a session (to spot bad poses):
     {"index": [...], "<body>": {"trans_mm": [...], "rot_deg": [...]}} with E = (A X)⁻¹ Z N for
-    each body, the matrices applied as the calibration says."""
-    A, B, C, idx = session.arrays(need_probe=cal.Y is not None and "probe" in session.bodies)
+    each body, the matrices applied as the calibration says (and A recomputed from the
+    joints when it carries an identified arm)."""
+    A, B, C, idx, _ = applied_arrays(session, cal, need_probe=cal.Y is not None
+                                     and "probe" in session.bodies)
     u = cal.used()
     out: dict[str, Any] = {"index": idx}
     pairs = [("marker", B, u["X"], u["Z"])]
@@ -250,6 +361,3 @@ def pose_residuals(session: Session, cal: Calibration) -> dict[str, Any]:
         e, th = body_errors(A, N, Xb, Zb)
         out[name] = {"trans_mm": e.tolist(), "rot_deg": np.abs(th).tolist()}
     return out
-
-
-# --- adaptive acquisition: its header entry, the prediction's inputs, robot time ------------
