@@ -17,6 +17,10 @@ Frames and units (mm, rad; poses 4×4 float64):
 
 * ``flange`` is DH frame n ← mechanical flange (the controller's flange frame, UR's
   ``tool0``, Franka's F): it makes the DH convention and the controller's flange agree.
+* ``beta`` (n,) rad (Hayati and Mirmirani 1985), zero in every nominal model: a rotation
+  Ry(β_i) appended to joint i's transform (standard: … Rx(α_i) Ry(β_i); modified:
+  Rx(α_i) Ry(β_i) Tx(a_i) …) — the misalignment about y that DH cannot express when two
+  consecutive joint axes are parallel; an identified arm (docs/kinematics.md) may carry it.
 
 So the flange in the world is ``forward(arm, q)`` = base · T_1 ⋯ T_n · flange, and in the robot's
 own base frame (what a controller reports, the tmscal A) ``base_from_flange(arm, q)`` =
@@ -40,7 +44,8 @@ import numpy as np
 from ...geometry import rot_x, rot_y, rot_z
 
 __all__ = ["Arm", "CONVENTIONS", "forward", "base_from_flange", "joint_frames",
-           "pose_from_rpy", "rpy_from_matrix", "dh_matrices", "check_joints"]
+           "pose_from_rpy", "rpy_from_matrix", "dh_matrices", "check_joints", "DEVIATION_KINDS",
+           "split_deviation", "deviation_units"]
 
 #: the DH conventions an arm's table may be written in (module docstring)
 CONVENTIONS = ("standard", "modified")
@@ -87,6 +92,7 @@ class Arm:
     joint_limits_rad: np.ndarray | None = None
     convention: str = "standard"
     flange: np.ndarray = field(default_factory=lambda: np.eye(4))
+    beta: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         dh = np.array(self.dh, dtype=float)
@@ -106,8 +112,12 @@ class Arm:
             if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
                 raise ValueError(f"{key} must be a finite 4×4 array")
             object.__setattr__(self, key, arr)
+        beta = np.zeros(len(dh)) if self.beta is None else np.array(self.beta, dtype=float)
+        if beta.shape != (len(dh),) or not np.all(np.isfinite(beta)):
+            raise ValueError(f"beta must be a finite array of {len(dh)} angles (rad)")
         object.__setattr__(self, "dh", dh)
         object.__setattr__(self, "joint_limits_rad", lim)
+        object.__setattr__(self, "beta", beta)
 
     @property
     def n_joints(self) -> int:
@@ -141,14 +151,35 @@ class Arm:
                        base=pose_from_rpy(p[k:k + 3], p[k + 3:k + 6]),
                        flange=pose_from_rpy(p[k + 6:k + 9], p[k + 9:k + 12]))
 
+    def deviation(self, name: str) -> float:
+        """The value of one DH parameter or β by name ("theta0_1", "d_2", "a_3", "alpha_4",
+        "beta_2"; rad or mm)."""
+        kind, i = split_deviation(name, self.n_joints)
+        return float(self.beta[i] if kind == "beta" else self.dh[i, DEVIATION_KINDS.index(kind)])
+
+    def with_deviations(self, names: list[str], delta: Any) -> Any:
+        """A copy with the named DH parameters and β changed by ``delta`` (rad or mm, one per
+        name); every other field (of a subclass too) is kept."""
+        dh, beta = self.dh.copy(), self.beta.copy()
+        for n, d in zip(names, np.asarray(delta, dtype=float).ravel(), strict=True):
+            kind, i = split_deviation(n, self.n_joints)
+            if kind == "beta":
+                beta[i] += d
+            else:
+                dh[i, DEVIATION_KINDS.index(kind)] += d
+        return replace(self, dh=dh, beta=beta)
+
     # --- plain types ---------------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:
         """Plain lists and strings (for YAML/JSON): name, convention, dh, base, flange,
         joint_limits_rad — the keys of :meth:`from_dict`."""
-        return {"name": self.name, "convention": self.convention, "dh": self.dh.tolist(),
-                "base": self.base.tolist(), "flange": self.flange.tolist(),
-                "joint_limits_rad": self.joint_limits_rad.tolist()}
+        out = {"name": self.name, "convention": self.convention, "dh": self.dh.tolist(),
+               "base": self.base.tolist(), "flange": self.flange.tolist(),
+               "joint_limits_rad": self.joint_limits_rad.tolist()}
+        if np.any(self.beta != 0):
+            out["beta"] = self.beta.tolist()
+        return out
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Arm:
@@ -158,11 +189,31 @@ class Arm:
             return cls(name=d["name"], dh=d["dh"], base=d["base"],
                        joint_limits_rad=d["joint_limits_rad"],
                        convention=d.get("convention", "standard"),
-                       flange=d.get("flange", np.eye(4)))
+                       flange=d.get("flange", np.eye(4)), beta=d.get("beta"))
         except KeyError as e:
             raise ValueError(f"arm: missing key {e.args[0]!r}") from None
         except TypeError as e:
             raise ValueError(f"arm: {e}") from None
+
+
+#: the per-joint parameters a deviation may name, in each joint's order; "beta" is the
+#: Hayati angle (module docstring)
+DEVIATION_KINDS = ("theta0", "d", "a", "alpha", "beta")
+
+
+def split_deviation(name: str, n: int) -> tuple[str, int]:
+    """("theta0", 0) for "theta0_1": the kind and the 0-based joint of a deviation's name;
+    ValueError naming it when it is not one of an n-joint arm's."""
+    kind, _, idx = str(name).rpartition("_")
+    if kind not in DEVIATION_KINDS or not idx.isdigit() or not 1 <= int(idx) <= n:
+        raise ValueError(f"unknown kinematic parameter {name!r} (expected theta0_i, d_i, a_i, "
+                         f"alpha_i or beta_i with i in 1…{n})")
+    return kind, int(idx) - 1
+
+
+def deviation_units(names: list[str]) -> list[str]:
+    """"rad" or "mm" for each deviation name."""
+    return ["mm" if str(n).rpartition("_")[0] in ("d", "a") else "rad" for n in names]
 
 
 def check_joints(arm: Arm, q: Any) -> np.ndarray:
@@ -174,9 +225,11 @@ def check_joints(arm: Arm, q: Any) -> np.ndarray:
     return q
 
 
-def dh_matrices(dh: np.ndarray, q: np.ndarray, convention: str = "standard") -> np.ndarray:
+def dh_matrices(dh: np.ndarray, q: np.ndarray, convention: str = "standard",
+                beta: np.ndarray | None = None) -> np.ndarray:
     """(…, n, 4, 4) joint transforms T_i (module docstring) of the DH rows ``dh`` (n, 4) for
-    joint values q (…, n) rad; lengths in mm."""
+    joint values q (…, n) rad, with the Hayati angles ``beta`` (n,) rad when given and not
+    zero; lengths in mm."""
     th = q + dh[:, 0]
     d, a, al = dh[:, 1], dh[:, 2], dh[:, 3]
     ct, st = np.cos(th), np.sin(th)
@@ -195,6 +248,17 @@ def dh_matrices(dh: np.ndarray, q: np.ndarray, convention: str = "standard") -> 
         raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got "
                          f"{convention!r}")
     T[..., 3, 3] = 1.0
+    if beta is not None and np.any(beta != 0):
+        Ry = np.zeros((len(beta), 4, 4))
+        Ry[:, :3, :3] = rot_y(np.asarray(beta, dtype=float))
+        Ry[:, 3, 3] = 1.0
+        if convention == "standard":   # … Rx(α) Ry(β)
+            T = T @ Ry
+        else:                          # Rx(α) Ry(β) Tx(a) Rz Tz = Rx(α) Ry(β) Rx(α)ᵀ · T
+            Rx = np.zeros((len(beta), 4, 4))
+            Rx[:, :3, :3] = rot_x(dh[:, 3])
+            Rx[:, 3, 3] = 1.0
+            T = (Rx @ Ry @ np.swapaxes(Rx, -1, -2)) @ T
     return T
 
 
@@ -203,7 +267,7 @@ def joint_frames(arm: Arm, q: Any) -> np.ndarray:
     frame 0 is the base (``arm.base``), frame i the DH frame after joint i (frame n is the
     last DH frame; the flange is frame n · ``arm.flange``)."""
     q = check_joints(arm, q)
-    T = dh_matrices(arm.dh, q, arm.convention)
+    T = dh_matrices(arm.dh, q, arm.convention, arm.beta)
     out = np.empty(q.shape[:-1] + (arm.n_joints + 1, 4, 4))
     out[..., 0, :, :] = arm.base
     for i in range(arm.n_joints):
@@ -215,7 +279,7 @@ def base_from_flange(arm: Arm, q: Any) -> np.ndarray:
     """Robot base ← flange (…, 4, 4) mm for joint values q (…, n) rad: T_1 ⋯ T_n · flange,
     without ``arm.base`` (what the controller reports: the tmscal A)."""
     q = check_joints(arm, q)
-    T = dh_matrices(arm.dh, q, arm.convention)
+    T = dh_matrices(arm.dh, q, arm.convention, arm.beta)
     out = np.broadcast_to(np.eye(4), q.shape[:-1] + (4, 4)).copy()
     for i in range(arm.n_joints):
         out = out @ T[..., i, :, :]
