@@ -319,9 +319,10 @@ def make_header(bodies: Iterable[str], config: Mapping[str, Any] | None = None,
 
 
 def records_from_arrays(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | None = None,
-                        commanded: np.ndarray | None = None, samples: int = 1
-                        ) -> list[PoseRecord]:
-    """PoseRecords (index 0…n−1) from arrays (n, 4, 4) mm, e.g. for simulated sessions."""
+                        commanded: np.ndarray | None = None, samples: int = 1,
+                        joints: np.ndarray | None = None) -> list[PoseRecord]:
+    """PoseRecords (index 0…n−1) from arrays (n, 4, 4) mm, e.g. for simulated sessions;
+    ``joints`` (n, k) rad: each pose's ``joints_rad``."""
     out = []
     for i in range(len(A)):
         s = {"A": samples}
@@ -332,5 +333,6 @@ def records_from_arrays(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | Non
         out.append(PoseRecord(index=i, A=A[i], B=None if B is None else B[i],
                               C=None if C is None else C[i],
                               commanded=None if commanded is None else commanded[i],
-                              time=float(i), samples=s))
+                              time=float(i), samples=s,
+                              joints_rad=None if joints is None else list(joints[i])))
     return out
