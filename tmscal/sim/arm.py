@@ -33,10 +33,11 @@ size Joubair et al. (2016) simulate, uniform ±2 mm on lengths and ±1° on angl
   manufacturer publishes such a per-model table; the ASSUMPTION (docs/kinematics.md,
   "Realistic arm errors") is length deviations N(0, σ_L²) with σ_L = 0.0004 × the arm's
   stated reach (``ArmSpec.reach_mm``: 0.34 mm on a UR5e, 0.52 mm on a UR10e, 0.7 mm on a
-  UR20, 0.24 mm on the VS-060) and angle deviations N(0, (0.03°)²). Over the mock's
-  workspace this gives a flange error of about a millimetre, the order Nubiola and Bonev
-  (2013) measured on an uncalibrated ABB IRB 1600 (0.968 mm mean); ``benchmarks/
-  realistic_arm_errors.py`` prints it per arm. Here the base error moves the arm in the rig
+  UR20, 0.24 mm on the VS-060) and angle deviations N(0, (0.03°)²). On a UR5e this gives a
+  mean flange error of 1.5 mm over the mock's workspace, and of 1.0 mm over the whole joint
+  range once a rigid base and tool are fitted: the order Nubiola and Bonev (2013) measured
+  on an uncalibrated ABB IRB 1600 (0.968 mm mean); ``benchmarks/realistic_arm_errors.py``
+  prints it per arm. Here the base error moves the arm in the rig
   frame (the true chain starts at ``mount`` · nominal base⁻¹ · true base: where joint 1
   really is in the controller's base frame), and the flange error moves the flange.
 
