@@ -112,3 +112,66 @@ def test_ur_unreachable_target_is_refused_and_nothing_moves(mock_config):
         with URRobot(mp.endpoints["robot"], envelope=Envelope()) as again:
             np.testing.assert_array_equal(again.joint_positions(), q0)
             np.testing.assert_allclose(again.flange_pose(), here, atol=1e-9)
+
+
+# --- realistic arm errors (configs/mock-*-polaris-kin.yaml; docs/kinematics.md) -------------
+
+def test_realistic_ur5e_session_records_joints_and_its_truth_arm_explains_the_tracker(
+        tmp_path, mock_config):
+    """An acquisition on configs/mock-ur-polaris-kin.yaml through ur_rtde and the Polaris
+    protocol (noise-free rig): joints on every pose; the driver names the arm; with the mock
+    rig's truth put in the header as the demo puts it (written and read back), its
+    ``truth_arm`` is the child's arm: the nominal one gives every reported A, the true one
+    every tracked B (to the Polaris' reporting resolution), and the two differ by the arm's
+    error."""
+    pytest.importorskip("rtde_control")
+    from tests.rigs import NOISE_FREE_MOCK
+    from tmscal.calib.kinematics import forward
+    from tmscal.geometry import invert
+    from tmscal.session import write_session
+
+    cfg_path = mock_config("mock-ur-polaris-kin.yaml", robot={"host": "127.0.0.63"},
+                           plan={"poses": 12}, sampling={"samples": 5},
+                           mock={"noise": NOISE_FREE_MOCK})
+    out = tmp_path / "s.jsonl"
+    with spawn_mock_rig(cfg_path, transport="pty") as mp:
+        res = acquire(load_config(cfg_path), out, **endpoints_kwargs(mp.endpoints))
+    assert (res.recorded, res.skipped) == (12, 0)
+    s = read_session(out)
+    assert s.header["devices"]["robot"]["arm"] == "ur5e"
+    assert s.truth_arm is None   # an acquisition does not know it ran on a mock
+    header = {**s.header, "truth": build_sim_rig(load_config(cfg_path)).truth.as_dict()}
+    write_session(tmp_path / "t.jsonl", header, s.poses)
+    t = read_session(tmp_path / "t.jsonl")
+    ta, truth = t.truth_arm, t.truth
+    assert ta is not None and (ta["name"], ta["errors"]) == ("ur5e", "realistic")
+    assert ta["name"] == t.header["devices"]["robot"]["arm"]
+    fit_true, fit_nominal = [], []
+    for p in t.poses:
+        assert p.joints_rad is not None and len(p.joints_rad) == 6, p.index
+        q = np.array(p.joints_rad)
+        A = ta["mount"] @ forward(ta["nominal"], q)
+        assert np.linalg.norm(A[:3, 3] - p.A[:3, 3]) < 1e-3, p.index
+        for flange, errs in ((ta["mount"] @ forward(ta["true"], q), fit_true),
+                             (A, fit_nominal)):
+            B = invert(truth["Z"]) @ flange @ truth["X"]
+            errs.append(np.linalg.norm(B[:3, 3] - p.B[:3, 3]))
+    assert max(fit_true) < 0.02, fit_true
+    assert np.median(fit_nominal) > 0.2, fit_nominal
+
+
+@pytest.mark.parametrize("base, robot", [("mock-ur-polaris-kin.yaml", {"host": "127.0.0.64"}),
+                                         ("mock-denso-polaris-kin.yaml", {"port": 0})])
+def test_demo_runs_on_the_realistic_arm_configs(mock_config, base, robot):
+    import subprocess
+    import sys
+    if "ur" in base:
+        pytest.importorskip("rtde_control")
+    cfg = mock_config(base, robot=robot)
+    out = subprocess.run([sys.executable, "-m", "tmscal.cli", "demo", "--config", str(cfg),
+                          "--poses", "12", "--samples", "5", "--json"],
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["method"] == "qr36" and res["n_solve"] == 12
+    assert res["truth"]["coil_placement_mm"] > 0.0

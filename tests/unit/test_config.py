@@ -18,7 +18,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
                                   "mock-polaris.yaml", "mock-ur.yaml", "mock-denso.yaml",
                                   "mock-ur-polaris-realtime.yaml",
                                   "mock-franka-polaris.yaml", "mock-ur-ati.yaml",
-                                  "mock-ur-igtl.yaml"])
+                                  "mock-ur-igtl.yaml", "mock-ur-polaris-kin.yaml",
+                                  "mock-denso-polaris-kin.yaml"])
 def test_shipped_mock_configs_load(name):
     cfg = load_config(CONFIGS / name)
     assert cfg.mock is not None

@@ -373,7 +373,8 @@ def test_errors_carry_the_line(tmp_path):
 def test_shipped_robot_configs_have_tool_points():
     for name in ("mock-ur-polaris", "mock-denso-polaris", "mock-ur", "mock-denso",
                  "ur-polaris", "denso-polaris", "mock-franka-polaris", "franka-polaris",
-                 "mock-ur-polaris-realtime", "mock-ur-ati"):
+                 "mock-ur-polaris-realtime", "mock-ur-ati", "mock-ur-polaris-kin",
+                 "mock-denso-polaris-kin"):
         data = yaml.safe_load((CONFIGS / f"{name}.yaml").read_text())
         for k in (*SAFETY_KEYS, "tool_points_mm"):
             assert data["safety"].get(k) is not None, (name, k)

@@ -18,7 +18,8 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
                + the driver's keys (ati: counts_per_force, counts_per_torque)}
     mock:     {clock: fast|real, seed, truth: tms|random|{X, Y, Z}, noise: {...},
                settle: {amplitude_mm, tau_s, freq_hz, rotation_deg},
-               kinematics: {arm: ur5e|vs060|… (registered), errors: paper|all|none, seed},
+               kinematics: {arm: ur5e|vs060|… (registered),
+                            errors: paper|all|none|realistic, seed},
                tracker: {model, faults: {...}, ...}, robot: {faults: {...}, ...},
                ft: {noise_n, noise_nm, faults: {...}, rate_hz, payload_kg, payload_cog_mm}}
 

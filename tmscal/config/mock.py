@@ -16,15 +16,15 @@ __all__ = ["KINEMATIC_ERRORS", "MOCK_FT_KEYS", "parse_mock",
            "check_kinematics", "check_mock_ft"]
 
 
-#: the error protocols of ``mock.kinematics.errors`` (its arms are the arm registry's,
-#: ``tmscal.calib.kinematics.ARM_NAMES``, imported when a config names one: importing
-#: ``tmscal.calib`` loads the solvers)
-KINEMATIC_ERRORS = ("paper", "all", "none")
+#: the error protocols of ``mock.kinematics.errors``, ``tmscal.sim.arm.ERROR_PROTOCOLS`` (its
+#: arms are the arm registry's, ``tmscal.calib.kinematics.ARM_NAMES``, imported when a config
+#: names one: importing ``tmscal.calib`` loads the solvers)
+KINEMATIC_ERRORS = ("paper", "all", "none", "realistic")
 
 
 def check_kinematics(data: Any, src: str, default_seed: int) -> dict[str, Any] | None:
     """``mock.kinematics`` (None when absent): {arm: a registered arm (``tmscal.calib.
-    kinematics.ARM_NAMES``: ur5e, vs060, fr3, …), errors: paper|all|none
+    kinematics.ARM_NAMES``: ur5e, vs060, fr3, …), errors: paper|all|none|realistic
     (default paper), seed: int (default the mock's seed)}, checked and completed; a
     ConfigError names the key."""
     if data is None:

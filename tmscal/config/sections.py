@@ -125,9 +125,9 @@ class MockConfig:
     "random" truth as in Wang et al. 2018, or explicit {X, Y, Z} 4×4 mm), noise
     (``sim.Noise`` fields), settle (``sim.Settle`` fields: the coil's damped oscillation
     after each move; None: no oscillation), per-device options and faults, and kinematics
-    ({arm: a registered arm, errors: paper|all|none, seed}: the mock robot moves a serial arm
-    whose true parameters differ from its controller's nominal ones; None: no arm model;
-    docs/selfcal.md)."""
+    ({arm: a registered arm, errors: paper|all|none|realistic, seed}: the mock robot moves a
+    serial arm whose true parameters differ from its controller's nominal ones; None: no arm
+    model; docs/selfcal.md, docs/kinematics.md)."""
 
     clock: str = "fast"
     seed: int = 0

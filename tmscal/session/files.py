@@ -20,17 +20,17 @@ from typing import Any
 import numpy as np
 
 from ..errors import SessionError
+from .checks import _Bad
 from .outputs import fsync_dir, install, new_temp
 from .records import (
     PoseRecord,
-    _Bad,
     _check_header,
     _check_pose,
-    _check_truth,
     _header_line,
     _line_for,
     _loads,
 )
+from .truth import _check_truth, _check_truth_arm
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +64,24 @@ class Session:
             return None
         try:
             return _check_truth(t)
+        except _Bad as e:
+            raise SessionError(f"{self.path or 'session'}: header: {e}") from None
+
+    @property
+    def truth_arm(self) -> dict[str, Any] | None:
+        """The simulated rig's arm (the header's ``truth.arm``; docs/session-format.md), or
+        None when the session has none: {"name": the registry name, "errors": the protocol
+        of its hidden errors, "nominal": the controller's model and "true": the arm's
+        (:class:`~tmscal.calib.kinematics.Arm`, mm and rad, in the robot's base frame),
+        "mount": 4×4 mm rig frame ← robot base}: the rig-frame flange at joints q is
+        mount · forward(arm, q), the reported A with the nominal arm, the one the tracker
+        sees (B = Z⁻¹ · it · X) with the true. Raises SessionError naming the key if it is
+        malformed."""
+        t = self.header.get("truth")
+        if not isinstance(t, dict) or "arm" not in t:
+            return None
+        try:
+            return _check_truth_arm(t["arm"])
         except _Bad as e:
             raise SessionError(f"{self.path or 'session'}: header: {e}") from None
 

@@ -18,24 +18,27 @@ from typing import Any
 import numpy as np
 
 from ..errors import SessionError
+from .checks import (
+    _MAX_JOINT_RAD,
+    _MAX_JOINTS,
+    _MAX_WRENCH,
+    _Bad,
+    _is_number,
+    _matrix,
+    _numbers,
+)
 from .jsonable import json_default
+from .truth import _check_truth
 
 log = logging.getLogger(__name__)
 
 FORMAT = "tmscal-session"
 VERSION = 1
 _MATRIX_KEYS = ("A", "B", "C", "commanded")
-_TRUTH_KEYS = ("X", "Y", "Z")
-#: sanity bounds: a translation beyond 10 km, an index or count beyond 10⁹ is corruption
-_MAX_TRANS_MM = 1e7
+#: sanity bound: an index or count beyond 10⁹ is corruption (translations: ``checks``)
 _MAX_COUNT = 10 ** 9
-_RIGID_TOL = 1e-4
 #: a JSON \\u escape of a UTF-16 surrogate (the only way a line can carry a lone surrogate)
 _SURROGATE_ESCAPE = re.compile(r"\\u[dD][89abcdefABCDEF]")
-
-
-class _Bad(Exception):
-    """A line fails validation; the message is the reason without file and line."""
 
 
 # --- validation (shared by the reader and the writer) --------------------------------------
@@ -77,45 +80,6 @@ def _dumps(obj: Any) -> str:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=json_default)
 
 
-_NUMBER_TYPES = frozenset((int, float))
-_EYE3 = np.eye(3)
-
-
-def _is_number(x: Any) -> bool:
-    return type(x) in _NUMBER_TYPES  # not bool, not str
-
-
-def _matrix(value: Any, name: str) -> np.ndarray | None:
-    """A 4×4 rigid transform (mm) from a JSON value, or None for null."""
-    if value is None:
-        return None
-    if not (type(value) is list and len(value) == 4
-            and all(type(r) is list and len(r) == 4 for r in value)):
-        raise _Bad(f"field '{name}': expected a 4×4 matrix (4 rows of 4 numbers)")
-    if not all(_NUMBER_TYPES.issuperset(map(type, r)) for r in value):
-        raise _Bad(f"field '{name}': entries must be numbers")
-    try:
-        M = np.array(value, dtype=np.float64)
-    except (OverflowError, ValueError, TypeError):
-        raise _Bad(f"field '{name}': a number is out of range") from None
-    if not np.isfinite(M).all():
-        raise _Bad(f"field '{name}': contains NaN or infinity")
-    r3 = M[3]
-    if abs(r3[0]) > 1e-9 or abs(r3[1]) > 1e-9 or abs(r3[2]) > 1e-9 or abs(r3[3] - 1) > 1e-9:
-        raise _Bad(f"field '{name}': last row {r3.tolist()} is not [0, 0, 0, 1]")
-    A = np.abs(M[:3])
-    if A[:, 3].max() > _MAX_TRANS_MM:
-        raise _Bad(f"field '{name}': translation beyond {_MAX_TRANS_MM:.0e} mm")
-    R = M[:3, :3]
-    # entries of a rotation are within [-1, 1]; checking first keeps the products finite
-    if A[:, :3].max() > 1 + 1e-3 or np.abs(R @ R.T - _EYE3).max() > _RIGID_TOL:
-        raise _Bad(f"field '{name}': not a rigid transform (rotation block not orthonormal)")
-    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
-    if abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) - 1) > _RIGID_TOL:
-        raise _Bad(f"field '{name}': not a rigid transform (a reflection, det ≠ 1)")
-    return M
-
-
 def _count(x: Any) -> bool:
     return type(x) is int and 0 <= x <= _MAX_COUNT
 
@@ -145,22 +109,6 @@ def _check_header(obj: Any) -> dict[str, Any]:
     if t is not None:
         _check_truth(t)
     return obj
-
-
-def _check_truth(t: Any) -> dict[str, np.ndarray]:
-    if not isinstance(t, dict):
-        raise _Bad("field 'truth' must be an object")
-    extra = [k for k in t if k not in _TRUTH_KEYS]
-    if extra:
-        raise _Bad(f"field 'truth': unknown key {extra[0]!r} (expected X, Y, Z)")
-    out = {}
-    for k in _TRUTH_KEYS:
-        M = _matrix(t.get(k), f"truth.{k}")
-        if M is None and k != "Y":
-            raise _Bad(f"field 'truth.{k}' is missing")
-        if M is not None:
-            out[k] = M
-    return out
 
 
 def _check_pose(obj: Any) -> PoseRecord:
@@ -212,37 +160,6 @@ def _check_pose(obj: Any) -> PoseRecord:
     return PoseRecord(index=idx, time=t, samples=samples, spread=spread, skipped=skipped,
                       pool=pool, robot_s=robot_s, joints_rad=joints, wrench=wrench,
                       wrench_spread=wspread, **mats)
-
-
-#: at most this many joint angles per pose (DENSO's CurJnt carries up to 32 axes)
-_MAX_JOINTS = 32
-#: a joint angle beyond ±1000 rad, a force or torque beyond 10⁶ N or N·m is corruption
-_MAX_JOINT_RAD = 1e3
-_MAX_WRENCH = 1e6
-
-
-def _numbers(value: Any, name: str, what: str, n: int, bound: float, exact: bool = False,
-             nonneg: bool = False) -> list[float] | None:
-    """An optional list of finite numbers (None for an absent field or null): exactly ``n``
-    with ``exact``, else 1 to ``n``; each of magnitude below ``bound`` (and ≥ 0 with
-    ``nonneg``)."""
-    if value is None:
-        return None
-    count = f"{n}" if exact else f"1 to {n}"
-    if not (type(value) is list and (len(value) == n if exact else 1 <= len(value) <= n)
-            and all(_is_number(x) for x in value)):
-        raise _Bad(f"field '{name}': expected a list of {count} numbers ({what})")
-    out = []
-    for x in value:
-        try:
-            f = float(x)
-        except OverflowError:
-            f = math.inf
-        if not (math.isfinite(f) and abs(f) < bound) or (nonneg and f < 0):
-            raise _Bad(f"field '{name}': {str(x)[:40]} is out of range (a finite number"
-                       f"{' ≥ 0' if nonneg else ''} of magnitude below {bound:g})")
-        out.append(f)
-    return out
 
 
 @dataclass
@@ -378,9 +295,10 @@ def _header_line(header: Mapping[str, Any], where: str) -> bytes:
 
 def make_header(bodies: Iterable[str], config: Mapping[str, Any] | None = None,
                 devices: Mapping[str, Any] | None = None,
-                truth: Mapping[str, np.ndarray | None] | None = None,
+                truth: Mapping[str, Any] | None = None,
                 **extra: Any) -> dict[str, Any]:
-    """A v1 header dict. ``truth`` (X, Z and optionally Y as 4×4 mm) is stored for simulated
+    """A v1 header dict. ``truth`` (X, Z and optionally Y as 4×4 mm, and optionally the
+    rig's ``arm``, as ``tmscal.sim.Truth.as_dict`` gives it) is stored for simulated
     sessions. Raises SessionError if the reader would reject the header (e.g. NaN, values
     that are not JSON, no bodies)."""
     h: dict[str, Any] = {
@@ -391,8 +309,8 @@ def make_header(bodies: Iterable[str], config: Mapping[str, Any] | None = None,
     }
     if truth is not None:
         try:
-            h["truth"] = {k: np.asarray(v, dtype=float).tolist() for k, v in truth.items()
-                          if v is not None}
+            h["truth"] = {k: (v if k == "arm" else np.asarray(v, dtype=float).tolist())
+                          for k, v in truth.items() if v is not None}
         except (TypeError, ValueError) as e:
             raise SessionError(f"session header: field 'truth': not numeric ({e})") from None
     h.update(extra)
@@ -401,9 +319,10 @@ def make_header(bodies: Iterable[str], config: Mapping[str, Any] | None = None,
 
 
 def records_from_arrays(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | None = None,
-                        commanded: np.ndarray | None = None, samples: int = 1
-                        ) -> list[PoseRecord]:
-    """PoseRecords (index 0…n−1) from arrays (n, 4, 4) mm, e.g. for simulated sessions."""
+                        commanded: np.ndarray | None = None, samples: int = 1,
+                        joints: np.ndarray | None = None) -> list[PoseRecord]:
+    """PoseRecords (index 0…n−1) from arrays (n, 4, 4) mm, e.g. for simulated sessions;
+    ``joints`` (n, k) rad: each pose's ``joints_rad``."""
     out = []
     for i in range(len(A)):
         s = {"A": samples}
@@ -414,5 +333,6 @@ def records_from_arrays(A: np.ndarray, B: np.ndarray | None, C: np.ndarray | Non
         out.append(PoseRecord(index=i, A=A[i], B=None if B is None else B[i],
                               C=None if C is None else C[i],
                               commanded=None if commanded is None else commanded[i],
-                              time=float(i), samples=s))
+                              time=float(i), samples=s,
+                              joints_rad=None if joints is None else list(joints[i])))
     return out

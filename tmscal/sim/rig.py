@@ -43,7 +43,8 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -75,11 +76,14 @@ TOOL_8700340_MM = TOOL_8700340_MM - TOOL_8700340_MM.mean(axis=0)
 @dataclass(frozen=True)
 class Truth:
     """Ground truth: X = flange_from_marker, Y = flange_from_probe (None for a marker-only
-    rig), Z = base_from_tracker; 4×4 mm."""
+    rig), Z = base_from_tracker; 4×4 mm. ``arm``: the rig's serial arm (an
+    :class:`~tmscal.sim.arm.ArmPair`: the controller's nominal model, the true one, the mount;
+    None: the rig has none, its robot is kinematically perfect)."""
 
     X: np.ndarray
     Z: np.ndarray
     Y: np.ndarray | None = None
+    arm: ArmPair | None = None
 
     def flange_from(self, body: str) -> np.ndarray:
         """flange_from_<body>, 4×4 mm, for body "marker" (X) or "probe" (Y)."""
@@ -89,11 +93,15 @@ class Truth:
             return self.Y
         raise KeyError(f"the rig has no body {body!r}")
 
-    def as_dict(self) -> dict[str, list]:
-        """{"X", "Z"[, "Y"]} as nested lists (mm), for session headers."""
-        d = {"X": self.X.tolist(), "Z": self.Z.tolist()}
+    def as_dict(self) -> dict[str, Any]:
+        """{"X", "Z"[, "Y"]} as nested lists (mm), and "arm" (``ArmPair.as_dict``: the arm's
+        name, error protocol, nominal and true geometry, mount) when the rig has one, for
+        session headers (docs/session-format.md)."""
+        d: dict[str, Any] = {"X": self.X.tolist(), "Z": self.Z.tolist()}
         if self.Y is not None:
             d["Y"] = self.Y.tolist()
+        if self.arm is not None:
+            d["arm"] = self.arm.as_dict()
         return d
 
     @classmethod
@@ -300,7 +308,9 @@ class SimRig:
     ``time_s``: the time base in seconds (None: ``time.monotonic``). ``arm``: a serial arm
     (:class:`~tmscal.sim.arm.ArmPair`, None: none): the robot then moves in joint space,
     reports the nominal model's flange pose and really puts the flange where the true model
-    says (``tmscal.sim.arm``); without one, behaviour and random draws are as before.
+    says (``tmscal.sim.arm``); without one, behaviour and random draws are as before. The
+    rig's ``truth`` carries the arm (``Truth.arm``): given on either, it is set on both; a
+    different arm on each is a ValueError.
     """
 
     truth: Truth
@@ -314,6 +324,12 @@ class SimRig:
 
     def __post_init__(self) -> None:
         self._lock = threading.RLock()
+        if self.arm is None:
+            self.arm = self.truth.arm
+        elif self.truth.arm is None:
+            self.truth = replace(self.truth, arm=self.arm)
+        elif self.truth.arm is not self.arm:
+            raise ValueError("the truth's arm and the rig's arm differ")
         if self.tools is None:
             names = ["marker"] + (["probe"] if self.truth.Y is not None else [])
             self.tools = {n: TOOL_8700340_MM for n in names}

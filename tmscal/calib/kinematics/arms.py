@@ -24,6 +24,11 @@ Sources (values converted to mm and rad):
   descriptions (DENSO WAVE: denso_robot_ros, ``vs060.urdf``, 2017; denso_cobotta_ros,
   ``cobotta.urdf``, 2019), with the joint limits given there; q = 0 is the arm straight up
   with the flange frame parallel to the base frame, as in those descriptions.
+* Reach (``reach_mm``, the maximum reach each manufacturer states; it sizes the mock rig's
+  realistic arm errors, ``tmscal.sim.arm``): Universal Robots' user manuals, "Technical
+  specifications" (UR3/UR3e 500 mm, UR5/UR5e 850 mm, UR10/UR10e 1300 mm, UR16e 900 mm, UR20
+  1750 mm); DENSO WAVE's product specifications (VS-060 605 mm, to the wrist centre;
+  COBOTTA 342.5 mm); Franka's "Robot and interface specifications" (855 mm, Panda and FR3).
 
 Mock placement (``mount``, ``home_q``): where the mock rig puts the arm so that its start pose
 ``tmscal.sim.TMS_RIG_P0`` (flange at (500, 0, 400) mm in the rig frame, tool down) and the plan
@@ -76,8 +81,9 @@ class ArmSpec:
     controller calls it: UR's dashboard ``get robot model`` answer, DENSO's ``@TYPE_NAME``,
     the robot name in the URDF a Franka controller returns), ``generation`` (UR: "CB3",
     "e-Series", or None when the model alone tells), ``mock_serial`` (the serial number a mock
-    controller answers), and the mock rig's ``mount`` (rig ← robot base, 4×4 mm) and
-    ``home_q`` (rad) (module docstring)."""
+    controller answers), the mock rig's ``mount`` (rig ← robot base, 4×4 mm) and ``home_q``
+    (rad) (module docstring), and ``reach_mm``: the maximum reach the manufacturer states (mm;
+    module docstring), which sizes the mock's realistic arm errors (``tmscal.sim.arm``)."""
 
     arm: Arm
     vendor: str
@@ -89,6 +95,7 @@ class ArmSpec:
     mock_serial: str | None = None
     mount: np.ndarray = field(default_factory=lambda: np.eye(4))
     home_q: tuple[float, ...] = ()
+    reach_mm: float = 0.0
 
     def __post_init__(self) -> None:
         mount = np.array(self.mount, dtype=float)
@@ -106,7 +113,7 @@ class ArmSpec:
 
 
 def _ur(name: str, model: str, d1: float, a2: float, a3: float, d4: float, d5: float,
-        d6: float, generation: str | None, serial: str,
+        d6: float, generation: str | None, serial: str, reach_mm: float,
         mount_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> ArmSpec:
     """A UR arm from its six published lengths (metres in UR's table, mm here)."""
     dh = [[0.0, d1, 0.0, _H], [0.0, 0.0, a2, 0.0], [0.0, 0.0, a3, 0.0],
@@ -116,7 +123,7 @@ def _ur(name: str, model: str, d1: float, a2: float, a3: float, d4: float, d5: f
     return ArmSpec(arm=arm, vendor="Universal Robots", model=model, source=UR_SOURCE,
                    controller_model=model.rstrip("e") if generation == "e-Series" else model,
                    generation=generation, mock_serial=serial,
-                   mount=make_pose(np.eye(3), mount_xyz),
+                   mount=make_pose(np.eye(3), mount_xyz), reach_mm=reach_mm,
                    home_q=(math.pi, -_H, _H, -_H, -_H, 0.0))
 
 
@@ -131,26 +138,27 @@ def _franka(name: str, model: str, lo: list[float], hi: list[float]) -> ArmSpec:
     arm = Arm(name=name, dh=_FRANKA_DH, convention="modified", flange=_FRANKA_FLANGE,
               joint_limits_rad=np.column_stack([lo, hi]))
     return ArmSpec(arm=arm, vendor="Franka", model=model, source=FRANKA_SOURCE,
-                   controller_model=name, home_q=(0.0, -0.11, 0.0, -2.28, 0.0, 2.17, 0.0))
+                   controller_model=name, home_q=(0.0, -0.11, 0.0, -2.28, 0.0, 2.17, 0.0),
+                   reach_mm=855.0)
 
 
 _SPECS: tuple[ArmSpec, ...] = (
     # Universal Robots CB3 (PolyScope 3.x) and e-Series (PolyScope 5.x)
     # the UR3s' 500 mm reach: the base stands 200 mm nearer P0, on a 100 mm pedestal
-    _ur("ur3", "UR3", 151.9, -243.65, -213.25, 112.35, 85.35, 81.9, "CB3", "2015330001",
+    _ur("ur3", "UR3", 151.9, -243.65, -213.25, 112.35, 85.35, 81.9, "CB3", "2015330001", 500.0,
         (200.0, 0.0, 100.0)),
-    _ur("ur5", "UR5", 89.159, -425.0, -392.25, 109.15, 94.65, 82.3, "CB3", "2016351864"),
-    _ur("ur10", "UR10", 127.3, -612.0, -572.3, 163.941, 115.7, 92.2, "CB3", "2016301779"),
+    _ur("ur5", "UR5", 89.159, -425.0, -392.25, 109.15, 94.65, 82.3, "CB3", "2016351864", 850.0),
+    _ur("ur10", "UR10", 127.3, -612.0, -572.3, 163.941, 115.7, 92.2, "CB3", "2016301779", 1300.0),
     _ur("ur3e", "UR3e", 151.85, -243.55, -213.2, 131.05, 85.35, 92.1, "e-Series",
-        "20185300000", (200.0, 0.0, 100.0)),
-    _ur("ur5e", "UR5e", 162.5, -425.0, -392.2, 133.3, 99.7, 99.6, "e-Series", "20185500000"),
+        "20185300000", 500.0, (200.0, 0.0, 100.0)),
+    _ur("ur5e", "UR5e", 162.5, -425.0, -392.2, 133.3, 99.7, 99.6, "e-Series", "20185500000", 850.0),
     _ur("ur10e", "UR10e", 180.7, -612.7, -571.55, 174.15, 119.85, 116.55, "e-Series",
-        "20185000000"),
+        "20185000000", 1300.0),
     _ur("ur16e", "UR16e", 180.7, -478.4, -360.0, 174.15, 119.85, 116.55, "e-Series",
-        "20195600000"),
+        "20195600000", 900.0),
     # the UR20's controller answers "UR20": the model alone tells (no CB3 twin); UR publishes
     # its serial-number structure only as a figure, so the mock's number is made up
-    _ur("ur20", "UR20", 236.3, -862.0, -728.7, 201.0, 159.3, 154.3, None, "20230000001"),
+    _ur("ur20", "UR20", 236.3, -862.0, -728.7, 201.0, 159.3, 154.3, None, "20230000001", 1750.0),
     ArmSpec(
         arm=Arm(name="vs060",
                 dh=np.array([[0.0, 345.0, 0.0, -_H], [-_H, 0.0, 305.0, 0.0],
@@ -161,7 +169,7 @@ _SPECS: tuple[ArmSpec, ...] = (
                                            [-2.094395, 2.094395], [-6.283185, 6.283185]])),
         vendor="DENSO", model="VS-060", source=DENSO_SOURCE, controller_model="VS-060",
         approximate=True, mount=make_pose(np.eye(3), [150.0, 0.0, 0.0]),
-        home_q=(0.0, 0.5, 1.5, 0.0, 1.14, 0.0)),
+        home_q=(0.0, 0.5, 1.5, 0.0, 1.14, 0.0), reach_mm=605.0),
     ArmSpec(
         arm=Arm(name="cobotta",
                 dh=np.array([[0.0, 180.0, 0.0, -_H], [-_H, 0.0, 165.0, 0.0],
@@ -174,7 +182,7 @@ _SPECS: tuple[ArmSpec, ...] = (
         # beside P0 (turned −90° about z, on a 200 mm pedestal): the wrist then works in the
         # middle of its ±170° J6 range
         approximate=True, mount=make_pose(rot_z(-_H), [500.0, 200.0, 200.0]),
-        home_q=(0.22, 0.28, 1.93, 0.0, 0.93, 1.8)),
+        home_q=(0.22, 0.28, 1.93, 0.0, 0.93, 1.8), reach_mm=342.5),
     _franka("fr3", "FR3", [-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159],
             [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159]),
     _franka("panda", "Panda", [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973],
