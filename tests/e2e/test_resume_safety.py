@@ -67,10 +67,13 @@ def test_resume_refuses_a_header_whose_p0_was_moved(tmp_path, recorded):
     assert out.read_bytes() == before
 
 
-def _turned(P: np.ndarray, deg: float) -> np.ndarray:
-    """Pose ``P`` turned by ``deg`` about its own tool (z) axis, the flange where it is."""
+def _turned(P: np.ndarray, deg: float, lift_mm: float = 0.0) -> np.ndarray:
+    """Pose ``P`` turned by ``deg`` about its own tool (z) axis, the flange where it is (or
+    ``lift_mm`` higher: a DENSO MOVE L times only the translation, so a jog that turns the
+    coil must also translate to be timed; docs/safety.md)."""
     T = np.array(P, dtype=float)
     T[:3, :3] = T[:3, :3] @ rot_z(np.radians(deg))
+    T[2, 3] += lift_mm
     return T
 
 
@@ -96,7 +99,7 @@ def test_resume_refuses_an_arm_turned_where_the_run_stopped(tmp_path, kind):
         robot = make_robot(cfg, host=kw["robot_host"], port=kw["robot_port"])
         with robot:   # the config's box and caps; no P0, so no rotation limit: a jog
             np.testing.assert_allclose(robot.flange_pose(), last, atol=1e-3)
-            robot.move_to(_turned(last, 60))
+            robot.move_to(_turned(last, 60, lift_mm=3.0))
             here = robot.flange_pose()
         assert 59 < np.degrees(angle_between(last, here)) < 61
         moves, before = mr.devices[-1].stats["moves"], out.read_bytes()
