@@ -17,7 +17,7 @@ from tmscal.acquisition.plan import make_plan
 from tmscal.acquisition.run import AcquisitionStopped, acquire
 from tmscal.config import load_config
 from tmscal.errors import SafetyError
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 from tmscal.solving.solve import solve_session
 

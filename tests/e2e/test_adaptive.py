@@ -18,11 +18,11 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from tmscal.acquisition.adaptive import acquire_adaptive, settings_for
+from tmscal.acquisition.adaptive_run import acquire_adaptive, settings_for
 from tmscal.acquisition.devices import envelope_for
 from tmscal.config import load_config
 from tmscal.errors import SafetyError
-from tmscal.mocks.rig import spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import spawn_mock_rig, start_mock_rig
 from tmscal.poses import PlanSpec
 from tmscal.session import read_session
 

@@ -17,7 +17,7 @@ from tmscal.calib.kinematics import ARMS, base_from_flange
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.mocks.denso.controller import NO_ARM_TYPE_NAME
-from tmscal.mocks.rig import spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import NOISE_FREE_MOCK, endpoints_kwargs

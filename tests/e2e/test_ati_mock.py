@@ -19,7 +19,7 @@ from tmscal.errors import ConnectionLost, DeviceError, DeviceTimeout
 from tmscal.geometry import make_pose, rot_x
 from tmscal.mocks.ati import ATIFaults, ATINetFTMock
 from tmscal.mocks.clock import FAST, REAL_TIME
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.mocks.wrench import gravity_wrench_source
 from tmscal.net import NotLoopbackError
 from tmscal.sim.rig import Noise, SimRig, tms_rig_truth

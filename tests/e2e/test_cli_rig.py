@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from tmscal.cli import main
 from tmscal.config import load_config
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.sim import TMS_RIG_P0
 
 from ..rigs import NOISE_FREE_MOCK, point_config
@@ -84,7 +84,7 @@ def test_demo_json_recovers_truth(mock_config):
 
 def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_config):
     from tmscal.geometry import rotvec_pose_from_matrix
-    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.mocks.launch import spawn_mock_rig
 
     cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
                       mock={"noise": NOISE_FREE_MOCK})
@@ -103,7 +103,7 @@ def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_co
 def test_robot_on_a_ur_whose_dashboard_reply_is_not_utf8_names_it(mock_config):
     """`tmscal robot` on a UR whose dashboard answers a query with bytes that are not UTF-8:
     one line naming the command and the bytes (escaped), exit status 1, no traceback."""
-    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.mocks.launch import spawn_mock_rig
 
     cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.22.4"},
                       mock={"noise": NOISE_FREE_MOCK,

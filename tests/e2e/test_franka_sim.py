@@ -34,7 +34,7 @@ from tmscal.config import load_config
 from tmscal.drivers.franka.robot import COMMUNICATION_TEXT
 from tmscal.errors import RobotFault, SafetyError
 from tmscal.geometry import angle_between, invert, make_pose, rot_x, rot_z
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.session import read_session
 from tmscal.sim import TMS_RIG_P0
 
@@ -142,7 +142,7 @@ def test_every_socket_of_the_mock_is_on_loopback(tmp_path):
 
     import franky
 
-    from tmscal.mocks.rig import start_mock_rig
+    from tmscal.mocks.launch import start_mock_rig
 
     from ..rigs import write_config
     cfg = load_config(write_config(tmp_path, BASE, robot={"host": "127.0.0.166"}))

@@ -150,7 +150,7 @@ def test_settling_seen_by_the_ndi_driver_decays_with_frames_not_with_sleep(mock_
     from tests.rigs import NOISE_FREE_MOCK, point_config
     from tmscal.acquisition.devices import make_robot, make_tracker
     from tmscal.config import load_config
-    from tmscal.mocks.rig import start_mock_rig
+    from tmscal.mocks.launch import start_mock_rig
 
     amp, tau, f = 0.3, 0.25, 4.0
     base = mock_config("mock-denso-polaris.yaml", robot={"port": 0},

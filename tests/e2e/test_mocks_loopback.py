@@ -16,7 +16,7 @@ import yaml
 
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.net import loopback_family
 
 pytestmark = pytest.mark.e2e

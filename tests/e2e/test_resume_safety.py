@@ -14,7 +14,7 @@ import pytest
 from tmscal.acquisition.run import acquire
 from tmscal.config import load_config
 from tmscal.errors import SessionError
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import SeenPoses, endpoints_kwargs, write_config

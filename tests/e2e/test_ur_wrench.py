@@ -129,7 +129,7 @@ def test_config_ft_ur_wrench_served_by_the_ur_mock(tmp_path: Any) -> None:
     from tests.rigs import NOISE_FREE_MOCK, write_config
     from tmscal.acquisition.devices import make_ft
     from tmscal.config import load_config
-    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.mocks.launch import spawn_mock_rig
     from tmscal.sim.rig import TMS_RIG_P0
 
     path = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.155"},

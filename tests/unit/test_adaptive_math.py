@@ -1,4 +1,4 @@
-"""tmscal.calib.adaptive: the prediction, the next-pose criterion, the bootstrap and the stopping
+"""tmscal.calib.prediction: the prediction, the next-pose criterion, the bootstrap and the stopping
 rule of adaptive acquisition, against simulated rigs with known truth (tmscal.sim.SimRig
 driven directly: move_flange, then averaged observations)."""
 
@@ -9,7 +9,7 @@ import pytest
 
 from tmscal.acquisition.sample import spread_of
 from tmscal.calib import Applied, Calibration, solve
-from tmscal.calib import adaptive as ad
+from tmscal.calib import prediction as ad
 from tmscal.calib.bound import STEPS, _placement_error, crb, sim_noise_options
 from tmscal.calib.ml_model import Problem
 from tmscal.errors import CalibrationError

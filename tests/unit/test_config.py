@@ -8,7 +8,7 @@ import yaml
 
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
-from tmscal.mocks.rig import build_sim_rig
+from tmscal.mocks.launch import build_sim_rig
 from tmscal.sim import TMS_RIG_P0, tms_rig_truth
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -91,7 +91,7 @@ def test_start_pose_from_xyz_rpy(tmp_path):
 
 
 def test_unknown_driver_and_fault_options_are_named(tmp_path):
-    from tmscal.mocks.rig import start_mock_rig
+    from tmscal.mocks.launch import start_mock_rig
     data = yaml.safe_load((CONFIGS / "mock-denso-polaris.yaml").read_text())
     data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
     data["robot"]["options"] = {"max_linear_speed_mm_s": 1000, "turbo": True}

@@ -15,9 +15,9 @@ from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.geometry import invert, make_pose
 from tmscal.mocks.clock import FAST
+from tmscal.mocks.launch import build_sim_rig, start_mock_rig
 from tmscal.mocks.polaris.frames import FrameSource
 from tmscal.mocks.polaris.model import PolarisFaults
-from tmscal.mocks.rig import build_sim_rig, start_mock_rig
 from tmscal.sim import TMS_RIG_P0, Noise, Settle, SimRig
 
 AMP, TAU, FREQ = 0.3, 0.25, 4.0

@@ -94,7 +94,7 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     from ..config import load_config
     from ..net import split_endpoint
     from .live import AcquireProgress, stderr_to_log
-    from .rig import _StopFlag
+    from .rig_commands import _StopFlag
 
     if _same_file(output, config):
         raise click.BadParameter(f"{output} is the config file; it is never written over",

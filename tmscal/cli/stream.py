@@ -122,7 +122,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     from ..config import load_config
     from ..exports import load_calibration
     from ..stream import TRANSFORMS, StreamServer, stream_frames
-    from .rig import _close_quietly, _StopFlag
+    from .rig_commands import _close_quietly, _StopFlag
 
     _check_host(host, allow_remote)
     cfg = load_config(config)

@@ -306,7 +306,7 @@ def format_robot_time(rt: dict[str, float]) -> str:
 
 
 def format_prediction(pred: Any, region: str) -> str:
-    """The adaptive prediction (``calib.adaptive.Prediction``) in two lines: the predicted
+    """The adaptive prediction (``calib.prediction.Prediction``) in two lines: the predicted
     coil-placement error (mm) at its confidence and its RMS, the poses and method it rests
     on, and the region it is averaged over (``region``, a description)."""
     return (f"predicted coil-placement error {pred.coil_mm:.3g} mm at "

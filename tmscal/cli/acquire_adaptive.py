@@ -1,7 +1,8 @@
 """The adaptive parts of ``tmscal acquire --adaptive`` and ``tmscal demo --adaptive``
 (docs/adaptive.md): running the loop with a progress display (the bars and a line per
 prediction), the end-of-run report, and the demo's comparison with the mock rig's truth. The
-commands' options live in :mod:`tmscal.cli.rig`; the run in :mod:`tmscal.acquisition.adaptive`."""
+commands live in :mod:`tmscal.cli.rig_commands`; the run in
+:mod:`tmscal.acquisition.adaptive_run`."""
 
 from __future__ import annotations
 
@@ -104,7 +105,7 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         quiet: bool = False) -> Any:
     """``acquire_adaptive`` with the progress display (the bars and a line per prediction on
     stderr unless ``quiet``); returns its AcquireResult."""
-    from ..acquisition.adaptive import acquire_adaptive, settings_for
+    from ..acquisition.adaptive_run import acquire_adaptive, settings_for
     from ..acquisition.progress import ProgressGroup
     from .live import AcquireProgress, stderr_to_log
 
@@ -150,8 +151,8 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     same region), and QR36 on the session as ``demo`` prints it."""
     import numpy as np
 
-    from ..calib.adaptive import true_coil_error
-    from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..calib.prediction import true_coil_error
+    from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..net import split_endpoint
     from ..poses import PlanSpec
     from ..report.text import format_prediction, format_result, format_robot_time

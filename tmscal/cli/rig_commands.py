@@ -13,7 +13,7 @@ import click
 import numpy as np
 
 from ..net import split_endpoint
-from .adaptive import adaptive_options, check_adaptive_flags
+from .acquire_adaptive import adaptive_options, check_adaptive_flags
 from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
@@ -127,7 +127,7 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
     import threading
 
     from ..config import load_config
-    from ..mocks.rig import start_mock_rig
+    from ..mocks.launch import start_mock_rig
 
     cfg = load_config(config)
     done = threading.Event()
@@ -307,7 +307,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     cfg = load_config(config)
     if dry_run:
         if adaptive:  # the candidates: the plan with adaptive.pool poses
-            from ..acquisition.adaptive import settings_for
+            from ..acquisition.adaptive_run import settings_for
             poses = settings_for(cfg, **overrides).pool
         _dry_run(cfg, poses, samples, robot_host)
         return
@@ -334,16 +334,16 @@ def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
                       overrides: dict[str, Any], samples: int | None,
                       tracker_port: str | None, robot_host: str | None, stop: Any) -> None:
     from ..acquisition.engine import AcquisitionStopped
-    from . import adaptive as cli_adaptive
+    from . import acquire_adaptive
 
     try:
-        res = cli_adaptive.run(cfg, output, resume=resume, overrides=overrides,
+        res = acquire_adaptive.run(cfg, output, resume=resume, overrides=overrides,
                                samples=samples, tracker_port=tracker_port,
                                robot_host=robot_host, should_stop=stop)
     except AcquisitionStopped as e:
         _fail(f"acquisition stopped: {e}")
         return
-    cli_adaptive.summary(res, config, output, tracker_port, robot_host)
+    acquire_adaptive.summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
 
@@ -426,7 +426,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
     coil-placement error and the true one against the mock rig's truth over the same region."""
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
-    from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..report.text import format_result
     from ..session import read_session
     from ..solving.solve import solve_session
@@ -446,8 +446,8 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
         output = Path(tmp.name) / "demo-session.jsonl"
     try:
         if adaptive:
-            from . import adaptive as cli_adaptive
-            cli_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
+            from . import acquire_adaptive
+            acquire_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
             return
         # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
         with spawn_mock_rig(cfg_path, transport=transport) as mp:
