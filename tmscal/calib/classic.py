@@ -49,7 +49,7 @@ from ..geometry import (
     quaternion_from_matrix,
 )
 from .calibration import Applied, Calibration
-from .linear import _check_diversity, resolve_translations
+from .linear import check_rotation_diversity, resolve_translations
 from .methods import SOLVERS, register_method
 
 __all__ = ["check_rotations", "rigid_calibration", "normalize_rotation", "quat_rotations"]
@@ -60,7 +60,7 @@ def check_rotations(A: np.ndarray) -> None:
     robot rotations about at least two non-parallel axes (CalibrationError otherwise)."""
     if len(A) < 3:
         raise CalibrationError(f"need at least 3 poses, got {len(A)}")
-    _check_diversity(A)
+    check_rotation_diversity(A)
 
 
 def bodies_of(A: np.ndarray, B: np.ndarray, C: np.ndarray | None) -> list[np.ndarray]:

@@ -18,13 +18,13 @@ from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
-    _fail,
-    _Finite,
-    _print_json,
-    _same_file,
+    Finite,
     check_outputs,
+    fail,
     handle_errors,
     main,
+    print_json,
+    same_file,
 )
 
 # --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
@@ -85,7 +85,7 @@ def _echo_pose(label: str, T: np.ndarray, rb: Any = None) -> None:
         click.echo("  " + pendant)
 
 
-class _StopFlag:
+class StopFlag:
     """First SIGINT/SIGTERM sets the flag (finish the pose in flight); a second SIGINT raises
     KeyboardInterrupt."""
 
@@ -167,7 +167,7 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
     from .live import TrackView
 
     cfg = load_config(config)
-    stop = _StopFlag(quiet=True)
+    stop = StopFlag(quiet=True)
     stop.install()
     tr = make_tracker(cfg, port)
     tr.open()
@@ -192,12 +192,12 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
         interrupted = True
     finally:
         if interrupted:
-            _close_quietly(tr)
+            close_quietly(tr)
         else:
             tr.close()
 
 
-def _close_quietly(dev: Any) -> None:
+def close_quietly(dev: Any) -> None:
     """Close a device whose link was interrupted mid-reply: its stop command may meet the
     rest of that reply, so the drivers' warnings and errors are held back."""
     import logging
@@ -222,7 +222,7 @@ def _close_quietly(dev: Any) -> None:
                    "fixed base axes (DENSO's P-type; NOT a UR pendant's rotation vector), in "
                    "the robot base frame. The config's safety envelope applies around the "
                    "current pose.")
-@click.option("--speed", type=_Finite(0, lo_open=True), default=None,
+@click.option("--speed", type=Finite(0, lo_open=True), default=None,
               help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
 @handle_errors
@@ -300,7 +300,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     from ..config import load_config
     from .live import AcquireProgress, stderr_to_log
 
-    if _same_file(output, config):  # an existing session is the run's to resume, never this
+    if same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
@@ -311,7 +311,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             poses = settings_for(cfg, **overrides).pool
         _dry_run(cfg, poses, samples, robot_host)
         return
-    stop = _StopFlag()
+    stop = StopFlag()
     stop.install()
     if adaptive:
         _acquire_adaptive(cfg, config, output, resume, overrides, samples, tracker_port,
@@ -323,7 +323,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
                               tracker_port=tracker_port, robot_host=robot_host,
                               progress=bar, should_stop=stop)
     except AcquisitionStopped as e:
-        _fail(f"acquisition stopped: {e}")
+        fail(f"acquisition stopped: {e}")
         return
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
@@ -341,7 +341,7 @@ def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
                                samples=samples, tracker_port=tracker_port,
                                robot_host=robot_host, should_stop=stop)
     except AcquisitionStopped as e:
-        _fail(f"acquisition stopped: {e}")
+        fail(f"acquisition stopped: {e}")
         return
     acquire_adaptive.summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
@@ -463,7 +463,7 @@ def demo(config: Path | None, poses: int | None, samples: int | None, output: Pa
         session.header["truth"] = truth.as_dict()
         _, result = solve_session(session, "qr36")
         if as_json:
-            _print_json(result.to_json())
+            print_json(result.to_json())
             return
         click.echo(f"acquired {res.recorded} poses ({res.skipped} skipped) in "
                    f"{res.elapsed_s:.1f} s through the wire protocols\n")

@@ -29,7 +29,8 @@ from ..errors import CalibrationError, ConfigError
 from ..geometry import RIGID_TOL_DEFAULT, check_pose, orthonormalize
 
 __all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "read_calibration",
-           "parse_calibration", "load_calibration", "provenance"]
+           "parse_calibration", "load_calibration", "provenance", "parse_document",
+           "parse_matrix"]
 
 FORMAT = "tmscal-calibration"
 VERSION = 1
@@ -66,7 +67,7 @@ def _bad(src: str, key: str, msg: str) -> CalibrationError:
     return CalibrationError(f"{src}: key '{key}': {msg}")
 
 
-def _matrix(v: Any, src: str, key: str, rigid: bool) -> np.ndarray:
+def parse_matrix(v: Any, src: str, key: str, rigid: bool) -> np.ndarray:
     """A 4×4 matrix (mm) from nested lists: finite numbers, last row 0 0 0 1; ``rigid``: an
     orthonormal rotation (det +1); otherwise a non-singular, bounded 3×3 block."""
     if not isinstance(v, list) or len(v) != 4 or not all(
@@ -139,7 +140,7 @@ def _uncertainty(u: Any, src: str) -> dict[str, Any] | None:
         return None
     out = dict(u)
     if out.get("target") is not None:
-        out["target"] = _matrix(out["target"], src, "uncertainty.target", rigid=True)
+        out["target"] = parse_matrix(out["target"], src, "uncertainty.target", rigid=True)
     for k, v in u.items():
         if isinstance(v, dict) and v.get("covariance") is not None:
             out[k] = dict(v, covariance=_number_matrix(v["covariance"], src,
@@ -185,12 +186,12 @@ def parse_calibration(doc: Any, src: str = "<calibration>") -> Calibration:
         v = doc.get(k)
         if v is None and k in ("X", "Z"):
             raise _bad(src, k, f"missing: the {k} matrix is required")
-        mats[k] = None if v is None else _matrix(v, src, k, rigid=True)
+        mats[k] = None if v is None else parse_matrix(v, src, k, rigid=True)
     raw_doc = _mapping(doc.get("raw"), src, "raw") or {}
     raw: dict[str, np.ndarray | None] = {}
     for k in _MATRICES:
         v = raw_doc.get(k)
-        raw[k] = mats[k] if v is None else _matrix(v, src, f"raw.{k}", rigid=False)
+        raw[k] = mats[k] if v is None else parse_matrix(v, src, f"raw.{k}", rigid=False)
         if v is not None and mats[k] is None:
             if k == "Z_probe":  # files from before Z_probe was written: project it
                 mats[k] = orthonormalize(raw[k])
@@ -215,7 +216,7 @@ def parse_calibration(doc: Any, src: str = "<calibration>") -> Calibration:
     return cal
 
 
-def _load_text(text: str, src: str) -> Any:
+def parse_document(text: str, src: str) -> Any:
     """The document of a YAML or JSON file (JSON when it starts with '{')."""
     if text.lstrip().startswith("{"):
         def no_constant(c: str) -> None:
@@ -259,7 +260,7 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     4×4 mm. Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
-    doc = _load_text(read_text_file(p, "calibration file"), src)
+    doc = parse_document(read_text_file(p, "calibration file"), src)
     cal = parse_calibration(doc, src)
     cal.extra.setdefault("source", src)
     return CalibrationFile(calibration=cal, path=p, doc=doc)

@@ -52,7 +52,7 @@ import yaml
 from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..session import plain
-from .calibfile import _load_text, _matrix, read_text_file
+from .calibfile import parse_document, parse_matrix, read_text_file
 
 __all__ = ["FORMAT", "VERSION", "KinematicsFile", "kinematics_doc", "kinematics_yaml",
            "parse_kinematics", "read_kinematics", "load_arm"]
@@ -250,13 +250,13 @@ def _fields(doc: Any, src: str) -> dict[str, Any]:
         raise CalibrationError(str(e)) from None
     name = _header(doc, src)
     dh, lim = _joints(doc.get("joints"), src)
-    base = _matrix(doc.get("base"), src, "base", rigid=True)
+    base = parse_matrix(doc.get("base"), src, "base", rigid=True)
     convention = doc.get("convention", "standard")
     if convention not in ("standard", "modified"):
         raise _bad(src, "convention", f"expected standard or modified, got {_show(convention)}")
     flange = np.eye(4) if doc.get("flange") is None else \
-        _matrix(doc.get("flange"), src, "flange", rigid=True)
-    mount = _matrix(doc.get("flange_from_sensor"), src, "flange_from_sensor", rigid=True)
+        parse_matrix(doc.get("flange"), src, "flange", rigid=True)
+    mount = parse_matrix(doc.get("flange_from_sensor"), src, "flange_from_sensor", rigid=True)
     tool = _mapping(doc.get("tool"), src, "tool", ("mass_kg", "cog_mm"))
     bias = _mapping(doc.get("bias"), src, "bias", ("force_n", "torque_nm"))
     return {"name": name, "dh": dh, "base": base, "convention": convention, "flange": flange,
@@ -329,7 +329,7 @@ def read_kinematics(path: str | Path) -> KinematicsFile:
     Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
-    kf = parse_kinematics(_load_text(read_text_file(p, "kinematics file"), src), src)
+    kf = parse_kinematics(parse_document(read_text_file(p, "kinematics file"), src), src)
     kf.path = p
     return kf
 

@@ -22,7 +22,8 @@ if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
 __all__ = ["format_result", "format_study", "calibration_yaml", "plot_study", "plot_residuals",
-           "format_matrix", "distortion_text"]
+           "format_matrix", "distortion_text", "error_rows", "truth_rows",
+           "uncertainty_rows", "outlier_lines", "legend_lines"]
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
@@ -59,7 +60,7 @@ def _parts(e: dict[str, Any]) -> str:
                       + (["e_z"] if "e_z_mm" in e else []))
 
 
-def _error_rows(res: SolveResult) -> list[str]:
+def error_rows(res: SolveResult) -> list[str]:
     """The hold-out error table: one row per body, e_z (QR24), the total; each followed by
     its SD over folds when cross-validated."""
     e, sd = res.errors, res.errors_sd
@@ -87,7 +88,8 @@ def _error_rows(res: SolveResult) -> list[str]:
     return lines
 
 
-def _truth_rows(res: SolveResult) -> list[str]:
+def truth_rows(res: SolveResult) -> list[str]:
+    """The errors against the truth of a simulated session (translation mm, rotation deg)."""
     t = res.truth or {}
     lines = [f"  {'against the truth (simulated session)':<{_W}}{'translation mm':>15}"
              f"{'rotation deg':>15}"]
@@ -127,7 +129,7 @@ def distortion_text(d: dict[str, Any]) -> str:
     return f"tracker distortion: {model}"
 
 
-def _uncertainty_rows(res: SolveResult) -> list[str]:
+def uncertainty_rows(res: SolveResult) -> list[str]:
     """The predicted uncertainty (1-σ and 95 %) of a statistical solver, and the distortion."""
     lines: list[str] = []
     u = res.uncertainty or {}
@@ -148,7 +150,8 @@ def _uncertainty_rows(res: SolveResult) -> list[str]:
     return lines
 
 
-def _outlier_lines(res: SolveResult) -> list[str]:
+def outlier_lines(res: SolveResult) -> list[str]:
+    """The outlier poses by the solve service's rule, or a line saying there are none."""
     from ..solving.outliers import RULE
     if not res.outliers:
         return textwrap.wrap(f"outlier poses: none (rule: {RULE})", 98,
@@ -161,7 +164,8 @@ def _outlier_lines(res: SolveResult) -> list[str]:
     return lines
 
 
-def _legend(res: SolveResult) -> list[str]:
+def legend_lines(res: SolveResult) -> list[str]:
+    """The legend of the solve table: which matrices the errors apply, what the metrics are."""
     applied = ("raw matrices applied: the errors use the solver's general (non-orthogonal) "
                "3×4 X, Y, Z, the paper's way; the matrices below, and those exported, are the "
                "orthonormal ones (--orthonormal applies those instead)"
@@ -205,13 +209,13 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
     if res.n_skipped:
         lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "
                      "and are not used)")
-    lines += [""] + _error_rows(res)
-    extra = _uncertainty_rows(res)
+    lines += [""] + error_rows(res)
+    extra = uncertainty_rows(res)
     if extra:
         lines += [""] + extra
     if res.truth is not None:
-        lines += [""] + _truth_rows(res)
-    lines += [""] + _outlier_lines(res) + [""] + _legend(res)
+        lines += [""] + truth_rows(res)
+    lines += [""] + outlier_lines(res) + [""] + legend_lines(res)
     if show_matrices:
         for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
                         ("Z", "base_from_tracker")):

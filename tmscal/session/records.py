@@ -34,7 +34,7 @@ _RIGID_TOL = 1e-4
 _SURROGATE_ESCAPE = re.compile(r"\\u[dD][89abcdefABCDEF]")
 
 
-class _Bad(Exception):
+class BadLine(Exception):
     """A line fails validation; the message is the reason without file and line."""
 
 
@@ -51,7 +51,7 @@ def _finite_float(text: str) -> float:
     return x
 
 
-def _loads(text: str, finite: bool = True) -> Any:
+def parse_json(text: str, finite: bool = True) -> Any:
     """json.loads that refuses NaN and Infinity literals and, with ``finite``, numbers that
     overflow float64 anywhere (pose lines skip that slower check: every number the reader
     keeps from them is checked for finiteness field by field)."""
@@ -59,16 +59,16 @@ def _loads(text: str, finite: bool = True) -> Any:
         obj = json.loads(text, parse_constant=_reject_constant,
                          parse_float=_finite_float if finite else None)
     except RecursionError:
-        raise _Bad("not valid JSON (nested too deeply)") from None
+        raise BadLine("not valid JSON (nested too deeply)") from None
     except json.JSONDecodeError as e:
-        raise _Bad(f"not valid JSON ({e.msg} at column {e.colno})") from None
+        raise BadLine(f"not valid JSON ({e.msg} at column {e.colno})") from None
     except ValueError as e:  # the int digit limit, our parse hooks
-        raise _Bad(f"not valid JSON ({str(e)[:120]})") from None
+        raise BadLine(f"not valid JSON ({str(e)[:120]})") from None
     if _SURROGATE_ESCAPE.search(text):
         try:
             json.dumps(obj, ensure_ascii=False).encode("utf-8")
         except UnicodeEncodeError:
-            raise _Bad("a string holds an unpaired UTF-16 surrogate (not valid Unicode)") \
+            raise BadLine("a string holds an unpaired UTF-16 surrogate (not valid Unicode)") \
                 from None
     return obj
 
@@ -91,28 +91,28 @@ def _matrix(value: Any, name: str) -> np.ndarray | None:
         return None
     if not (type(value) is list and len(value) == 4
             and all(type(r) is list and len(r) == 4 for r in value)):
-        raise _Bad(f"field '{name}': expected a 4×4 matrix (4 rows of 4 numbers)")
+        raise BadLine(f"field '{name}': expected a 4×4 matrix (4 rows of 4 numbers)")
     if not all(_NUMBER_TYPES.issuperset(map(type, r)) for r in value):
-        raise _Bad(f"field '{name}': entries must be numbers")
+        raise BadLine(f"field '{name}': entries must be numbers")
     try:
         M = np.array(value, dtype=np.float64)
     except (OverflowError, ValueError, TypeError):
-        raise _Bad(f"field '{name}': a number is out of range") from None
+        raise BadLine(f"field '{name}': a number is out of range") from None
     if not np.isfinite(M).all():
-        raise _Bad(f"field '{name}': contains NaN or infinity")
+        raise BadLine(f"field '{name}': contains NaN or infinity")
     r3 = M[3]
     if abs(r3[0]) > 1e-9 or abs(r3[1]) > 1e-9 or abs(r3[2]) > 1e-9 or abs(r3[3] - 1) > 1e-9:
-        raise _Bad(f"field '{name}': last row {r3.tolist()} is not [0, 0, 0, 1]")
+        raise BadLine(f"field '{name}': last row {r3.tolist()} is not [0, 0, 0, 1]")
     A = np.abs(M[:3])
     if A[:, 3].max() > _MAX_TRANS_MM:
-        raise _Bad(f"field '{name}': translation beyond {_MAX_TRANS_MM:.0e} mm")
+        raise BadLine(f"field '{name}': translation beyond {_MAX_TRANS_MM:.0e} mm")
     R = M[:3, :3]
     # entries of a rotation are within [-1, 1]; checking first keeps the products finite
     if A[:, :3].max() > 1 + 1e-3 or np.abs(R @ R.T - _EYE3).max() > _RIGID_TOL:
-        raise _Bad(f"field '{name}': not a rigid transform (rotation block not orthonormal)")
+        raise BadLine(f"field '{name}': not a rigid transform (rotation block not orthonormal)")
     (a, b, c), (d, e, f), (g, h, i) = R.tolist()
     if abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) - 1) > _RIGID_TOL:
-        raise _Bad(f"field '{name}': not a rigid transform (a reflection, det ≠ 1)")
+        raise BadLine(f"field '{name}': not a rigid transform (a reflection, det ≠ 1)")
     return M
 
 
@@ -120,88 +120,94 @@ def _count(x: Any) -> bool:
     return type(x) is int and 0 <= x <= _MAX_COUNT
 
 
-def _check_header(obj: Any) -> dict[str, Any]:
+def validate_header(obj: Any) -> dict[str, Any]:
+    """The header object of a session line, checked (format, version, units mm, bodies,
+    truth); ``BadLine`` naming the field otherwise."""
     if not isinstance(obj, dict):
-        raise _Bad("the header must be a JSON object")
+        raise BadLine("the header must be a JSON object")
     if obj.get("kind") != "header" or obj.get("format") != FORMAT:
-        raise _Bad(f"not a tmscal session header (expected kind 'header' and format '{FORMAT}')")
+        raise BadLine(f"not a tmscal session header (expected kind 'header' and format '{FORMAT}')")
     v = obj.get("version")
     if type(v) is not int or v != VERSION:
-        raise _Bad(f"unsupported session version {v!r} (this tmscal reads version {VERSION})")
+        raise BadLine(f"unsupported session version {v!r} (this tmscal reads version {VERSION})")
     units = obj.get("units", {})
     if not isinstance(units, dict) or units.get("length") != "mm":
-        raise _Bad("field 'units.length' must be 'mm'")
+        raise BadLine("field 'units.length' must be 'mm'")
     bodies = obj.get("bodies")
     if (not isinstance(bodies, list) or not bodies
             or not all(isinstance(b, str) and b for b in bodies)
             or len(set(bodies)) != len(bodies)):
-        raise _Bad("field 'bodies' must be a non-empty list of distinct names")
+        raise BadLine("field 'bodies' must be a non-empty list of distinct names")
     for k in ("config", "devices", "plan", "sampling", "units", "adaptive"):
         if k in obj and not isinstance(obj[k], dict):
-            raise _Bad(f"field '{k}' must be an object")
+            raise BadLine(f"field '{k}' must be an object")
     if "created" in obj and not isinstance(obj["created"], str):
-        raise _Bad("field 'created' must be a string")
+        raise BadLine("field 'created' must be a string")
     t = obj.get("truth")
     if t is not None:
-        _check_truth(t)
+        validate_truth(t)
     return obj
 
 
-def _check_truth(t: Any) -> dict[str, np.ndarray]:
+def validate_truth(t: Any) -> dict[str, np.ndarray]:
+    """The header's ``truth`` (X, Z and optionally Y: 4×4 mm) as arrays; ``BadLine`` naming
+    the field otherwise."""
     if not isinstance(t, dict):
-        raise _Bad("field 'truth' must be an object")
+        raise BadLine("field 'truth' must be an object")
     extra = [k for k in t if k not in _TRUTH_KEYS]
     if extra:
-        raise _Bad(f"field 'truth': unknown key {extra[0]!r} (expected X, Y, Z)")
+        raise BadLine(f"field 'truth': unknown key {extra[0]!r} (expected X, Y, Z)")
     out = {}
     for k in _TRUTH_KEYS:
         M = _matrix(t.get(k), f"truth.{k}")
         if M is None and k != "Y":
-            raise _Bad(f"field 'truth.{k}' is missing")
+            raise BadLine(f"field 'truth.{k}' is missing")
         if M is not None:
             out[k] = M
     return out
 
 
-def _check_pose(obj: Any) -> PoseRecord:
+def validate_pose(obj: Any) -> PoseRecord:
+    """A pose line's object as a ``PoseRecord`` (A, B, C: 4×4 mm), checked field by field;
+    ``BadLine`` naming the field otherwise."""
     if not isinstance(obj, dict):
-        raise _Bad("a pose line must be a JSON object")
+        raise BadLine("a pose line must be a JSON object")
     if obj.get("kind") != "pose":
-        raise _Bad(f"field 'kind' is {str(obj.get('kind'))[:40]!r}, expected 'pose'")
+        raise BadLine(f"field 'kind' is {str(obj.get('kind'))[:40]!r}, expected 'pose'")
     idx = obj.get("index")
     if not _count(idx):
-        raise _Bad(f"field 'index' must be an integer from 0 to {_MAX_COUNT}")
+        raise BadLine(f"field 'index' must be an integer from 0 to {_MAX_COUNT}")
     mats = {k: _matrix(obj.get(k), k) for k in _MATRIX_KEYS}
     skipped = obj.get("skipped")
     if skipped is not None and not isinstance(skipped, str):
-        raise _Bad("field 'skipped' must be a string")
+        raise BadLine("field 'skipped' must be a string")
     if skipped is None and mats["A"] is None:
-        raise _Bad("field 'A' is missing (and the pose is not skipped)")
+        raise BadLine("field 'A' is missing (and the pose is not skipped)")
     t = obj.get("time", 0.0)
     if not _is_number(t):
-        raise _Bad("field 'time' must be a number")
+        raise BadLine("field 'time' must be a number")
     try:
         t = float(t)
     except OverflowError:
         t = math.inf
     if not math.isfinite(t):
-        raise _Bad("field 'time' must be a finite number")
+        raise BadLine("field 'time' must be a finite number")
     samples = obj.get("samples", {})
     if not isinstance(samples, dict) or not all(_count(v) for v in samples.values()):
-        raise _Bad(f"field 'samples' must be an object of counts (integers 0 to {_MAX_COUNT})")
+        raise BadLine(f"field 'samples' must be an object of counts (integers 0 to {_MAX_COUNT})")
     spread = obj.get("spread", {})
     if not isinstance(spread, dict) or not all(
             isinstance(v, dict) and all(_is_number(x) and abs(x) < 1e300 for x in v.values())
             for v in spread.values()):
-        raise _Bad("field 'spread' must be an object of {\"trans_mm\": mm, \"rot_deg\": deg} "
+        raise BadLine("field 'spread' must be an object of {\"trans_mm\": mm, \"rot_deg\": deg} "
                    "objects (finite numbers)")
     pool = obj.get("pool")
     if pool is not None and not _count(pool):
-        raise _Bad(f"field 'pool' must be an integer from 0 to {_MAX_COUNT}")
+        raise BadLine(f"field 'pool' must be an integer from 0 to {_MAX_COUNT}")
     robot_s = obj.get("robot_s")
     if robot_s is not None and not (isinstance(robot_s, dict) and all(
             _is_number(v) and 0 <= v < 1e9 for v in robot_s.values())):
-        raise _Bad("field 'robot_s' must be an object of seconds (finite numbers ≥ 0)")
+        raise BadLine("field 'robot_s' must be an object of seconds (finite numbers ≥ 0)")
     joints = _numbers(obj.get("joints_rad"), "joints_rad", "joint angles (rad)", _MAX_JOINTS,
                       _MAX_JOINT_RAD)
     wrench = _numbers(obj.get("wrench"), "wrench", "[Fx, Fy, Fz N, Tx, Ty, Tz N·m]", 6,
@@ -231,7 +237,7 @@ def _numbers(value: Any, name: str, what: str, n: int, bound: float, exact: bool
     count = f"{n}" if exact else f"1 to {n}"
     if not (type(value) is list and (len(value) == n if exact else 1 <= len(value) <= n)
             and all(_is_number(x) for x in value)):
-        raise _Bad(f"field '{name}': expected a list of {count} numbers ({what})")
+        raise BadLine(f"field '{name}': expected a list of {count} numbers ({what})")
     out = []
     for x in value:
         try:
@@ -239,7 +245,7 @@ def _numbers(value: Any, name: str, what: str, n: int, bound: float, exact: bool
         except OverflowError:
             f = math.inf
         if not (math.isfinite(f) and abs(f) < bound) or (nonneg and f < 0):
-            raise _Bad(f"field '{name}': {str(x)[:40]} is out of range (a finite number"
+            raise BadLine(f"field '{name}': {str(x)[:40]} is out of range (a finite number"
                        f"{' ≥ 0' if nonneg else ''} of magnitude below {bound:g})")
         out.append(f)
     return out
@@ -318,10 +324,10 @@ def validate_record(rec: PoseRecord, where: str = "") -> PoseRecord:
     matrices with last row [0, 0, 0, 1], an index from 0 to 10⁹, a finite time, counts and
     spreads that are JSON numbers (no NaN). Returns the record as it will read back; raises
     SessionError naming ``where``, the pose index and the field. Writes nothing."""
-    return _line_for(rec, where)[1]
+    return record_line(rec, where)[1]
 
 
-def _line_for(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
+def record_line(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
     """The exact bytes of a record's line and the record as the reader will see it."""
     pre = f"{where}: pose {getattr(rec, 'index', '?')}" if where else \
         f"pose {getattr(rec, 'index', '?')}"
@@ -338,40 +344,40 @@ def _line_for(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
                 norm[k] = v
                 continue
             try:
-                norm[k] = _loads(_dumps(v))
+                norm[k] = parse_json(_dumps(v))
             except (TypeError, ValueError, OverflowError, RecursionError) as e:
-                raise _Bad(f"field '{k}' is not storable as JSON ({e})") from None
-            except _Bad as e:
-                raise _Bad(f"field '{k}': {e}") from None
-        _check_pose(norm)
+                raise BadLine(f"field '{k}' is not storable as JSON ({e})") from None
+            except BadLine as e:
+                raise BadLine(f"field '{k}': {e}") from None
+        validate_pose(norm)
         # then the whole line, exactly as the reader will read it
         try:
             text = _dumps(d)
         except (TypeError, ValueError, OverflowError, RecursionError) as e:
-            raise _Bad(f"not storable as JSON ({e})") from None
-        back = _check_pose(_loads(text))
-    except _Bad as e:
+            raise BadLine(f"not storable as JSON ({e})") from None
+        back = validate_pose(parse_json(text))
+    except BadLine as e:
         raise SessionError(f"{pre}: {e}") from None
     return text.encode("utf-8") + b"\n", back
 
 
-def _header_line(header: Mapping[str, Any], where: str) -> bytes:
+def header_line(header: Mapping[str, Any], where: str) -> bytes:
     """The exact bytes of the header line, validated as the reader will validate it."""
     try:
         h = dict(header)
         for k, v in h.items():  # field by field first, so that the message names the field
             if k == "truth" and isinstance(v, dict):
-                _check_truth(v)  # NaN in a matrix: say which
+                validate_truth(v)  # NaN in a matrix: say which
             try:
                 _dumps(v)
             except (TypeError, ValueError, OverflowError, RecursionError) as e:
-                raise _Bad(f"field '{k}' is not storable as JSON ({e})") from None
+                raise BadLine(f"field '{k}' is not storable as JSON ({e})") from None
         try:
             text = _dumps(h)
         except (TypeError, ValueError, OverflowError, RecursionError) as e:
-            raise _Bad(f"not storable as JSON ({e})") from None
-        _check_header(_loads(text))
-    except _Bad as e:
+            raise BadLine(f"not storable as JSON ({e})") from None
+        validate_header(parse_json(text))
+    except BadLine as e:
         raise SessionError(f"{where}: {e}") from None
     return text.encode("utf-8") + b"\n"
 
@@ -396,7 +402,7 @@ def make_header(bodies: Iterable[str], config: Mapping[str, Any] | None = None,
         except (TypeError, ValueError) as e:
             raise SessionError(f"session header: field 'truth': not numeric ({e})") from None
     h.update(extra)
-    _header_line(h, "session header")
+    header_line(h, "session header")
     return h
 
 
