@@ -10,7 +10,7 @@ import click
 from ..exports import FORMATS
 from .app import FORCE_HELP, INPUT_FILE, check_outputs, handle_errors, main, write_atomic
 
-_FORMAT_HELP = "; ".join(f"{k}: {v[1]}" for k, v in FORMATS.items())
+_FORMAT_HELP = "; ".join(f"{k}: {v.help}" for k, v in FORMATS.items())
 
 
 @main.command()

@@ -340,16 +340,16 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
     and thresholds of Wang et al. 2018 (their Tables 1 and 3, Figure 3; docs/methods.md)."""
     from tqdm import tqdm
 
-    from ..calib import METHODS
+    from ..calib import METHODS, get_method
     from ..errors import CalibrationError
     from ..report.text import format_study, plot_study
     from ..solving.study import study_session
 
     ms = [m.strip().lower() for m in methods.split(",") if m.strip()]
-    bad = [m for m in ms if m not in METHODS]
-    if not ms or bad:
-        raise CalibrationError(f"--methods: unknown method {bad[0] if bad else '(none)'}; "
-                               f"known: {', '.join(METHODS)}")
+    if not ms:
+        raise CalibrationError(f"--methods: no method given; known: {', '.join(METHODS)}")
+    for m in ms:
+        get_method(m, "--methods")
     check_outputs({"--plot": plot}, [session_file], force)
     session = read_session_file(session_file, strict)
     total = len(ms) * max(0, n_max - 4)
