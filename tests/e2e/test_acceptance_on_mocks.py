@@ -39,7 +39,7 @@ def check_report(text: str, cfg: Path, robot: str, verdicts: dict[str, str]) -> 
 
 @pytest.mark.parametrize("base, robot", [
     pytest.param("mock-denso-polaris.yaml", {"port": 0}, id="denso"),
-    pytest.param("mock-ur-polaris.yaml", {"host": "127.0.0.61"}, id="ur"),
+    pytest.param("mock-ur-polaris.yaml", {}, id="ur"),
 ])
 def test_suite_passes_on_real_time_mock_rig(tmp_path, mock_config, base, robot):
     cfg = mock_config(base, robot=robot, mock={"clock": "real"}, sampling={"settle_s": 0.2})

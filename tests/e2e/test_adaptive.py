@@ -164,7 +164,7 @@ def test_demo_adaptive_json_recovers_the_truth_within_the_prediction(mock_config
     robot time, so one run cannot check the share; benchmarks/adaptive_coverage.py and
     tests/unit/test_adaptive_math.py do, over many runs. Twice the 95 % quantile is far out
     in the tail: an honest prediction essentially never exceeds it.)"""
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.131"})
+    cfg = mock_config("mock-ur-polaris.yaml")
     r = _cli("demo", "--config", str(cfg), "--adaptive", "--samples", "20", "--target-mm",
              "0.07", "--json")
     assert r.returncode == 0, r.stderr[-2000:]

@@ -71,7 +71,7 @@ def test_track_robot_dry_run_and_jog(tmp_path, mock_config):
 
 
 def test_demo_json_recovers_truth(mock_config):
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.43"})
+    cfg = mock_config("mock-ur-polaris.yaml")
     out = subprocess.run([sys.executable, "-m", "tmscal.cli", "demo", "--config", str(cfg),
                           "--poses", "25", "--samples", "10", "--json"],
                          capture_output=True, text=True, timeout=240)
@@ -86,8 +86,7 @@ def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_co
     from tmscal.geometry import rotvec_pose_from_matrix
     from tmscal.mocks.launch import spawn_mock_rig
 
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
-                      mock={"noise": NOISE_FREE_MOCK})
+    cfg = mock_config("mock-ur-polaris.yaml", mock={"noise": NOISE_FREE_MOCK})
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         host = mp.endpoints["robot"]
         out = subprocess.run([sys.executable, "-m", "tmscal.cli", "robot", str(cfg),
@@ -105,7 +104,7 @@ def test_robot_on_a_ur_whose_dashboard_reply_is_not_utf8_names_it(mock_config):
     one line naming the command and the bytes (escaped), exit status 1, no traceback."""
     from tmscal.mocks.launch import spawn_mock_rig
 
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.22.4"},
+    cfg = mock_config("mock-ur-polaris.yaml",
                       mock={"noise": NOISE_FREE_MOCK,
                             "robot": {"faults": {"non_utf8_dashboard_reply": "robotmode"}}})
     with spawn_mock_rig(cfg, transport="tcp") as mp:

@@ -31,7 +31,7 @@ KIN = {"arm": "ur5e", "errors": "paper", "seed": 3}
 
 
 @pytest.mark.parametrize("base, robot, kin", [
-    ("mock-ur-polaris.yaml", {"host": "127.0.0.61"}, KIN),
+    ("mock-ur-polaris.yaml", {}, KIN),
     ("mock-denso-polaris.yaml", {"port": 0}, {**KIN, "arm": "vs060"})])
 def test_joints_reach_the_session_and_true_kinematics_correct_a(tmp_path, mock_config, base,
                                                                  robot, kin):
@@ -98,8 +98,7 @@ def test_ur_unreachable_target_is_refused_and_nothing_moves(mock_config):
     joints and flange stay where they were."""
     pytest.importorskip("rtde_control")
     from tmscal.drivers.ur.robot import URRobot
-    cfg_path = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.62"},
-                           mock={"kinematics": KIN})
+    cfg_path = mock_config("mock-ur-polaris.yaml", mock={"kinematics": KIN})
     with spawn_mock_rig(cfg_path, transport="pty") as mp:
         robot = URRobot(mp.endpoints["robot"], envelope=Envelope())
         with robot:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.rigs import unique_addresses
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.mocks.launch import build_sim_rig
@@ -92,7 +93,7 @@ def test_start_pose_from_xyz_rpy(tmp_path):
 
 def test_unknown_driver_and_fault_options_are_named(tmp_path):
     from tmscal.mocks.launch import start_mock_rig
-    data = yaml.safe_load((CONFIGS / "mock-denso-polaris.yaml").read_text())
+    data = unique_addresses(yaml.safe_load((CONFIGS / "mock-denso-polaris.yaml").read_text()))
     data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
     data["robot"]["options"] = {"max_linear_speed_mm_s": 1000, "turbo": True}
     data["mock"]["tracker"] = {"faults": {"crc_eror_prob": 0.1}}

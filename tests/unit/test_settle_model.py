@@ -173,7 +173,7 @@ def test_config_key_and_wiring(mock_config) -> None:
     cfg = load_config(path)
     rig = build_sim_rig(cfg)
     assert rig.settle == Settle(0.3, 0.25, 4.0)
-    with start_mock_rig(cfg, tracker_transport="tcp", robot_host="127.0.0.3") as mr:
+    with start_mock_rig(cfg, tracker_transport="tcp") as mr:
         assert mr.rig.time_s is not None      # fast clock: the tracker's time
     plain = build_sim_rig(load_config(mock_config("mock-ur-polaris.yaml")))
     assert plain.settle is None
