@@ -11,6 +11,7 @@ import json
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+from urllib.parse import urlparse
 
 import numpy as np
 import pytest
@@ -84,7 +85,8 @@ def test_exports_of_a_session_acquired_on_the_mock_rig(tmp_path, mock_config):
     roms = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")}
     assert roms == {"CoilMarker": cfg["tracker"]["tools"]["marker"],
                     "CoilCentre": cfg["tracker"]["tools"]["probe"]}
-    assert dev.get("NetworkHostname") == "127.0.0.1"  # the demo's Polaris on loopback TCP
+    # the config's network Polaris (socket://HOST:PORT), a loopback address of the test's own
+    assert dev.get("NetworkHostname") == urlparse(cfg["tracker"]["port"]).hostname
     Z = ET.parse(tmp_path / "plus.xml").getroot().find(
         "./CoordinateDefinitions/Transform[@From='Tracker']").get("Matrix")
     np.testing.assert_array_equal(np.reshape([float(v) for v in Z.split()], (4, 4)),
