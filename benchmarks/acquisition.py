@@ -23,7 +23,7 @@ import yaml
 from tmscal.acquisition.run import acquire
 from tmscal.config import load_config
 from tmscal.geometry import angle_between
-from tmscal.mocks.rig import spawn_mock_rig
+from tmscal.mocks.launch import spawn_mock_rig
 from tmscal.session import read_session
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"

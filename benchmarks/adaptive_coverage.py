@@ -7,7 +7,7 @@ what do chosen poses buy over random ones (docs/methods.md, "Adaptive acquisitio
 The rig is the config's mock rig (truth, noise, P0), driven directly (tmscal.sim.SimRig:
 move_flange, then ``observe(body, n)`` averaged), on the fast clock. Each of ``--runs`` adaptive
 runs has its own rig seed and averages 20, 40, 60, 80 or 100 frames per pose (in turn). The
-decisions are tmscal.calib.adaptive's, in the order tmscal.acquisition.adaptive takes them:
+decisions are tmscal.calib.prediction's, in the order tmscal.acquisition.adaptive_run takes them:
 the bootstrap, then predict → stop_reason → choose_next (the L-optimal pose per second of
 robot time) until it stops. The candidates are the config's plan with ``adaptive.pool``
 poses; robot time is the move by tmscal.motion at the config's speed and acceleration caps +
@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from tmscal.acquisition.sample import spread_of
-from tmscal.calib import adaptive as ad
+from tmscal.calib import prediction as ad
 from tmscal.calib import solve
 from tmscal.config import load_config
 from tmscal.geometry import pose_mean

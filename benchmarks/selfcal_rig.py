@@ -50,7 +50,7 @@ from tmscal.calib import solve
 from tmscal.config import load_config
 from tmscal.exports.kinfile import load_arm
 from tmscal.geometry import invert
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.poses import make_plan
 from tmscal.session import read_session
 from tmscal.sim.arm import reach

@@ -34,12 +34,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from tmscal.acquisition.adaptive import acquire_adaptive, settings_for
+from tmscal.acquisition.adaptive_run import acquire_adaptive, settings_for
 from tmscal.calib import solve
-from tmscal.calib.adaptive import true_coil_error
+from tmscal.calib.prediction import true_coil_error
 from tmscal.config import load_config
 from tmscal.geometry import pose_mean
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.motion import move_duration
 from tmscal.poses import PlanSpec
 from tmscal.sim import SimRig

@@ -4,8 +4,11 @@
 ``--rig-*`` options run the rig acceptance suite, ``tests/acceptance`` (``docs/acceptance.md``).
 The fixtures give every test the same rigs (``tests/rigs.py``): ``configs_dir`` and
 ``tools_dir`` (the shipped configs and tool ROMs), ``sim_rig`` (the built-in TMS rig without
-noise, flange at P0) and ``mock_config`` (a copy of a shipped mock config with sections
-changed, in the test's tmp_path).
+noise, flange at P0), ``mock_config`` (a copy of a shipped mock config with sections changed
+and every mock address the test's own, in the test's tmp_path) and ``loopback_host`` (a
+loopback address no other test and no other pytest run on the machine gets; with
+``tests.rigs.free_port`` where a server cannot take port 0), so that two runs of the suite
+side by side never meet on an address.
 """
 
 from __future__ import annotations
@@ -90,9 +93,18 @@ def sim_rig() -> SimRig:
 
 
 @pytest.fixture
+def loopback_host() -> str:
+    """A loopback address of this test's own (:func:`tests.rigs.unique_host`): a mock binds
+    there with any port, a UR mock's fixed ones included. Call ``tests.rigs.unique_host()``
+    for more than one."""
+    return rigs.unique_host()
+
+
+@pytest.fixture
 def mock_config(tmp_path: Path) -> Callable[..., Path]:
     """Factory ``mock_config(base, **changes) -> Path``: ``configs/<base>`` copied into the
-    test's tmp_path with sections changed (see :func:`tests.rigs.write_config`)."""
+    test's tmp_path, every mock address the test's own, with sections changed (see
+    :func:`tests.rigs.write_config`)."""
     def make(base: str, **changes) -> Path:
         return rigs.write_config(tmp_path, base, **changes)
     return make

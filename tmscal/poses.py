@@ -60,7 +60,8 @@ def random_poses(n: int, rng: np.random.Generator, r_mm: float = 500.0) -> np.nd
     return make_pose(random_rotation(rng, n), rng.uniform(-r_mm, r_mm, size=(n, 3)))
 
 
-#: plan kind → generator, for acquisition plans
+#: plan kind → its pose generator ``gen(p0, n, rng, r_mm=, d_deg=)``: the one list of plan
+#: kinds (config's ``plan.kind``, session headers, ``make_plan``)
 PLAN_KINDS = {"eq14": eq14_poses, "sphere": sphere_poses}
 
 
@@ -71,7 +72,8 @@ def make_plan(kind: str, p0: np.ndarray, n: int, seed: int, radius_mm: float,
     The first n of a longer plan with the same seed are the same poses."""
     gen = PLAN_KINDS.get(kind)
     if gen is None:
-        raise ValueError(f"unknown plan kind {kind!r}; expected 'eq14' or 'sphere'")
+        known = " or ".join(repr(k) for k in PLAN_KINDS)
+        raise ValueError(f"unknown plan kind {kind!r}; expected {known}")
     # pose i comes from its own generator seeded by (seed, i): any prefix of a plan is the
     # plan of that length, and a resumed run regenerates exactly the poses it skipped
     out = np.empty((n, 4, 4))

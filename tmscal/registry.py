@@ -5,7 +5,7 @@ its pip extra).
 A ground module (it imports only ``tmscal.errors``), so every layer may ask it: the config
 parser for the names valid in ``robot.driver``, ``tracker.driver`` and ``ft.driver``
 (force-torque sensors) and for each driver's own settings class (``tmscal.config.devices``);
-``acquisition.devices`` builds drivers from it and ``mocks.rig`` builds mocks from it, so none
+``acquisition.devices`` builds drivers from it and ``mocks.launch`` builds mocks from it, so none
 of them names a brand. Classes are given as ``"module:Class"`` strings and imported only when
 used, so a driver whose optional extra is missing costs nothing until a config names it, and
 then is one ``MissingExtraError`` saying which extra to install.

@@ -3,7 +3,7 @@ built through the driver registry like ``tmscal acquire`` builds them, opened by
 check and closed at the end of the session, and the report a lab keeps (``--rig-report``).
 
 A config with a ``mock:`` section is served by mocks the suite starts itself (``tmscal mock``
-in a child process, ``tmscal.mocks.rig.spawn_mock_rig``) unless ``--rig-no-start-mocks``
+in a child process, ``tmscal.mocks.launch.spawn_mock_rig``) unless ``--rig-no-start-mocks``
 says they are already running. See ``docs/acceptance.md``.
 """
 
@@ -110,7 +110,7 @@ def rig(request: pytest.FixtureRequest) -> Iterator[RigUnderTest]:
             "settings": ", ".join(f"{k}={v}" for k, v in asdict(settings).items())}
     mocks = None
     if start:
-        from tmscal.mocks.rig import spawn_mock_rig
+        from tmscal.mocks.launch import spawn_mock_rig
         mocks = spawn_mock_rig(path, transport="tcp")
     rut: RigUnderTest | None = None
     try:

@@ -6,7 +6,6 @@ real drivers and client libraries). The real-time runs take a few seconds each."
 from __future__ import annotations
 
 import re
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -18,12 +17,6 @@ from tmscal.acquisition.selftest import CHECK_NAMES
 from ..rigs import REPO
 
 pytestmark = pytest.mark.e2e
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def run_suite(cwd: Path, *args: str) -> tuple[int, str]:
@@ -47,7 +40,7 @@ def check_report(text: str, cfg: Path, robot: str, verdicts: dict[str, str],
 
 @pytest.mark.parametrize("base, robot", [
     pytest.param("mock-denso-polaris.yaml", {"port": 0}, id="denso"),
-    pytest.param("mock-ur-polaris.yaml", {"host": "127.0.0.61"}, id="ur"),
+    pytest.param("mock-ur-polaris.yaml", {}, id="ur"),
 ])
 def test_suite_passes_on_real_time_mock_rig(tmp_path, mock_config, base, robot):
     cfg = mock_config(base, robot=robot, mock={"clock": "real"}, sampling={"settle_s": 0.2})
@@ -69,10 +62,8 @@ def test_suite_passes_on_real_time_mock_rig(tmp_path, mock_config, base, robot):
     pytest.param("mock-ur-igtl.yaml", "ur", "igtl", id="ur-igtl"),
 ])
 def test_fast_clock_skips_only_the_stop_check(tmp_path, mock_config, base, robot, tracker):
-    if tracker == "igtl":  # the UR on an address of its own, the OpenIGTLink mock on a free port
-        cfg = mock_config(base, robot={"host": "127.0.23.11"}, tracker={"port": _free_port()})
-    else:
-        cfg = mock_config(base, robot={"port": 0})
+    # every mock on an address of the test's own (tests.rigs.unique_addresses)
+    cfg = mock_config(base) if tracker == "igtl" else mock_config(base, robot={"port": 0})
     report = tmp_path / "report.txt"
     rc, out = run_suite(tmp_path, "--rig", str(cfg), "--rig-report", str(report))
     assert rc == 0 and re.search(r"^4 passed, 1 skipped in ", out, re.M), out

@@ -17,7 +17,7 @@ from tmscal.acquisition.plan import make_plan
 from tmscal.acquisition.run import AcquisitionStopped, acquire
 from tmscal.config import load_config
 from tmscal.errors import SafetyError
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 from tmscal.solving.solve import solve_session
 
@@ -46,12 +46,9 @@ def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
 
 
 @pytest.mark.e2e
-@pytest.mark.parametrize("base, host", [("mock-ur-polaris.yaml", "127.0.0.41"),
-                                        ("mock-denso-polaris.yaml", "127.0.0.1")])
-def test_acquire_then_solve_recovers_truth(tmp_path, base, host, mock_config):
-    robot = {"host": host}
-    if "denso" in base:
-        robot["port"] = 0
+@pytest.mark.parametrize("base", ["mock-ur-polaris.yaml", "mock-denso-polaris.yaml"])
+def test_acquire_then_solve_recovers_truth(tmp_path, base, mock_config):
+    robot = {"port": 0} if "denso" in base else {}
     cfg_path = mock_config(base, robot=robot, plan={"poses": 30},
                            sampling={"samples": 10})
     out = tmp_path / "s.jsonl"
@@ -179,7 +176,7 @@ def test_robot_fault_stops_cleanly_with_cause(tmp_path, mock_config):
 @pytest.mark.e2e
 def test_ur_protective_stop_stops_cleanly(tmp_path, mock_config):
     cfg_path = mock_config(
-        "mock-ur-polaris.yaml", robot={"host": "127.0.0.42"}, plan={"poses": 8},
+        "mock-ur-polaris.yaml", plan={"poses": 8},
         sampling={"samples": 5}, mock={"robot": {"faults": {"protective_stop_at_move": 3}}})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="pty") as mp:
@@ -213,7 +210,7 @@ def test_mock_command_prints_json_endpoints_first(mock_config):
         line = proc.stdout.readline()
         ep = json.loads(line)
         assert ep["tracker"].startswith("/dev/pts/")
-        assert ep["robot"].startswith("127.0.0.1:")
+        assert ep["robot"].startswith(f"{load_config(cfg_path).robot.host}:")
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 0
@@ -224,8 +221,7 @@ def test_ur_dropped_connection_stops_cleanly_and_resumable(tmp_path, mock_config
     """The UR mock closes every socket (and refuses reconnects) at the 3rd move: the run
     (in a child process, as ur_rtde may misbehave on a dropped link) ends with one error line
     naming the cause and the resume command, and the session keeps the poses before."""
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
-                      plan={"poses": 8}, sampling={"samples": 5},
+    cfg = mock_config("mock-ur-polaris.yaml", plan={"poses": 8}, sampling={"samples": 5},
                       run={"retries": 2, "reconnect_wait_s": 0.1},
                       mock={"robot": {"faults": {"drop_connection_at_move": 3}}})
     out = tmp_path / "s.jsonl"

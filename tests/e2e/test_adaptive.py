@@ -18,11 +18,11 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from tmscal.acquisition.adaptive import acquire_adaptive, settings_for
+from tmscal.acquisition.adaptive_run import acquire_adaptive, settings_for
 from tmscal.acquisition.devices import envelope_for
 from tmscal.config import load_config
 from tmscal.errors import SafetyError
-from tmscal.mocks.rig import spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import spawn_mock_rig, start_mock_rig
 from tmscal.poses import PlanSpec
 from tmscal.session import read_session
 
@@ -164,7 +164,7 @@ def test_demo_adaptive_json_recovers_the_truth_within_the_prediction(mock_config
     robot time, so one run cannot check the share; benchmarks/adaptive_coverage.py and
     tests/unit/test_adaptive_math.py do, over many runs. Twice the 95 % quantile is far out
     in the tail: an honest prediction essentially never exceeds it.)"""
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.131"})
+    cfg = mock_config("mock-ur-polaris.yaml")
     r = _cli("demo", "--config", str(cfg), "--adaptive", "--samples", "20", "--target-mm",
              "0.07", "--json")
     assert r.returncode == 0, r.stderr[-2000:]

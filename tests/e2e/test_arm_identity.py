@@ -17,7 +17,7 @@ from tmscal.calib.kinematics import ARMS, base_from_flange
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.mocks.denso.controller import NO_ARM_TYPE_NAME
-from tmscal.mocks.rig import spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import NOISE_FREE_MOCK, endpoints_kwargs
@@ -37,12 +37,11 @@ def _check_poses(s, arm: str) -> None:
         assert np.abs(A[:3, :3] - p.A[:3, :3]).max() < 1e-6, p.index
 
 
-@pytest.mark.parametrize("arm, host, model, major", [("ur10", "127.20.20.1", "UR10", "3"),
-                                                     ("ur16e", "127.20.20.2", "UR16", "5")])
-def test_ur_driver_names_the_arm_the_dashboard_describes(tmp_path, mock_config, arm, host,
-                                                          model, major):
+@pytest.mark.parametrize("arm, model, major", [("ur10", "UR10", "3"), ("ur16e", "UR16", "5")])
+def test_ur_driver_names_the_arm_the_dashboard_describes(tmp_path, mock_config, arm, model,
+                                                          major):
     pytest.importorskip("rtde_control")
-    cfg_path = mock_config("mock-ur-polaris.yaml", robot={"host": host},
+    cfg_path = mock_config("mock-ur-polaris.yaml",
                            mock={"kinematics": {"arm": arm, "errors": "none"},
                                  "noise": NOISE_FREE_MOCK})
     out = tmp_path / "s.jsonl"
@@ -60,7 +59,7 @@ def test_ur_driver_names_the_arm_the_dashboard_describes(tmp_path, mock_config, 
 
 def test_ur_mock_without_an_arm_answers_as_a_ur5e(mock_config):
     pytest.importorskip("rtde_control")
-    cfg_path = mock_config("mock-ur-polaris.yaml", robot={"host": "127.20.20.3"})
+    cfg_path = mock_config("mock-ur-polaris.yaml")
     with spawn_mock_rig(cfg_path, transport="pty"):
         with make_robot(load_config(cfg_path)) as robot:
             ident = robot.identity()
@@ -97,7 +96,7 @@ def test_denso_without_a_denso_arm_names_none(mock_config, kinematics, type_name
     assert ident["type_name"] == type_name and ident["arm"] is None
 
 
-@pytest.mark.parametrize("base, robot", [("mock-ur-polaris.yaml", {"host": "127.20.20.4"}),
+@pytest.mark.parametrize("base, robot", [("mock-ur-polaris.yaml", {}),
                                          ("mock-denso-polaris.yaml", {"port": 0})])
 def test_a_seven_joint_arm_on_a_six_joint_controller_is_a_config_error(mock_config, base,
                                                                         robot):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.rigs import NOISE_FREE_MOCK, wait_until, write_config
+from tests.rigs import NOISE_FREE_MOCK, free_port, unique_host, wait_until, write_config
 from tmscal.acquisition.devices import make_ft
 from tmscal.config import load_config
 from tmscal.drivers.ati import codec
@@ -19,7 +19,7 @@ from tmscal.errors import ConnectionLost, DeviceError, DeviceTimeout
 from tmscal.geometry import make_pose, rot_x
 from tmscal.mocks.ati import ATIFaults, ATINetFTMock
 from tmscal.mocks.clock import FAST, REAL_TIME
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.mocks.wrench import gravity_wrench_source
 from tmscal.net import NotLoopbackError
 from tmscal.sim.rig import Noise, SimRig, tms_rig_truth
@@ -141,10 +141,8 @@ def test_silent_sensor_is_a_timeout() -> None:
 
 
 def test_nobody_listening_is_connection_lost() -> None:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    ft = ATINetFT("127.0.0.1", 1e6, 1e6, port=port, timeout_s=0.5)
+    host = unique_host()
+    ft = ATINetFT(host, 1e6, 1e6, port=free_port(host, udp=True), timeout_s=0.5)
     with pytest.raises((ConnectionLost, DeviceTimeout)):
         with ft:
             ft.read(1)

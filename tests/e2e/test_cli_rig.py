@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from tmscal.cli import main
 from tmscal.config import load_config
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.sim import TMS_RIG_P0
 
 from ..rigs import NOISE_FREE_MOCK, point_config
@@ -71,7 +71,7 @@ def test_track_robot_dry_run_and_jog(tmp_path, mock_config):
 
 
 def test_demo_json_recovers_truth(mock_config):
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.43"})
+    cfg = mock_config("mock-ur-polaris.yaml")
     out = subprocess.run([sys.executable, "-m", "tmscal.cli", "demo", "--config", str(cfg),
                           "--poses", "25", "--samples", "10", "--json"],
                          capture_output=True, text=True, timeout=240)
@@ -84,10 +84,9 @@ def test_demo_json_recovers_truth(mock_config):
 
 def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_config):
     from tmscal.geometry import rotvec_pose_from_matrix
-    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.mocks.launch import spawn_mock_rig
 
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.44"},
-                      mock={"noise": NOISE_FREE_MOCK})
+    cfg = mock_config("mock-ur-polaris.yaml", mock={"noise": NOISE_FREE_MOCK})
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         host = mp.endpoints["robot"]
         out = subprocess.run([sys.executable, "-m", "tmscal.cli", "robot", str(cfg),
@@ -103,9 +102,9 @@ def test_robot_on_a_ur_labels_rpy_and_prints_the_pendant_rotation_vector(mock_co
 def test_robot_on_a_ur_whose_dashboard_reply_is_not_utf8_names_it(mock_config):
     """`tmscal robot` on a UR whose dashboard answers a query with bytes that are not UTF-8:
     one line naming the command and the bytes (escaped), exit status 1, no traceback."""
-    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.mocks.launch import spawn_mock_rig
 
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.22.4"},
+    cfg = mock_config("mock-ur-polaris.yaml",
                       mock={"noise": NOISE_FREE_MOCK,
                             "robot": {"faults": {"non_utf8_dashboard_reply": "robotmode"}}})
     with spawn_mock_rig(cfg, transport="tcp") as mp:

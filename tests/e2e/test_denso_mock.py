@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
+from tests.rigs import free_port, unique_host
 from tmscal.drivers.base import Envelope
 from tmscal.drivers.denso.client import BCAPClient
 from tmscal.drivers.denso.hresult import (
@@ -298,12 +299,10 @@ def test_client_bad_framing_is_a_protocol_error_naming_the_function() -> None:
 
 
 def test_client_connect_refused() -> None:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
+    host = unique_host()
+    port = free_port(host)   # nothing listens there
     with pytest.raises(ConnectionLost, match=str(port)):
-        BCAPClient("127.0.0.1", port, timeout_s=1.0).connect()
+        BCAPClient(host, port, timeout_s=1.0).connect()
 
 
 # --- DensoRobot ----------------------------------------------------------------------------

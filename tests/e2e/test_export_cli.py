@@ -11,14 +11,13 @@ import json
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
-from pathlib import Path
+from urllib.parse import urlparse
 
 import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
 
-import tmscal as tmscal_pkg
 from tmscal.cli import main
 from tmscal.exports import load_calibration
 from tmscal.session import read_session, write_session
@@ -73,20 +72,21 @@ def test_daily_check_catches_a_moved_tracker(days):
     assert 1.5 < r["truth"]["coil_placement_mm"] < 2.6
 
 
-def test_exports_of_a_session_acquired_on_the_mock_rig(tmp_path):
+def test_exports_of_a_session_acquired_on_the_mock_rig(tmp_path, mock_config):
     """`tmscal demo` acquires through the real drivers and wire protocols; the calibration
     solved on it records the rig config, so the PLUS export names the config's tool ROMs."""
-    tmscal("demo", "--poses", 6, "-o", tmp_path / "s.jsonl")
+    cfg_path = mock_config("mock-ur-polaris.yaml")  # the demo rig, mocks on our own addresses
+    tmscal("demo", "--config", cfg_path, "--poses", 6, "-o", tmp_path / "s.jsonl")
     tmscal("solve", tmp_path / "s.jsonl", "-o", tmp_path / "c.yaml", "--folds", 2)
-    cfg = yaml.safe_load((Path(tmscal_pkg.__file__).parent / "data" / "configs"
-                          / "mock-ur-polaris.yaml").read_text())
+    cfg = yaml.safe_load(cfg_path.read_text())
     p = tmscal("export", tmp_path / "c.yaml", "--format", "plus", "-o", tmp_path / "plus.xml")
     assert f"wrote {tmp_path / 'plus.xml'}" in p.stdout and "CHECK" not in p.stdout
     dev = ET.parse(tmp_path / "plus.xml").getroot().find("./DataCollection/Device")
     roms = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")}
     assert roms == {"CoilMarker": cfg["tracker"]["tools"]["marker"],
                     "CoilCentre": cfg["tracker"]["tools"]["probe"]}
-    assert dev.get("NetworkHostname") == "127.0.0.1"  # the mock Polaris on loopback TCP
+    # the config's network Polaris (socket://HOST:PORT), a loopback address of the test's own
+    assert dev.get("NetworkHostname") == urlparse(cfg["tracker"]["port"]).hostname
     Z = ET.parse(tmp_path / "plus.xml").getroot().find(
         "./CoordinateDefinitions/Transform[@From='Tracker']").get("Matrix")
     np.testing.assert_array_equal(np.reshape([float(v) for v in Z.split()], (4, 4)),

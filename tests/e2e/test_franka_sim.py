@@ -34,7 +34,7 @@ from tmscal.config import load_config
 from tmscal.drivers.franka.robot import COMMUNICATION_TEXT
 from tmscal.errors import RobotFault, SafetyError
 from tmscal.geometry import angle_between, invert, make_pose, rot_x, rot_z
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.session import read_session
 from tmscal.sim import TMS_RIG_P0
 
@@ -70,7 +70,7 @@ def rig(tmp_path_factory):
     """(config pointed at the running mocks, the mock process) for the module's tests."""
     from ..rigs import write_config
     tmp = tmp_path_factory.mktemp("franka")
-    cfg = write_config(tmp, BASE, robot={"host": "127.0.0.163"}, mock={"noise": NOISE_FREE_MOCK})
+    cfg = write_config(tmp, BASE, mock={"noise": NOISE_FREE_MOCK})
     with spawn_mock_rig(cfg, transport="tcp", timeout_s=60) as mp:
         yield point_config(cfg, mp.endpoints, "pointed.yaml"), mp
 
@@ -123,7 +123,7 @@ def test_the_rig_acceptance_suite_passes_on_the_franka_rig(tmp_path):
     simulated arm lags its target by ~4 mm when franky reports the motion finished)."""
     from ..rigs import write_config
     from .test_acceptance_on_mocks import check_report, run_suite
-    cfg = write_config(tmp_path, BASE, robot={"host": "127.0.0.165"})
+    cfg = write_config(tmp_path, BASE)
     report = tmp_path / "report.txt"
     rc, out = run_suite(tmp_path, "--rig", str(cfg), "--rig-report", str(report))
     skip_if_loop_lost(out)
@@ -131,7 +131,8 @@ def test_the_rig_acceptance_suite_passes_on_the_franka_rig(tmp_path):
     text = report.read_text()
     assert "result: PASS (5 passed, 0 failed, 0 skipped)" in text
     check_report(text, cfg, "franka", {})
-    assert "move_outcome: RobotFault: franka 127.0.0.165: move_to halted by stop()" in text
+    host = load_config(cfg).robot.host
+    assert f"move_outcome: RobotFault: franka {host}: move_to halted by stop()" in text
 
 
 def test_every_socket_of_the_mock_is_on_loopback(tmp_path):
@@ -142,13 +143,13 @@ def test_every_socket_of_the_mock_is_on_loopback(tmp_path):
 
     import franky
 
-    from tmscal.mocks.rig import start_mock_rig
+    from tmscal.mocks.launch import start_mock_rig
 
     from ..rigs import write_config
-    cfg = load_config(write_config(tmp_path, BASE, robot={"host": "127.0.0.166"}))
+    cfg = load_config(write_config(tmp_path, BASE))
     with start_mock_rig(cfg, tracker_transport="tcp") as mr:
         mock = mr.devices[-1]
-        client = franky.Robot("127.0.0.166", realtime_config=franky.RealtimeConfig.Ignore)
+        client = franky.Robot(cfg.robot.host, realtime_config=franky.RealtimeConfig.Ignore)
         assert len(client.state.q) == 7  # state arrived over UDP
         socks = mock._sockets
         kinds = {s.type for s in socks}
@@ -203,7 +204,7 @@ def test_acquire_records_franka_poses(rig, tmp_path):
 
 def test_demo_recovers_the_truth_through_franky_and_franky_sim(tmp_path):
     from ..rigs import write_config
-    cfg = write_config(tmp_path, BASE, robot={"host": "127.0.0.164"})
+    cfg = write_config(tmp_path, BASE)
     p = _cli("demo", "--config", str(cfg), "--poses", "20", "--json")
     assert p.returncode == 0, p.stderr[-2000:]
     res = json.loads(p.stdout.strip().splitlines()[-1])

@@ -9,7 +9,6 @@ tool the source never sends, or re-sends stale, is a skipped sample, as with the
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -21,7 +20,7 @@ from tmscal.acquisition.run import acquire
 from tmscal.config import load_config
 from tmscal.exports import load_calibration
 from tmscal.geometry import angle_between
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import NOISE_FREE_MOCK, endpoints_kwargs
@@ -38,24 +37,18 @@ def _cli(*args: str | Path, timeout: float = 240) -> subprocess.CompletedProcess
                           stdin=subprocess.DEVNULL)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _rig(mock_config, robot_host: str, **changes) -> Path:
-    """configs/mock-ur-igtl.yaml with the robot on ``robot_host`` (ur_rtde's ports are fixed)
-    and the OpenIGTLink mock on a free port of its own, ``changes`` over it."""
-    tracker = {"port": _free_port(), **changes.pop("tracker", {})}
-    return mock_config(BASE, robot={"host": robot_host}, tracker=tracker, **changes)
+def _rig(mock_config, **changes) -> Path:
+    """configs/mock-ur-igtl.yaml with every mock on an address of the test's own (the UR's
+    fixed ports and the OpenIGTLink port bind there: ``tests.rigs.unique_addresses``),
+    ``changes`` over it."""
+    return mock_config(BASE, **changes)
 
 
 def test_track_on_a_running_tmscal_mock_shows_the_true_tool_poses(mock_config):
     """`tmscal track` against `tmscal mock` serving the config's own host and port: the tools
     by their TRANSFORM names, and on a noise-free rig the marker and the probe where the sim
     rig puts them (tracker frame, mm; OpenIGTLink's float32 rounds at about 1e-4 mm)."""
-    cfg_path = _rig(mock_config, "127.0.23.1", mock={"noise": NOISE_FREE_MOCK})
+    cfg_path = _rig(mock_config, mock={"noise": NOISE_FREE_MOCK})
     cfg = load_config(cfg_path)
     rig = build_sim_rig(cfg)  # the child builds the same rig from the same config
     with spawn_mock_rig(cfg_path, transport="config") as mp:
@@ -77,7 +70,7 @@ def test_acquire_then_solve_through_the_commands_recovers_the_truth(mock_config,
     """`tmscal acquire` on the running mock records every pose with the igtl driver's
     identity; `tmscal solve -o` writes a calibration whose X, Y and Z are the sim rig's truth
     (within the noise: 0.05 mm fiducials, 0.05 mm / 0.05° robot, 30 poses of 10 frames)."""
-    cfg_path = _rig(mock_config, "127.0.23.2", plan={"poses": 30}, sampling={"samples": 10})
+    cfg_path = _rig(mock_config, plan={"poses": 30}, sampling={"samples": 10})
     out, calib = tmp_path / "s.jsonl", tmp_path / "c.yaml"
     with spawn_mock_rig(cfg_path, transport="config"):
         r = _cli("acquire", cfg_path, "-o", out)
@@ -103,8 +96,7 @@ def test_acquire_then_solve_through_the_commands_recovers_the_truth(mock_config,
 def test_demo_json_on_the_igtl_config_recovers_the_truth(mock_config, transport):
     """`tmscal demo --config mock-ur-igtl.yaml --json`; with ``--transport pty`` the
     OpenIGTLink mock, which has no serial line, is still served on loopback TCP."""
-    cfg = mock_config(BASE, robot={"host": "127.0.23.3" if transport == "tcp"
-                                   else "127.0.23.4"})
+    cfg = mock_config(BASE)
     r = _cli("demo", "--config", cfg, "--poses", "25", "--samples", "10", "--json",
              "--transport", transport)
     assert r.returncode == 0, r.stderr[-2000:]
@@ -118,8 +110,7 @@ def test_demo_json_on_the_igtl_config_recovers_the_truth(mock_config, transport)
 def test_a_tool_never_sent_or_stale_is_skipped_with_the_reason(mock_config, tmp_path, fault):
     """A probe the source never sends (not among PlusServer's transform names) or re-sends
     with an old timestamp is missing from every frame: every pose is skipped, naming it."""
-    cfg_path = _rig(mock_config, "127.0.23.5" if fault == "drop_tools" else "127.0.23.6",
-                    plan={"poses": 3}, sampling={"samples": 5},
+    cfg_path = _rig(mock_config, plan={"poses": 3}, sampling={"samples": 5},
                     mock={"tracker": {"faults": {fault: ["probe"]}}})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="config") as mp:
@@ -133,7 +124,7 @@ def test_a_tool_never_sent_or_stale_is_skipped_with_the_reason(mock_config, tmp_
 def test_missing_tools_are_skipped_samples_and_the_session_completes(mock_config, tmp_path):
     """Tools missing from some frames (PlusServer's MISSING status, sent as invalid): those
     frames are skipped samples, the poses are recorded with fewer samples."""
-    cfg_path = _rig(mock_config, "127.0.23.10", plan={"poses": 10},
+    cfg_path = _rig(mock_config, plan={"poses": 10},
                     sampling={"samples": 10, "min_share": 0.5},
                     mock={"tracker": {"send_invalid": True,
                                       "faults": {"missing_fraction": 0.1}}})

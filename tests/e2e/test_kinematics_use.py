@@ -21,7 +21,7 @@ from click.testing import CliRunner
 from tmscal.acquisition.run import acquire
 from tmscal.cli import main
 from tmscal.config import load_config
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.session import Session, read_session, write_session
 
 from ..rigs import endpoints_kwargs, write_config
@@ -138,8 +138,7 @@ def test_demo_kinematics_estimate_reports_the_true_coil(tmp_path) -> None:
     """tmscal demo --kinematics estimate on a mock UR5e with hidden arm errors: the arm, the
     true coil placement of its flange commands, and QR36's beside it."""
     pytest.importorskip("rtde_control")
-    cfg = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.20.1"},
-                       sampling={"samples": 5},
+    cfg = write_config(tmp_path, "mock-ur-polaris.yaml", sampling={"samples": 5},
                        mock={"kinematics": {"arm": "ur5e", "errors": "all", "seed": 3}})
     code, out = _run("demo", "--kinematics", "estimate", "--config", str(cfg), "--poses", "30",
                      "--json")

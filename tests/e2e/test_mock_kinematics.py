@@ -20,7 +20,7 @@ from tmscal.drivers.denso.robot import DensoRobot
 from tmscal.errors import DeviceError
 from tmscal.exports.kinfile import kinematics_yaml
 from tmscal.geometry import make_pose
-from tmscal.mocks.rig import build_sim_rig, spawn_mock_rig, start_mock_rig
+from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import endpoints_kwargs
@@ -31,7 +31,7 @@ KIN = {"arm": "ur5e", "errors": "paper", "seed": 3}
 
 
 @pytest.mark.parametrize("base, robot, kin", [
-    ("mock-ur-polaris.yaml", {"host": "127.0.0.61"}, KIN),
+    ("mock-ur-polaris.yaml", {}, KIN),
     ("mock-denso-polaris.yaml", {"port": 0}, {**KIN, "arm": "vs060"})])
 def test_joints_reach_the_session_and_true_kinematics_correct_a(tmp_path, mock_config, base,
                                                                  robot, kin):
@@ -98,8 +98,7 @@ def test_ur_unreachable_target_is_refused_and_nothing_moves(mock_config):
     joints and flange stay where they were."""
     pytest.importorskip("rtde_control")
     from tmscal.drivers.ur.robot import URRobot
-    cfg_path = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.0.62"},
-                           mock={"kinematics": KIN})
+    cfg_path = mock_config("mock-ur-polaris.yaml", mock={"kinematics": KIN})
     with spawn_mock_rig(cfg_path, transport="pty") as mp:
         robot = URRobot(mp.endpoints["robot"], envelope=Envelope())
         with robot:
@@ -130,8 +129,7 @@ def test_realistic_ur5e_session_records_joints_and_its_truth_arm_explains_the_tr
     from tmscal.geometry import invert
     from tmscal.session import write_session
 
-    cfg_path = mock_config("mock-ur-polaris-kin.yaml", robot={"host": "127.0.0.63"},
-                           plan={"poses": 12}, sampling={"samples": 5},
+    cfg_path = mock_config("mock-ur-polaris-kin.yaml", plan={"poses": 12}, sampling={"samples": 5},
                            mock={"noise": NOISE_FREE_MOCK})
     out = tmp_path / "s.jsonl"
     with spawn_mock_rig(cfg_path, transport="pty") as mp:
@@ -160,7 +158,7 @@ def test_realistic_ur5e_session_records_joints_and_its_truth_arm_explains_the_tr
     assert np.median(fit_nominal) > 0.2, fit_nominal
 
 
-@pytest.mark.parametrize("base, robot", [("mock-ur-polaris-kin.yaml", {"host": "127.0.0.64"}),
+@pytest.mark.parametrize("base, robot", [("mock-ur-polaris-kin.yaml", {}),
                                          ("mock-denso-polaris-kin.yaml", {"port": 0})])
 def test_demo_runs_on_the_realistic_arm_configs(mock_config, base, robot):
     import subprocess

@@ -21,6 +21,7 @@ if __name__ != "__main__":
     pytestmark = pytest.mark.e2e
 
 from tests.child import child_main, run_child
+from tests.rigs import unique_host
 from tmscal.geometry import compose, invert, make_pose, rot_x, rot_z, rotation_angle
 from tmscal.mocks.clock import FAST, Clock
 from tmscal.motion import move_duration, trapezoid_duration
@@ -55,7 +56,7 @@ def test_ur_mock_move_durations_are_the_trapezoid_at_the_commanded_caps() -> Non
     rig = _rig()
     speed, accel = 120.0, 800.0          # mm/s, mm/s² as URRobot is configured
     targets = _targets()
-    with URMock(rig, host="127.0.0.71", clock=FAST) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST) as mock:
         res = run_child(__file__, "ur_moves", mock.host,
                         {"poses": [t.tolist() for t in targets], "speed": speed,
                          "accel": accel})
@@ -150,7 +151,7 @@ def test_settling_seen_by_the_ndi_driver_decays_with_frames_not_with_sleep(mock_
     from tests.rigs import NOISE_FREE_MOCK, point_config
     from tmscal.acquisition.devices import make_robot, make_tracker
     from tmscal.config import load_config
-    from tmscal.mocks.rig import start_mock_rig
+    from tmscal.mocks.launch import start_mock_rig
 
     amp, tau, f = 0.3, 0.25, 4.0
     base = mock_config("mock-denso-polaris.yaml", robot={"port": 0},

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.rigs import wait_until
+from tests.rigs import unique_host, wait_until
 from tmscal.drivers.denso.hresult import (
     E_INVALIDARG,
     S_EXECUTING,
@@ -252,7 +252,7 @@ def _control_client(host: str) -> tuple[RawRTDE, int, int]:
 @pytest.fixture
 def ur() -> Iterator[tuple[URMock, SimRig]]:
     rig = new_rig()
-    with URMock(rig, host="127.0.0.87", clock=FAST) as m:
+    with URMock(rig, host=unique_host(), clock=FAST) as m:
         yield m, rig
 
 

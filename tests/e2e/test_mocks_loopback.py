@@ -14,9 +14,10 @@ from typing import Any
 import pytest
 import yaml
 
+from tests.rigs import free_port, unique_addresses, unique_host
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.net import loopback_family
 
 from ..rigs import portable_tools
@@ -28,9 +29,9 @@ TMSCAL = Path(sys.executable).with_name("tmscal")
 
 
 def _config(tmp_path: Path, base: str, **changes: Any) -> Path:
-    """A copy of ``configs/<base>`` with ``changes`` ({"robot.host": …}) and its tool values
-    made portable (an NDI's ROM files absolute)."""
-    data = yaml.safe_load((ROOT / "configs" / base).read_text())
+    """A copy of ``configs/<base>`` with every mock address the test's own, then ``changes``
+    ({"robot.host": …}), its tool values made portable (an NDI's ROM files absolute)."""
+    data = unique_addresses(yaml.safe_load((ROOT / "configs" / base).read_text()))
     for key, value in changes.items():
         section, _, field = key.partition(".")
         data[section][field] = value
@@ -79,14 +80,15 @@ def test_tmscal_mock_refuses_non_loopback_endpoints(tmp_path: Path, base: str,
 
 
 def test_nothing_binds_when_one_endpoint_is_refused(tmp_path: Path) -> None:
-    port = _free_port()  # for the (loopback) tracker
+    host = unique_host()  # for the (loopback) tracker
+    port = free_port(host)
     cfg = load_config(_config(tmp_path, "mock-denso-polaris.yaml",
-                              **{"tracker.port": f"socket://127.0.0.1:{port}",
+                              **{"tracker.port": f"socket://{host}:{port}",
                                  "robot.host": "0.0.0.0"}))
     with pytest.raises(ConfigError, match="robot.host"):
         start_mock_rig(cfg)
     with pytest.raises(ConnectionRefusedError):  # the tracker was never started
-        socket.create_connection(("127.0.0.1", port), timeout=5).close()
+        socket.create_connection((host, port), timeout=5).close()
 
 
 def _bound(mr: Any) -> list[str]:
@@ -98,25 +100,17 @@ def _bound(mr: Any) -> list[str]:
     return out
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.mark.parametrize("base, changes", [
+    # a loopback name: free ports on 127.0.0.1, the address "localhost" names
     ("mock-denso-polaris.yaml", {"tracker.port": "socket://localhost:{}", "robot.port": "{}",
                                  "robot.host": "localhost"}),
-    ("mock-ur-polaris.yaml", {"tracker.port": "socket://127.0.0.1:{}",
-                              "robot.host": "127.0.0.88"}),
-    ("mock-franka-polaris.yaml", {"tracker.port": "socket://127.0.0.1:{}",
-                                  "robot.host": "127.0.0.89"}),
-    ("mock-ur-igtl.yaml", {"tracker.host": "localhost", "tracker.port": "{}",
-                           "robot.host": "127.0.23.7"}),
+    ("mock-ur-polaris.yaml", {}),
+    ("mock-franka-polaris.yaml", {}),
+    ("mock-ur-igtl.yaml", {}),
 ])
 def test_started_servers_listen_on_loopback_only(tmp_path: Path, base: str,
                                                  changes: dict[str, Any]) -> None:
-    filled: dict[str, Any] = {k: v.format(_free_port()) for k, v in changes.items()}
+    filled: dict[str, Any] = {k: v.format(free_port()) for k, v in changes.items()}
     for key in ("robot.port", "tracker.port"):
         if filled.get(key, "").isdigit():
             filled[key] = int(filled[key])
@@ -134,7 +128,7 @@ def test_a_tcp_only_tracker_mock_is_served_on_loopback_tcp_whatever_the_transpor
     """An OpenIGTLink tracker has no serial line: asked for a pty (or an ephemeral port) the
     mock rig serves it on a loopback TCP port, and the driver's settings take the endpoint
     back as its address (``with_address``, as ``--tracker-port`` does)."""
-    cfg = load_config(_config(tmp_path, "mock-ur-igtl.yaml", **{"robot.host": "127.0.23.8"}))
+    cfg = load_config(_config(tmp_path, "mock-ur-igtl.yaml"))
     with start_mock_rig(cfg, tracker_transport=transport) as mr:
         host, _, port = mr.endpoints["tracker"].rpartition(":")
         assert ipaddress.ip_address(host).is_loopback and int(port) != cfg.tracker.settings.port

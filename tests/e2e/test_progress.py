@@ -18,7 +18,7 @@ import termios
 import pytest
 
 from tmscal.config import load_config
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import REPO, point_config

@@ -10,10 +10,10 @@ to run them, with the test's environment on PATH (as after ``. .venv/bin/activat
 * every other line runs to completion and must exit 0 (the README's own ``until grep -q
   serving mock.log`` line is the wait for the mock; the test adds only a hang guard).
 
-The configs are copies whose mock addresses are unique to this run (a loopback address of its
-own for the UR mock, free TCP ports for the Polaris and the DENSO mock): the shipped 127.0.0.2
-and :8765 may be in use by another test or a ``tmscal mock`` left running, and nothing else in
-the files changes.
+The mock configs are copies whose every mock address is a loopback address of the test's own
+(``tests.rigs.unique_addresses``; ports kept): the shipped 127.0.0.2 and :8765 may be in use by
+another test, another test run or a ``tmscal mock`` left running. Nothing else in them changes
+but their comments (the copies are written back from the parsed YAML).
 """
 
 from __future__ import annotations
@@ -23,14 +23,14 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
-from ..rigs import CONFIGS, REPO
+from ..rigs import CONFIGS, REPO, unique_addresses
 
 pytestmark = pytest.mark.e2e
 
@@ -60,37 +60,14 @@ def tour_commands(readme: str) -> list[str]:
     return commands
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _patch(path: Path, old: str, new: str) -> None:
-    text = path.read_text()
-    assert text.count(old) == 1, f"{path.name}: expected one {old!r} to give a run-unique address"
-    path.write_text(text.replace(old, new))
-
-
 def tour_folder(tmp_path: Path) -> Path:
-    """A folder with ``configs/`` (copies of the shipped configs, run-unique mock addresses)."""
+    """A folder with ``configs/`` (copies of the shipped configs, every mock address the
+    test's own)."""
     configs = tmp_path / "configs"
     shutil.copytree(CONFIGS, configs)
-    ur = configs / "mock-ur-polaris.yaml"
-    _patch(ur, "host: 127.0.0.2", f"host: 127.91.{os.getpid() % 250}.2")
-    _patch(ur, "socket://127.0.0.1:8765", f"socket://127.0.0.1:{_free_port()}")
-    _patch(configs / "mock-denso-polaris.yaml", "port: 5007", f"port: {_free_port()}")
-    _patch(configs / "mock-ur-igtl.yaml", "host: 127.0.0.2", f"host: 127.93.{os.getpid() % 250}.2")
-    ati = configs / "mock-ur-ati.yaml"
-    _patch(ati, "host: 127.0.0.180", f"host: 127.92.{os.getpid() % 250}.180")
-    _patch(ati, "socket://127.0.0.1:8768", f"socket://127.0.0.1:{_free_port()}")
-    _patch(ati, "port: 49152", f"port: {_free_udp_port()}")
+    for path in configs.glob("mock-*.yaml"):
+        path.write_text(yaml.safe_dump(unique_addresses(yaml.safe_load(path.read_text())),
+                                       sort_keys=False))
     return tmp_path
 
 

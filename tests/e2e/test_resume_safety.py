@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tmscal.acquisition.adaptive import acquire_adaptive
+from tmscal.acquisition.adaptive_run import acquire_adaptive
 from tmscal.acquisition.devices import make_robot
 from tmscal.acquisition.run import acquire
 from tmscal.config import load_config
 from tmscal.errors import SessionError
 from tmscal.geometry import angle_between, rot_z
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import SeenPoses, endpoints_kwargs, write_config

@@ -24,7 +24,7 @@ from tmscal.acquisition.selfcal import SelfcalPlan, acquire_selfcal, nominal_arm
 from tmscal.calib.selfcal.identify import error_stats, position_errors
 from tmscal.config import load_config
 from tmscal.exports.kinfile import read_kinematics
-from tmscal.mocks.rig import spawn_mock_rig
+from tmscal.mocks.launch import spawn_mock_rig
 from tmscal.session import read_session
 from tmscal.sim.arm import make_arm
 
@@ -37,11 +37,11 @@ pytest.importorskip("rtde_control")
 KIN = {"arm": "ur5e", "errors": "paper", "seed": 5}
 
 
-def _config(mock_config, host: str, **changes):
-    """configs/mock-ur-ati.yaml on robot ``host``, the Net F/T mock on an ephemeral port,
-    20 readings per configuration."""
-    return mock_config("mock-ur-ati.yaml", robot={"host": host},
-                       ft={"port": 0, "samples": 20}, mock={"kinematics": KIN}, **changes)
+def _config(mock_config, **changes):
+    """configs/mock-ur-ati.yaml (every mock on an address of the test's own), the Net F/T mock
+    on an ephemeral port, 20 readings per configuration."""
+    return mock_config("mock-ur-ati.yaml", ft={"port": 0, "samples": 20},
+                       mock={"kinematics": KIN}, **changes)
 
 
 def _tmscal(*args, **kw):
@@ -60,7 +60,7 @@ def test_acquire_identify_recovers_the_hidden_errors(tmp_path, mock_config):
     recorded configurations and 200 held-out ones around them, is below half the nominal
     arm's (measured: about a third, 5.0 → 1.6 mm at 30 configurations); every identified
     parameter that carries a hidden error moves toward its true value in aggregate."""
-    cfg = _config(mock_config, "127.0.0.181")
+    cfg = _config(mock_config)
     out, kin = tmp_path / "sc.jsonl", tmp_path / "kin.yaml"
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         r = _tmscal(*_acquire_args(cfg, out, mp.endpoints, "--k", 40, "--pool", 1500))
@@ -99,7 +99,7 @@ def test_ctrl_c_then_resume_completes_the_plan(tmp_path, mock_config):
     """--dry-run plans and writes nothing. SIGINT during the run: exit 130 after the
     configuration in flight, the resume command printed, a valid session; --resume records
     exactly the configurations left, the same plan, each once."""
-    cfg = _config(mock_config, "127.0.0.182", sampling={"settle_s": 0.3})
+    cfg = _config(mock_config, sampling={"settle_s": 0.3})
     out = tmp_path / "sc.jsonl"
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         dry = _tmscal(*_acquire_args(cfg, out, mp.endpoints, "--k", 12, "--pool", 600,
@@ -134,8 +134,7 @@ def test_ctrl_c_then_resume_completes_the_plan(tmp_path, mock_config):
 def test_an_envelope_too_tight_refuses_before_moving(tmp_path, mock_config):
     """±2° of rotation from P0: too few candidates inside; one error line naming the limit,
     no session, and the arm where it was."""
-    cfg = _config(mock_config, "127.0.0.183",
-                  safety={"max_rotation_deg": 2, "max_offset_mm": 20})
+    cfg = _config(mock_config, safety={"max_rotation_deg": 2, "max_offset_mm": 20})
     out = tmp_path / "sc.jsonl"
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         before = _tmscal("robot", cfg, "--host", mp.endpoints["robot"])
@@ -178,7 +177,7 @@ def test_resume_refuses_an_arm_turned_away_from_p0(tmp_path, mock_config):
     config's 120°), ``selfcal acquire --resume`` resumed (it checked the position only) and
     swung the wrist from there. Now: one error line naming the angles, the arm where it was,
     the session unchanged; turned back to P0, the same session resumes to the end."""
-    cfg = _config(mock_config, "127.22.3.1")
+    cfg = _config(mock_config)
     out = tmp_path / "sc.jsonl"
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         ep = mp.endpoints
@@ -243,7 +242,7 @@ def test_resume_refuses_a_header_whose_plan_was_edited(tmp_path, mock_config):
     together (no longer a candidate drawn from the seed), two configurations swapped (no
     longer the nearest-neighbour order): each refused in one line naming the configuration,
     before anything opens; the file unchanged."""
-    cfg = _config(mock_config, "127.22.3.2")
+    cfg = _config(mock_config)
     out = tmp_path / "sc.jsonl"
     with spawn_mock_rig(cfg, transport="tcp") as mp:
         ep = mp.endpoints

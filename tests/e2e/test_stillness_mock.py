@@ -24,7 +24,7 @@ import pytest
 from tmscal.acquisition.run import acquire
 from tmscal.config import load_config
 from tmscal.geometry import invert
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.session import read_session
 
 from ..rigs import endpoints_kwargs

@@ -27,7 +27,7 @@ import yaml
 
 from tests.rigs import write_config
 from tmscal.config import load_config
-from tmscal.mocks.rig import start_mock_rig
+from tmscal.mocks.launch import start_mock_rig
 from tmscal.sim import tms_rig_truth
 from tmscal.timing import Deadline
 

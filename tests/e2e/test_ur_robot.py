@@ -9,7 +9,6 @@ Each test uses its own loopback address.
 
 from __future__ import annotations
 
-import socket
 import time
 from typing import Any
 
@@ -22,6 +21,7 @@ if __name__ != "__main__":
     pytestmark = pytest.mark.e2e
 
 from tests.child import child_main, run_child
+from tests.rigs import free_port, unique_host
 from tmscal.geometry import compose, make_pose, rot_x, rot_y, rot_z
 from tmscal.mocks.clock import FAST
 from tmscal.mocks.ur import ROBOT_MODE_POWER_OFF, URFaults, URMock
@@ -53,7 +53,7 @@ def _moves(mock: URMock, targets: list[np.ndarray], upload_script: bool) -> dict
 def test_urrobot_moves_rig_to_commanded_poses() -> None:
     rig = _rig()
     targets = _targets()
-    with URMock(rig, host="127.0.0.21", clock=FAST) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST) as mock:
         res = _moves(mock, targets, upload_script=True)
     assert res["error"] is None, res["error"]
     # the rig received exactly the commanded flange poses (through metres and rotvecs)
@@ -76,7 +76,7 @@ def test_urrobot_moves_rig_to_commanded_poses() -> None:
 def test_protective_stop_raises_robot_fault() -> None:
     rig = _rig()
     targets = _targets()
-    with URMock(rig, host="127.0.0.22", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
         res = _moves(mock, targets, upload_script=True)
         assert mock.protective_stopped
@@ -95,7 +95,7 @@ def test_protective_stop_raises_robot_fault() -> None:
 def test_dropped_connection_raises_connection_lost() -> None:
     rig = _rig()
     targets = _targets()
-    with URMock(rig, host="127.0.0.23", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(drop_at_move=2)) as mock:
         res = _moves(mock, targets, upload_script=True)
     err = res["error"]
@@ -113,7 +113,7 @@ def test_protective_stop_cleared_script_reuploaded_and_run_continues() -> None:
     cleared the stop, the next move re-uploads the script and the run goes on."""
     rig = _rig()
     targets = _targets()
-    with URMock(rig, host="127.0.0.24", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
         res = run_child(__file__, "moves", mock.host, {
             "poses": [t.tolist() for t in targets], "upload_script": True,
@@ -133,7 +133,7 @@ def test_protective_stop_not_cleared_is_robot_fault_on_retry() -> None:
     re-uploaded and the flange stays where the stop left it."""
     rig = _rig()
     targets = _targets()
-    with URMock(rig, host="127.0.0.25", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
         res = run_child(__file__, "moves", mock.host, {
             "poses": [t.tolist() for t in targets], "upload_script": True, "operator": []})
@@ -145,21 +145,14 @@ def test_protective_stop_not_cleared_is_robot_fault_on_retry() -> None:
     assert np.abs(rig.flange[:3, 3] - half).max() < 1e-6
 
 
-def _free_port() -> int:
-    """A TCP port nothing listens on now (for ur_rtde's URCap script sender)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def test_urcap_path_serves_script_to_external_control() -> None:
     """upload_script false is the External Control URCap (FLAG_USE_EXT_UR_CAP): the pendant
     is in Local Control, nothing goes to the script port; the URCap fetches the script from
     ur_rtde when the operator presses Play, and the moves run."""
     rig = _rig()
     targets = _targets()[:2]
-    port = _free_port()
-    with URMock(rig, host="127.0.0.26", clock=FAST, remote_control=False, urcap_port=port,
+    port = free_port()  # for ur_rtde's URCap script sender
+    with URMock(rig, host=unique_host(), clock=FAST, remote_control=False, urcap_port=port,
                 play_when_ready=True) as mock:
         assert mock.runtime_state != 2              # nothing runs before Play
         res = run_child(__file__, "moves", mock.host, {
@@ -181,7 +174,7 @@ def _open_error(mock: URMock, **args: Any) -> dict[str, Any]:
 
 def test_remote_control_off_is_robot_fault_at_open() -> None:
     rig = _rig()
-    with URMock(rig, host="127.0.0.27", clock=FAST, remote_control=False) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST, remote_control=False) as mock:
         err = _open_error(mock, upload_script=True)
         assert mock.scripts_received == 0
     assert err["type"] == "RobotFault"
@@ -194,7 +187,7 @@ def test_dashboard_reply_not_utf8_is_protocol_error_naming_the_command() -> None
     ProtocolError naming the command and showing the bytes escaped, not a UnicodeDecodeError;
     nothing is uploaded."""
     rig = _rig()
-    with URMock(rig, host="127.0.22.1", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(non_utf8_dashboard_reply="get serial number")) as mock:
         err = _open_error(mock, upload_script=True)
         assert mock.scripts_received == 0
@@ -213,7 +206,8 @@ time.sleep(600)
 """
 
 
-def test_second_tmscal_cannot_take_over_a_robot_in_use(mock_config: Any) -> None:
+def test_second_tmscal_cannot_take_over_a_robot_in_use(mock_config: Any,
+                                                       loopback_host: str) -> None:
     """While one tmscal process drives the UR (its control script running), `tmscal robot` on
     the same address is refused, naming the address and that process's pid, before it
     connects: the first run's script is not replaced (nothing more uploaded) and keeps
@@ -226,8 +220,8 @@ def test_second_tmscal_cannot_take_over_a_robot_in_use(mock_config: Any) -> None
     from tests.child import ROOT
 
     rig = _rig()
-    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": "127.0.22.3"})
-    with URMock(rig, host="127.0.22.3", clock=FAST) as mock:
+    cfg = mock_config("mock-ur-polaris.yaml", robot={"host": loopback_host})
+    with URMock(rig, host=loopback_host, clock=FAST) as mock:
         holder = subprocess.Popen([sys.executable, "-c", _UR_HOLDER, mock.host], cwd=ROOT,
                                   env={**os.environ, "PYTHONPATH": str(ROOT)},
                                   stdout=subprocess.PIPE, text=True)
@@ -240,7 +234,7 @@ def test_second_tmscal_cannot_take_over_a_robot_in_use(mock_config: Any) -> None
             text = out.stdout + out.stderr
             assert out.returncode == 1, text[-2000:]
             assert "Traceback" not in text
-            assert "127.0.22.3" in text and f"pid {holder.pid}" in text, text[-2000:]
+            assert loopback_host in text and f"pid {holder.pid}" in text, text[-2000:]
             assert "in use by another tmscal" in text
             assert mock.scripts_received == 1        # the first run's script stays
             assert mock.runtime_state == 2           # and runs
@@ -253,7 +247,7 @@ def test_second_tmscal_cannot_take_over_a_robot_in_use(mock_config: Any) -> None
 
 def test_powered_off_robot_is_robot_fault_at_open() -> None:
     rig = _rig()
-    with URMock(rig, host="127.0.0.28", clock=FAST, robot_mode=ROBOT_MODE_POWER_OFF) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST, robot_mode=ROBOT_MODE_POWER_OFF) as mock:
         err = _open_error(mock, upload_script=True)
     assert err["type"] == "RobotFault" and err["text"] == "POWER_OFF"
     assert "power it on" in err["message"]
@@ -263,7 +257,7 @@ def test_powered_off_robot_is_robot_fault_at_open() -> None:
 def test_power_off_during_move_is_robot_fault_naming_it() -> None:
     rig = _rig()
     targets = _targets()
-    with URMock(rig, host="127.0.0.29", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(power_off_at_move=2)) as mock:
         res = _moves(mock, targets, upload_script=True)
         assert mock.robot_mode == ROBOT_MODE_POWER_OFF

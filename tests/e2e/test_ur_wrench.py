@@ -26,6 +26,7 @@ if __name__ != "__main__":
     pytestmark = pytest.mark.e2e
 
 from tests.child import child_main, run_child
+from tests.rigs import unique_host
 from tmscal.geometry import make_pose, rot_x
 from tmscal.mocks.clock import FAST
 from tmscal.mocks.ur import URMock
@@ -56,7 +57,7 @@ def _within_noise(mean: Any, want: np.ndarray) -> None:
 
 
 def test_ur_wrench_raw_and_tcp_equal_the_rig_within_noise() -> None:
-    with _mock("127.0.0.151") as mock:
+    with _mock(unique_host()) as mock:
         res = run_child(__file__, "sensor", mock.host, {"n": N})
     assert res["error"] is None, res["error"]
     assert res["identity"]["frame"] == "flange" and res["identity"]["variable"] == \
@@ -69,7 +70,7 @@ def test_ur_wrench_raw_and_tcp_equal_the_rig_within_noise() -> None:
 
 
 def test_tcp_force_is_payload_compensated() -> None:
-    with _mock("127.0.0.152", payload_kg=1.5) as mock:
+    with _mock(unique_host(), payload_kg=1.5) as mock:
         res = run_child(__file__, "sensor", mock.host, {"n": N})
     assert res["error"] is None, res["error"]
     _within_noise(res["tcp_mean"], np.zeros(6))
@@ -77,7 +78,7 @@ def test_tcp_force_is_payload_compensated() -> None:
 
 
 def test_urrobot_wrench_reads_the_same() -> None:
-    with _mock("127.0.0.153") as mock:
+    with _mock(unique_host()) as mock:
         res = run_child(__file__, "robot", mock.host, {"n": N})
     assert res["error"] is None, res["error"]
     _within_noise(res["raw"], RAW)
@@ -86,7 +87,7 @@ def test_urrobot_wrench_reads_the_same() -> None:
 
 def test_mock_without_a_wrench_source_reads_zero() -> None:
     rig = SimRig(tms_rig_truth(), noise=Noise.none())
-    with URMock(rig, host="127.0.0.154", clock=FAST) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST) as mock:
         res = run_child(__file__, "sensor", mock.host, {"n": 3})
     assert res["error"] is None, res["error"]
     assert res["raw_mean"] == [0.0] * 6 and res["tcp_mean"] == [0.0] * 6
@@ -129,17 +130,17 @@ def test_config_ft_ur_wrench_served_by_the_ur_mock(tmp_path: Any) -> None:
     from tests.rigs import NOISE_FREE_MOCK, write_config
     from tmscal.acquisition.devices import make_ft
     from tmscal.config import load_config
-    from tmscal.mocks.rig import spawn_mock_rig
+    from tmscal.mocks.launch import spawn_mock_rig
     from tmscal.sim.rig import TMS_RIG_P0
 
-    path = write_config(tmp_path, "mock-ur-polaris.yaml", robot={"host": "127.0.0.155"},
+    path = write_config(tmp_path, "mock-ur-polaris.yaml",
                         ft={"driver": "ur_wrench", "host": "robot", "samples": 20},
                         mock={"noise": NOISE_FREE_MOCK, "ft": {"noise_n": 0.0}})
     cfg = load_config(path)
     with spawn_mock_rig(path) as proc:
         assert proc.endpoints["ft"] == proc.endpoints["robot"]
         with make_ft(cfg) as ft:
-            assert ft.identity()["host"] == "127.0.0.155"
+            assert ft.identity()["host"] == cfg.robot.host
             w = ft.read(20).mean(axis=0)
     f = TMS_RIG_P0[:3, :3].T @ [0.0, 0.0, -MG]
     np.testing.assert_allclose(w, np.concatenate([f, np.cross([0.0, 0.0, 0.060], f)]),

@@ -3,9 +3,12 @@
 The wheel is built from a copy of the sources (``pip wheel --no-deps``, with build isolation as
 a user's pip would), installed with the ``ur`` extra into a fresh venv (``python -m venv``; the
 dependencies come from PyPI or pip's cache), and ``tmscal demo`` runs from a temp folder, so the
-source tree is not importable and the demo's configs and tool ROMs must come from the package
-data (``tmscal/data/configs/``). SLOW: about a minute (building, installing numpy/scipy/ur_rtde
-from the cache, 20 poses through the wire protocols); it needs PyPI or a warm pip cache.
+source tree is not importable and the demo's config and tool ROMs must come from the package
+data (``tmscal/data/configs/``): the installed demo config, its mock addresses made the test's
+own (``tests.rigs.unique_addresses``: the packaged UR address, 127.0.0.2, may be in use by
+another test run), its ROM paths pointing into the installed package. SLOW: about a minute
+(building, installing numpy/scipy/ur_rtde from the cache, 20 poses through the wire
+protocols); it needs PyPI or a warm pip cache.
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
-from ..rigs import REPO
+from ..rigs import REPO, unique_addresses
 
 pytestmark = [pytest.mark.e2e, pytest.mark.wheel, pytest.mark.timeout(600)]
 
@@ -71,7 +75,15 @@ def test_wheel_installs_and_runs_the_demo(tmp_path):
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
     where = _run([str(py), "-c", "import tmscal; print(tmscal.__file__)"], cwd, env)
     assert Path(where.strip()).is_relative_to(venv), f"tmscal imported from {where}"
-    out = _run([str(tmscal), "demo", "--poses", "20", "--samples", "5", "--json"], cwd, env)
+    data = Path(_run([str(py), "-c", "import pathlib, tmscal.data; "
+                      "print(pathlib.Path(tmscal.data.__file__).parent / 'configs')"],
+                     cwd, env).strip())
+    assert data.is_relative_to(venv), f"package data at {data}"
+    cfg = unique_addresses(yaml.safe_load((data / "mock-ur-polaris.yaml").read_text()))
+    cfg["tracker"]["tools"] = {k: str(data / v) for k, v in cfg["tracker"]["tools"].items()}
+    (cwd / "demo.yaml").write_text(yaml.safe_dump(cfg))
+    out = _run([str(tmscal), "demo", "--config", "demo.yaml", "--poses", "20", "--samples", "5",
+                "--json"], cwd, env)
     result = json.loads(out)
     assert result["n_skipped"] == 0
     assert result["truth"]["coil_placement_mm"] < 0.3

@@ -25,6 +25,7 @@ if __name__ != "__main__":
     pytestmark = pytest.mark.interop
 
 from tests.child import child_main, run_child
+from tests.rigs import unique_host
 from tmscal.geometry import compose, make_pose, pose_from_rotvec, rot_z, rotvec_pose_from_matrix
 from tmscal.mocks.clock import FAST, REAL_TIME
 from tmscal.mocks.ur import ROBOT_MODE_POWER_OFF, URFaults, URMock
@@ -57,7 +58,7 @@ def test_default_flags_upload_script_and_move_sync_and_async() -> None:
     and async move the rig; getActualTCPPose reports the rig's pose."""
     rig = _rig()
     t1, t2 = rotvec_pose_from_matrix(_T1).tolist(), rotvec_pose_from_matrix(_T2).tolist()
-    with URMock(rig, host="127.0.0.31", clock=REAL_TIME) as mock:
+    with URMock(rig, host=unique_host(), clock=REAL_TIME) as mock:
         res = run_child(__file__, "moves", mock.host,
                         {"flags": None, "t1": t1, "t2": t2, "speed": 0.05, "async_speed": 0.04})
         assert mock.scripts_received == 1
@@ -94,7 +95,7 @@ def test_flags_zero_without_upload() -> None:
     """flags=0: no script upload; the running control program executes the moves."""
     rig = _rig()
     t1, t2 = rotvec_pose_from_matrix(_T1).tolist(), rotvec_pose_from_matrix(_T2).tolist()
-    with URMock(rig, host="127.0.0.32", clock=FAST) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST) as mock:
         res = run_child(__file__, "moves", mock.host,
                         {"flags": 0, "t1": t1, "t2": t2, "speed": 0.25, "async_speed": 0.25,
                          "variables": ["timestamp", "actual_TCP_pose"]})
@@ -111,7 +112,7 @@ def test_flags_zero_without_upload() -> None:
 def test_protective_stop_fails_move_and_unlock_clears_it() -> None:
     rig = _rig()
     t1, t2 = rotvec_pose_from_matrix(_T1).tolist(), rotvec_pose_from_matrix(_T2).tolist()
-    with URMock(rig, host="127.0.0.33", clock=FAST,
+    with URMock(rig, host=unique_host(), clock=FAST,
                 faults=URFaults(protective_stop_at_move=2)) as mock:
         res = run_child(__file__, "protective", mock.host, {"t1": t1, "t2": t2})
         assert "unlock protective stop" in mock.dashboard_log
@@ -138,7 +139,7 @@ def test_protective_stop_fails_move_and_unlock_clears_it() -> None:
 
 @pytest.fixture(scope="module")
 def bare_mock():
-    with URMock(_rig(), host="127.0.0.34", clock=FAST) as mock:
+    with URMock(_rig(), host=unique_host(), clock=FAST) as mock:
         yield mock
 
 
@@ -168,12 +169,12 @@ def _still_serves(host: str) -> None:
 def test_local_control_and_power_off_as_a_controller_answers() -> None:
     """Remote control off: ur_rtde's constructor refuses (its own check); powered off: the
     dashboard says so and an uploaded script does not start (the library times out)."""
-    with URMock(_rig(), host="127.0.0.35", clock=FAST, remote_control=False) as mock:
+    with URMock(_rig(), host=unique_host(), clock=FAST, remote_control=False) as mock:
         res = run_child(__file__, "states", mock.host, {})
     assert "remote control" in res["ctor_error"].lower()
     assert res["remote"] is False
     assert res["play"].startswith("Command is not allowed due to safety reasons")
-    with URMock(_rig(), host="127.0.0.36", clock=FAST,
+    with URMock(_rig(), host=unique_host(), clock=FAST,
                 robot_mode=ROBOT_MODE_POWER_OFF) as mock:
         res = run_child(__file__, "states", mock.host, {})
         assert mock.runtime_state == 1 and mock.scripts_received == 1

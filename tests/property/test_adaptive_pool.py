@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from tests.fuzz import fuzz_settings
 from tmscal.acquisition.plan import check_plan
 from tmscal.acquisition.sample import spread_of
-from tmscal.calib import adaptive as ad
+from tmscal.calib import prediction as ad
 from tmscal.drivers.base import Envelope
 from tmscal.errors import SafetyError
 from tmscal.geometry import pose_mean

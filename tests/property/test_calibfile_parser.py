@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
 from tmscal.errors import CalibrationError
-from tmscal.exports.calibfile import _load_text, parse_calibration
+from tmscal.exports.calibfile import parse_calibration
+from tmscal.exports.textfile import load_text as parse_document
 from tmscal.geometry import make_pose, matrix_from_rotvec
 
 SRC = "fuzz.yaml"
@@ -47,7 +48,7 @@ def check(doc):
 def test_rigid_matrices_round_trip_exactly(X, Y, Z, how):
     doc = valid_doc(X, Z, Y)
     text = yaml.safe_dump(doc) if how == "yaml" else json.dumps(doc)
-    cal = parse_calibration(_load_text(text, SRC), SRC)
+    cal = parse_calibration(parse_document(text, SRC), SRC)
     np.testing.assert_array_equal(cal.X, X)
     np.testing.assert_array_equal(cal.Y, Y)
     np.testing.assert_array_equal(cal.Z_raw, Z)  # no raw given: the orthonormal ones
@@ -95,7 +96,7 @@ def test_one_entry_of_a_matrix_replaced(X, Z, i, j, v):
 @fuzz_settings(300)
 def test_any_text_parses_or_fails_cleanly(text):
     try:
-        doc = _load_text(text, SRC)
+        doc = parse_document(text, SRC)
     except CalibrationError as e:
         assert SRC in str(e)
         return

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from tests.fuzz import fuzz_settings
 from tmscal.errors import SessionError
 from tmscal.session import PoseRecord, validate_record
-from tmscal.session.records import _Bad, _check_pose
+from tmscal.session.records import BadLine, validate_pose
 
 _FIELDS = ("joints_rad", "wrench", "wrench_spread")
 _numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**400,
@@ -55,8 +55,8 @@ def _acceptable(field: str, value: object) -> bool:
 @given(field=st.sampled_from(_FIELDS), value=_values)
 def test_reader_keeps_the_numbers_or_names_the_field(field, value):
     try:
-        rec = _check_pose(json.loads(json.dumps(_line(field, value))))
-    except _Bad as e:
+        rec = validate_pose(json.loads(json.dumps(_line(field, value))))
+    except BadLine as e:
         assert not _acceptable(field, value)
         assert f"'{field}'" in str(e)
         return

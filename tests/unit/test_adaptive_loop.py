@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tmscal.acquisition import adaptive as loop
+from tmscal.acquisition import adaptive_run as loop
 from tmscal.acquisition.engine import PhaseClock
 from tmscal.acquisition.progress import Progress
 from tmscal.acquisition.settings import sampling_settings as _settings
-from tmscal.calib.adaptive import AdaptiveSettings, bootstrap_indices
+from tmscal.calib.prediction import AdaptiveSettings, bootstrap_indices
 from tmscal.config import load_config
 from tmscal.errors import ConfigError, SessionError
 from tmscal.motion import move_duration

@@ -1,4 +1,4 @@
-"""tmscal.calib.adaptive: the prediction, the next-pose criterion, the bootstrap and the stopping
+"""tmscal.calib.prediction: the prediction, the next-pose criterion, the bootstrap and the stopping
 rule of adaptive acquisition, against simulated rigs with known truth (tmscal.sim.SimRig
 driven directly: move_flange, then averaged observations)."""
 
@@ -9,8 +9,8 @@ import pytest
 
 from tmscal.acquisition.sample import spread_of
 from tmscal.calib import Applied, Calibration, solve
-from tmscal.calib import adaptive as ad
-from tmscal.calib.bound import STEPS, _placement_error, crb, sim_noise_options
+from tmscal.calib import prediction as ad
+from tmscal.calib.bound import STEPS, crb, placement_error, sim_noise_options
 from tmscal.calib.ml_model import Problem
 from tmscal.errors import CalibrationError
 from tmscal.geometry import angle_between, make_pose, pose_mean
@@ -136,7 +136,7 @@ def test_placement_jacobian_matches_finite_differences_of_the_bound_model(
             h = 1e-7 if i >= 18 else STEPS[(i % 6) // 3]
             e = np.zeros(k)
             e[i] = h
-            Jn[:, i] = (_placement_error(prob, e, N, 1) - _placement_error(prob, -e, N, 1)
+            Jn[:, i] = (placement_error(prob, e, N, 1) - placement_error(prob, -e, N, 1)
                         )[3:] / (2 * h)
         scale = np.abs(Jn).max(axis=0) + 1e-9
         assert np.all(np.abs(J[r] - Jn) <= 1e-4 * scale + 1e-6)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import pytest
 
+from tests.rigs import unique_host
 from tmscal.drivers.denso.arm import denso_arm
 from tmscal.drivers.franka.robot import arm_from_urdf
 from tmscal.drivers.ur.arm import ur_arm, ur_generation
@@ -78,4 +79,4 @@ def test_the_franka_mock_takes_only_the_arm_franky_sim_simulates():
 
     rig = SimRig(tms_rig_truth(), noise=Noise(), start=TMS_RIG_P0, arm=make_arm("ur5e", "none", 0))
     with pytest.raises(ValueError, match="franky-sim simulates an FR3.*not ur5e"):
-        FrankaMock(rig, host="127.20.20.10")
+        FrankaMock(rig, host=unique_host())

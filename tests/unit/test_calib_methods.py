@@ -174,9 +174,13 @@ def test_handheld_needs_the_extra_measurement_and_a_known_base():
     _, d = simulated(10, seed=5, plan="random", noise=Noise.none())
     with pytest.raises(CalibrationError, match="handheld_B and handheld_C"):
         solve(d["A"], d["marker"], d["probe"], method="handheld")
-    with pytest.raises(CalibrationError, match="unknown base method 'nope'"):
+    with pytest.raises(CalibrationError,
+                       match=r"^handheld: option base: unknown method 'nope'; known: qr24, "):
         solve(d["A"], d["marker"], None, method="handheld", handheld_B=np.eye(4),
               handheld_C=np.eye(4), base="nope")
+    with pytest.raises(CalibrationError, match="base cannot be 'handheld' itself"):
+        solve(d["A"], d["marker"], None, method="handheld", handheld_B=np.eye(4),
+              handheld_C=np.eye(4), base="handheld")
     bad = np.eye(4)
     bad[0, 0] = 2.0
     with pytest.raises(CalibrationError, match="handheld_B"):

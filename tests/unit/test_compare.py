@@ -192,7 +192,7 @@ def fake_method(monkeypatch):
                           "scale_percent": 0.08}
         return cal
 
-    monkeypatch.setitem(calib.SOLVERS, "fake", fake)
+    monkeypatch.setitem(calib.METHODS, "fake", fake)
     return calls
 
 

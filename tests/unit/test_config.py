@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.rigs import unique_addresses
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
-from tmscal.mocks.rig import build_sim_rig
+from tmscal.mocks.launch import build_sim_rig
 from tmscal.sim import TMS_RIG_P0, tms_rig_truth
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -110,8 +111,8 @@ def test_start_pose_from_xyz_rpy(tmp_path):
 
 
 def test_unknown_driver_and_fault_options_are_named(tmp_path):
-    from tmscal.mocks.rig import start_mock_rig
-    data = yaml.safe_load((CONFIGS / "mock-denso-polaris.yaml").read_text())
+    from tmscal.mocks.launch import start_mock_rig
+    data = unique_addresses(yaml.safe_load((CONFIGS / "mock-denso-polaris.yaml").read_text()))
     data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
     data["robot"]["options"] = {"max_linear_speed_mm_s": 1000, "turbo": True}
     data["mock"]["tracker"] = {"faults": {"crc_eror_prob": 0.1}}

@@ -239,3 +239,13 @@ def test_export_refuses_bad_use(files):
     assert "FIFO" in fails("export", fifo, "--format", "json", "-o", files / "z.json")
     assert "s.jsonl" in fails("export", files / "s.jsonl", "--format", "json", "-o",
                               files / "y.json")
+
+
+def test_an_unknown_export_format_is_a_config_error_listing_the_known_ones(files):
+    from tmscal.errors import ConfigError
+    from tmscal.exports import read_calibration, render
+
+    cf = read_calibration(files / "qr36.yaml")
+    with pytest.raises(ConfigError, match=r"^unknown export format 'stl'; known formats: itk, "
+                                          r"plus, easy-handeye, invesalius, json$"):
+        render("stl", cf)

@@ -14,6 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
+from tests.rigs import unique_host
 from tmscal.drivers.franka.frames import (
     MIN_FACTOR,
     base_from_flange,
@@ -282,8 +283,8 @@ def test_mock_refuses_the_fast_clock_and_a_public_host():
 
     rig = SimRig(tms_rig_truth())
     with pytest.raises(ValueError, match="mock.clock: real"):
-        FrankaMock(rig, host="127.0.0.2", clock=FAST)
+        FrankaMock(rig, host=unique_host(), clock=FAST)
     with pytest.raises(ConfigError, match="not a loopback address"):
         FrankaMock(rig, host="0.0.0.0")
     with pytest.raises(ValueError, match="initial_q must be 7 finite joint angles"):
-        FrankaMock(rig, host="127.0.0.2", initial_q=[0.0] * 6)
+        FrankaMock(rig, host=unique_host(), initial_q=[0.0] * 6)

@@ -5,7 +5,6 @@ error naming host:port. Poses are tracker_from_<body>, 4×4 mm."""
 
 from __future__ import annotations
 
-import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -13,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.rigs import free_port, unique_host
 from tmscal.drivers.igtl.tracker import IGTLTracker
 from tmscal.errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
 from tmscal.geometry import rotation_angle
@@ -220,12 +220,10 @@ def test_an_occasional_corrupted_message_is_a_protocol_error() -> None:
 
 
 def test_a_refused_connection_is_connection_lost_naming_host_and_port() -> None:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()   # nothing listens there now
-    t = IGTLTracker("127.0.0.1", TOOLS, port=port, timeout_s=1.0)
-    with pytest.raises(ConnectionLost, match=f"igtl 127.0.0.1:{port}: connection refused"):
+    host = unique_host()
+    port = free_port(host)   # nothing listens there
+    t = IGTLTracker(host, TOOLS, port=port, timeout_s=1.0)
+    with pytest.raises(ConnectionLost, match=f"igtl {host}:{port}: connection refused"):
         t.open()
     assert not t.is_open
     t.close()

@@ -207,7 +207,7 @@ def test_valid_models_round_trip(rows, mass, cog):
 
 # --- selfcal identify writes it ---------------------------------------------------------------
 
-def _selfcal_session(path, pair, n=50, sigma=(0.05, 0.01), samples=25, seed=4, spreads=True):
+def selfcal_session(path, pair, n=50, sigma=(0.05, 0.01), samples=25, seed=4, spreads=True):
     """A session as `selfcal acquire` records it, made here from the true arm's gravity
     wrench plus Gaussian noise of the averaged reading ``sigma`` (N, N·m)."""
     from tmscal.calib.selfcal.model import wrench
@@ -237,7 +237,7 @@ def test_identify_writes_a_kinematics_file_closer_to_the_truth(tmp_path):
 
     pair = make_arm("ur5e", "paper", 11)
     s_path, k_path = tmp_path / "sc.jsonl", tmp_path / "kin.yaml"
-    q = _selfcal_session(s_path, pair)
+    q = selfcal_session(s_path, pair)
     r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o", str(k_path)])
     assert r.exit_code == 0, r.output
     assert "converged" in r.output and "not identified: base_yaw: zero column" in r.output
@@ -263,7 +263,7 @@ def test_identify_without_spreads_needs_sigma(tmp_path):
     from tmscal.sim.arm import make_arm
 
     s_path = tmp_path / "sc.jsonl"
-    _selfcal_session(s_path, make_arm("ur5e", "none", 0), n=20, spreads=False)
+    selfcal_session(s_path, make_arm("ur5e", "none", 0), n=20, spreads=False)
     r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o",
                                   str(tmp_path / "k.yaml")])
     assert r.exit_code == 2 and "--sigma" in r.output

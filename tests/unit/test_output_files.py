@@ -24,7 +24,7 @@ from tmscal.session import files as session_mod
 from tmscal.session.outputs import output_path, remove_output, write_output
 
 from ..rigs import REPO, simulated
-from .test_kinfile import _selfcal_session
+from .test_kinfile import selfcal_session
 
 pytest.importorskip("matplotlib")
 
@@ -59,7 +59,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     _ok("simulate", "-o", d / "s.jsonl", "--poses", 30, "--seed", 5)
     _ok("solve", d / "s.jsonl", "-o", d / "c.yaml", "--folds", 2)
     from tmscal.sim.arm import make_arm
-    _selfcal_session(d / "sc.jsonl", make_arm("ur5e", "paper", 11), n=30)
+    selfcal_session(d / "sc.jsonl", make_arm("ur5e", "paper", 11), n=30)
     return {"session": d / "s.jsonl", "calib": d / "c.yaml", "selfcal": d / "sc.jsonl"}
 
 

@@ -20,7 +20,7 @@ from tmscal.config import load_config
 from tmscal.config.mock import KINEMATIC_ERRORS
 from tmscal.errors import SessionError
 from tmscal.geometry import invert
-from tmscal.mocks.rig import build_sim_rig
+from tmscal.mocks.launch import build_sim_rig
 from tmscal.poses import eq14_poses
 from tmscal.session import make_header, read_session, write_session
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, make_arm, tms_rig_truth

@@ -15,9 +15,9 @@ from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.geometry import invert, make_pose
 from tmscal.mocks.clock import FAST
+from tmscal.mocks.launch import build_sim_rig, start_mock_rig
 from tmscal.mocks.polaris.frames import FrameSource
 from tmscal.mocks.polaris.model import PolarisFaults
-from tmscal.mocks.rig import build_sim_rig, start_mock_rig
 from tmscal.sim import TMS_RIG_P0, Noise, Settle, SimRig
 
 AMP, TAU, FREQ = 0.3, 0.25, 4.0
@@ -173,7 +173,7 @@ def test_config_key_and_wiring(mock_config) -> None:
     cfg = load_config(path)
     rig = build_sim_rig(cfg)
     assert rig.settle == Settle(0.3, 0.25, 4.0)
-    with start_mock_rig(cfg, tracker_transport="tcp", robot_host="127.0.0.3") as mr:
+    with start_mock_rig(cfg, tracker_transport="tcp") as mr:
         assert mr.rig.time_s is not None      # fast clock: the tracker's time
     plain = build_sim_rig(load_config(mock_config("mock-ur-polaris.yaml")))
     assert plain.settle is None

@@ -84,7 +84,7 @@ def test_raw_qr36_absorbs_an_isotropic_scale_a_rigid_solution_cannot(seed: int) 
 
 def test_a_mock_rig_config_sets_the_distortion(mock_config) -> None:
     from tmscal.config import load_config
-    from tmscal.mocks.rig import build_sim_rig
+    from tmscal.mocks.launch import build_sim_rig
 
     base = "mock-ur-polaris.yaml"
     mock = yaml.safe_load((Path(__file__).parents[2] / "configs" / base).read_text())["mock"]

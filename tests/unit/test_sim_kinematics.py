@@ -14,7 +14,7 @@ from tmscal.calib.selfcal.model import NOMINAL, forward
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.geometry import invert, make_pose
-from tmscal.mocks.rig import build_sim_rig
+from tmscal.mocks.launch import build_sim_rig
 from tmscal.poses import eq14_poses
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, Unreachable, make_arm, tms_rig_truth
 from tmscal.sim.arm import IK_TOL_MM, inverse

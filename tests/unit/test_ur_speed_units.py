@@ -18,6 +18,7 @@ if __name__ != "__main__":
     pytest.importorskip("rtde_control")
 
 from tests.child import child_main, run_child
+from tests.rigs import unique_host
 from tmscal.geometry import make_pose, rot_z
 from tmscal.mocks.clock import FAST
 from tmscal.mocks.ur import URMock
@@ -30,7 +31,7 @@ def test_move_to_hands_ur_rtde_metres_per_second() -> None:
     rig = SimRig(tms_rig_truth(), noise=Noise.none(), start=TMS_RIG_P0)
     t1 = TMS_RIG_P0 @ make_pose(rot_z(0.05), [12.0, -7.0, 4.0])
     t2 = TMS_RIG_P0 @ make_pose(np.eye(3), [-30.0, 5.0, 20.0])
-    with URMock(rig, host="127.0.22.2", clock=FAST) as mock:
+    with URMock(rig, host=unique_host(), clock=FAST) as mock:
         res = run_child(__file__, "moves", mock.host, {
             "speed_mm_s": 123.0, "accel_mm_s2": 456.0,
             "moves": [[t1.tolist(), None], [t2.tolist(), 87.5]]})

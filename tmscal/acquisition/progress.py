@@ -40,7 +40,7 @@ class Progress:
         """Pose ``i`` is now ``name``."""
 
     def predicted(self, prediction: Any, info: dict[str, Any]) -> None:
-        """An adaptive run's prediction (``calib.adaptive.Prediction``) and its decision."""
+        """An adaptive run's prediction (``calib.prediction.Prediction``) and its decision."""
 
     def pose(self, done: int, total: int, record: PoseRecord) -> None:
         """Pose ``record`` was saved; ``done`` of ``total`` are now in the session."""

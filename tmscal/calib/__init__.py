@@ -15,10 +15,10 @@ from __future__ import annotations
 
 from .calibration import Applied, Calibration
 from .linear import design_matrix
-from .methods import METHODS, SOLVERS, check_inputs, register_method, solve
+from .methods import METHODS, check_inputs, get_method, register_method, solve
 from .metrics import coil_placement_errors, holdout_errors, noise_floor, truth_errors
 
-__all__ = ["solve", "register_method", "SOLVERS", "Applied", "Calibration", "METHODS",
+__all__ = ["solve", "register_method", "get_method", "Applied", "Calibration", "METHODS",
            "design_matrix", "holdout_errors", "truth_errors", "coil_placement_errors",
            "noise_floor", "check_inputs"]
 

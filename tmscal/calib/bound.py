@@ -35,7 +35,7 @@ from .ml_model import (
 )
 
 __all__ = ["crb", "tool_tracker_cov", "sim_noise_options", "translation_rms_bound",
-           "uncertainty_at"]
+           "uncertainty_at", "placement_error"]
 
 
 def tool_tracker_cov(tool_mm: np.ndarray, fiducial_sigma_mm: float, samples: int = 1
@@ -100,7 +100,7 @@ def translation_rms_bound(cov: np.ndarray, which: str = "Y", bodies: int = 2) ->
     return float(np.sqrt(np.trace(cov[np.ix_(idx, idx)])))
 
 
-def _placement_error(prob: Problem, th: np.ndarray, N_ref: np.ndarray, j: int
+def placement_error(prob: Problem, th: np.ndarray, N_ref: np.ndarray, j: int
                      ) -> np.ndarray:
     """[rotation vector (rad, base), translation (mm)] of the body's pose when the robot is
     commanded with parameters θ to put body j at tracker pose N_ref, relative to where the
@@ -132,8 +132,8 @@ def uncertainty_at(prob: Problem, P: np.ndarray, N_ref: np.ndarray, j: int
         h = G_STEP if i >= 6 * (len(prob.Ws) + 1) else STEPS[(i % 6) // 3]
         e = np.zeros(k)
         e[i] = h
-        Je[:, i] = (_placement_error(prob, e, N_ref, j)
-                    - _placement_error(prob, -e, N_ref, j)) / (2 * h)
+        Je[:, i] = (placement_error(prob, e, N_ref, j)
+                    - placement_error(prob, -e, N_ref, j)) / (2 * h)
     cov = Je @ P @ Je.T
     ct = cov[3:, 3:]
     _, Z0, G0 = prob.unpack(np.zeros(k))

@@ -49,8 +49,8 @@ from ..geometry import (
     quaternion_from_matrix,
 )
 from .calibration import Applied, Calibration
-from .linear import _check_diversity, resolve_translations
-from .methods import SOLVERS, register_method
+from .linear import check_rotation_diversity, resolve_translations
+from .methods import get_method, register_method
 
 __all__ = ["check_rotations", "rigid_calibration", "normalize_rotation", "quat_rotations"]
 
@@ -60,7 +60,7 @@ def check_rotations(A: np.ndarray) -> None:
     robot rotations about at least two non-parallel axes (CalibrationError otherwise)."""
     if len(A) < 3:
         raise CalibrationError(f"need at least 3 poses, got {len(A)}")
-    _check_diversity(A)
+    check_rotation_diversity(A)
 
 
 def bodies_of(A: np.ndarray, B: np.ndarray, C: np.ndarray | None) -> list[np.ndarray]:
@@ -292,15 +292,16 @@ def solve_handheld(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonorm
         raise CalibrationError("handheld needs the extra measurement with the probe at the coil "
                                "centre: options handheld_B and handheld_C (4×4 mm)")
     base = str(base).lower()
-    if base == "handheld" or base not in SOLVERS:
-        raise CalibrationError(f"handheld: unknown base method {base!r}")
+    if base == "handheld":
+        raise CalibrationError("handheld: option base cannot be 'handheld' itself")
+    base_solver = get_method(base, "handheld: option base")
     try:
         Ba, Ca = (check_poses(np.asarray(M, dtype=np.float64)[None], name,
                               tol=RIGID_TOL_DEFAULT)[0]
                   for M, name in ((handheld_B, "handheld_B"), (handheld_C, "handheld_C")))
     except ValueError as e:
         raise CalibrationError(str(e)) from None
-    cal = SOLVERS[base](A, B, None, orthonormal)
+    cal = base_solver(A, B, None, orthonormal)
     rel = invert(Ba) @ Ca
     cal.Y = cal.X @ rel
     cal.Y_raw = cal.X_raw @ rel

@@ -39,6 +39,7 @@ __all__ = [
     "resolve_translations",
     "vec34",
     "unvec34",
+    "check_rotation_diversity",
 ]
 
 
@@ -91,7 +92,7 @@ def design_matrix(A: np.ndarray, *bodies: np.ndarray) -> tuple[np.ndarray, np.nd
     return D.reshape(n * m * 12, 12 * (m + 1)), b.reshape(-1)
 
 
-def _check_diversity(A: np.ndarray) -> None:
+def check_rotation_diversity(A: np.ndarray) -> None:
     """Raise CalibrationError when the robot rotations give no unique solution: fewer than
     two distinct rotation axes among the relative motions A_0⁻¹ A_i."""
     R = A[:, :3, :3]
@@ -144,7 +145,7 @@ def solve_linear(A: np.ndarray, *bodies: np.ndarray) -> tuple[np.ndarray, list[n
     n = A.shape[0]
     if n < 3:
         raise CalibrationError(f"need at least 3 poses, got {n}")
-    _check_diversity(A)
+    check_rotation_diversity(A)
     # Exact reparametrisation for conditioning: with S0, T0 pure translations to the mean
     # flange and mean tracked-body positions, A' = S0⁻¹A, N' = T0⁻¹N and Z' = S0⁻¹ Z T0 give
     # the very same residuals A'⁻¹ Z' N' − X = A⁻¹ Z N − X, hence the same minimiser, but

@@ -18,12 +18,11 @@ from ..geometry import RIGID_TOL_DEFAULT, check_poses
 from .calibration import Calibration
 
 #: method name → solver ``fn(A, B, C, orthonormal: bool, **options) -> Calibration`` (inputs
-#: already checked by ``check_inputs``); filled by ``register_method``. ``METHODS`` iterates
-#: over the names.
-SOLVERS: dict[str, Callable[..., Calibration]] = {}
-METHODS = SOLVERS
+#: already checked by ``check_inputs``), in registration order; filled by ``register_method``,
+#: read by ``get_method``
+METHODS: dict[str, Callable[..., Calibration]] = {}
 
-__all__ = ["SOLVERS", "METHODS", "solve", "register_method", "check_inputs"]
+__all__ = ["METHODS", "solve", "register_method", "get_method", "check_inputs"]
 
 
 def check_inputs(A: Any, B: Any, C: Any = None) -> tuple[np.ndarray, np.ndarray,
@@ -49,9 +48,20 @@ def register_method(name: str) -> Callable[[Callable[..., Calibration]],
     """Decorator: register ``fn(A, B, C, orthonormal, **options) -> Calibration`` as
     ``solve(..., method=name)`` and ``tmscal solve --method name``."""
     def deco(fn: Callable[..., Calibration]) -> Callable[..., Calibration]:
-        SOLVERS[name] = fn
+        METHODS[name] = fn
         return fn
     return deco
+
+
+def get_method(name: str, where: str = "") -> Callable[..., Calibration]:
+    """The solver registered as ``name`` (case-insensitive); an unknown name is a
+    CalibrationError listing the known ones, prefixed with ``where`` (e.g. an option) when
+    given."""
+    fn = METHODS.get(name.lower()) if isinstance(name, str) else None
+    if fn is None:
+        pre = f"{where}: " if where else ""
+        raise CalibrationError(f"{pre}unknown method {name!r}; known: {', '.join(METHODS)}")
+    return fn
 
 
 def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool = False,
@@ -68,11 +78,10 @@ def solve(A: Any, B: Any, C: Any = None, method: str = "qr36", orthonormal: bool
     non-rigid or NaN poses, qr36 without C) and for an unknown method or option.
     """
     method = method.lower()
-    if method not in SOLVERS:
-        raise CalibrationError(f"unknown method {method!r}; known: {', '.join(SOLVERS)}")
+    fn = get_method(method)
     A, B, C = check_inputs(A, B, C)
     try:
-        return SOLVERS[method](A, B, C, orthonormal, **options)
+        return fn(A, B, C, orthonormal, **options)
     except TypeError as e:
         if options and "argument" in str(e):
             raise CalibrationError(f"method {method!r}: {e}") from None

@@ -29,7 +29,8 @@ EXIT_ERROR = 1
 EXIT_INTERRUPTED = 130
 
 
-def _fail(msg: str, code: int = EXIT_ERROR) -> None:
+def fail(msg: str, code: int = EXIT_ERROR) -> None:
+    """Print ``error: msg`` on stderr and exit with ``code`` (1 by default)."""
     click.echo(f"error: {msg}", err=True)
     sys.exit(code)
 
@@ -42,15 +43,15 @@ def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return fn(*args, **kwargs)
         except TmscalError as e:
-            _fail(str(e))
+            fail(str(e))
         except OSError as e:
             where = f"{e.filename}: " if getattr(e, "filename", None) else ""
-            _fail(f"{where}{e.strerror or e}")
+            fail(f"{where}{e.strerror or e}")
 
     return wrapper
 
 
-def _write_atomic(path: Path, text: str, force: bool = False) -> None:
+def write_atomic(path: Path, text: str, force: bool = False) -> None:
     """Write an output file whole or not at all, mode 0666 & ~umask, never over a file
     another tmscal process holds locked, over an existing one only with ``force``
     (``tmscal.session.outputs.write_output``; call ``check_outputs`` first)."""
@@ -58,7 +59,7 @@ def _write_atomic(path: Path, text: str, force: bool = False) -> None:
     write_output(path, text, overwrite=force)
 
 
-def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
+def run_plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
     """Call a report plotting function; a missing matplotlib is one clear error."""
     from ..errors import MissingExtraError
     try:
@@ -68,10 +69,10 @@ def _plot(fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
 
 
 @contextlib.contextmanager
-def _output_files(outputs: dict[str, Path], force: bool) -> Iterator[dict[str, str]]:
+def output_files(outputs: dict[str, Path], force: bool) -> Iterator[dict[str, str]]:
     """Temporary paths (same folder and suffix) to write the output files ``outputs``
     {key: path} to, e.g. by matplotlib; once the block has written them all, each is put in
-    place by the rule of ``_write_atomic``; if it raises, none is."""
+    place by the rule of ``write_atomic``; if it raises, none is."""
     from ..session.outputs import output_path
 
     with contextlib.ExitStack() as stack:
@@ -84,13 +85,14 @@ def _json_default(o: Any) -> Any:
     return str(o) if isinstance(o, Path) else json_default(o)
 
 
-def _print_json(obj: Any) -> None:
+def print_json(obj: Any) -> None:
+    """Print ``obj`` as one line of JSON (numpy values and paths converted)."""
     click.echo(json.dumps(obj, default=_json_default))
 
 
 # --- argument types and the one rule for output files -----------------------------------------
 
-class _Finite(click.ParamType):
+class Finite(click.ParamType):
     """A finite float (NaN and ±∞ refused) in [lo, hi]; ``lo_open`` makes the lower bound
     exclusive (e.g. a speed must be > 0)."""
 
@@ -141,7 +143,8 @@ class _InputFile(click.ParamType):
 INPUT_FILE = _InputFile()
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def same_file(a: Path, b: Path) -> bool:
+    """True when both paths exist and are the same file (links followed)."""
     try:
         return a.exists() and b.exists() and os.path.samefile(a, b)
     except OSError:
@@ -159,7 +162,7 @@ def check_outputs(outputs: dict[str, Path | None], inputs: list[Path], force: bo
         if out is None:
             continue
         for inp in inputs:
-            if _same_file(out, inp) or out.resolve() == inp.resolve():
+            if same_file(out, inp) or out.resolve() == inp.resolve():
                 raise click.BadParameter(f"{out} is an input of this command; it is never "
                                          "written over (choose another file)", param_hint=opt)
         key = out.resolve()
@@ -187,7 +190,7 @@ def _check_not_locked(out: Path, opt: str) -> None:
         raise click.BadParameter(str(e), param_hint=opt) from None
 
 
-def _read_session(path: Path, strict: bool) -> Any:
+def read_session_file(path: Path, strict: bool) -> Any:
     """Read a session for a command; what the reader skipped is said in one warning line
     (``_warn_damage``) instead of one log line per damaged line (unless -v)."""
     from ..session import read_session

@@ -12,13 +12,13 @@ from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,
-    _output_files,
-    _plot,
-    _print_json,
-    _read_session,
     check_outputs,
     handle_errors,
     main,
+    output_files,
+    print_json,
+    read_session_file,
+    run_plot,
 )
 
 #: the files ``--plot DIR`` writes
@@ -81,7 +81,7 @@ def compare(session_file: Path, methods: str | None, n_text: str | None, folds: 
     outputs = {f"--plot ({name})": None if plot is None else plot / f
                for name, f in PLOT_FILES.items()}
     check_outputs(outputs, [session_file], force)
-    session = _read_session(session_file, strict)
+    session = read_session_file(session_file, strict)
     with tqdm(desc="solving", unit="solve", disable=None, file=sys.stderr,
               leave=False) as bar:
         res = compare_session(session, ms, ns=ns, folds=folds, progress=bar.update)
@@ -90,12 +90,12 @@ def compare(session_file: Path, methods: str | None, n_text: str | None, folds: 
         plot.mkdir(parents=True, exist_ok=True)
         files = {k.split("(")[1].rstrip(")"): v for k, v in outputs.items()
                  if v is not None and (res["truth"] or "truth" not in k)}
-        with _output_files(files, force) as tmp:
-            _plot(plot_compare, res, tmp, title=session_file.name)
+        with output_files(files, force) as tmp:
+            run_plot(plot_compare, res, tmp, title=session_file.name)
         written = [str(v) for v in files.values()]
     if as_json:
         from ..session import json_safe
-        _print_json(json_safe(res))
+        print_json(json_safe(res))
     else:
         from ..report.compare import format_compare
         click.echo(format_compare(res))

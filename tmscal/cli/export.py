@@ -8,9 +8,9 @@ from pathlib import Path
 import click
 
 from ..exports import FORMATS
-from .app import FORCE_HELP, INPUT_FILE, _write_atomic, check_outputs, handle_errors, main
+from .app import FORCE_HELP, INPUT_FILE, check_outputs, handle_errors, main, write_atomic
 
-_FORMAT_HELP = "; ".join(f"{k}: {v[1]}" for k, v in FORMATS.items())
+_FORMAT_HELP = "; ".join(f"{k}: {v.help}" for k, v in FORMATS.items())
 
 
 @main.command()
@@ -51,7 +51,7 @@ def export(calib_file: Path, fmt: str, output: Path, handeye2: bool, frames: tup
     check_outputs({"--output": output}, [calib_file], force)
     cf = read_calibration(calib_file)
     opts = {"version": 2 if handeye2 else 1, "frames": names} if fmt == "easy-handeye" else {}
-    _write_atomic(output, render(fmt, cf, **opts), force)
+    write_atomic(output, render(fmt, cf, **opts), force)
     click.echo(f"wrote {output} ({fmt}{' 2' if handeye2 else ''}) from {calib_file}")
     for note in _notes(fmt, cf, output.suffix.lower()):
         click.echo(f"note: {note}")

@@ -2,7 +2,7 @@
 arm's kinematics estimated (``solving.solve.solve_session(kinematics="estimate")``,
 docs/kinematics.md), and the coil placement against the mock rig's truth through that
 calibration's flange commands, beside QR36's on the controller's nominal poses. The command's
-options live in :mod:`tmscal.cli.rig`."""
+options live in :mod:`tmscal.cli.rig_commands`."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def demo_report(session: Any, acquired: Any, as_json: bool) -> None:
     result (poses recorded, skipped, seconds)."""
     from ..report.text import format_result
     from ..solving.solve import solve_session
-    from .app import _print_json
+    from .app import print_json
 
     _, result = solve_session(session, "ml", kinematics="estimate")
     _, nominal = solve_session(session, "qr36")
@@ -29,7 +29,7 @@ def demo_report(session: Any, acquired: Any, as_json: bool) -> None:
         return t.get("coil_placement_mm")
 
     if as_json:
-        _print_json({**result.to_json(), "true_coil_mm": coil(result),
+        print_json({**result.to_json(), "true_coil_mm": coil(result),
                      "nominal": {"method": "qr36", "true_coil_mm": coil(nominal)}})
         return
     click.echo(f"acquired {acquired.recorded} poses ({acquired.skipped} skipped) in "

@@ -36,7 +36,8 @@ from tqdm.contrib.logging import logging_redirect_tqdm
 
 from ..acquisition.progress import Progress
 
-__all__ = ["AcquireProgress", "TrackView", "fit", "spread_text", "stderr_to_log", "track_rows"]
+__all__ = ["AcquireProgress", "TrackView", "fit", "spread_text", "stderr_to_log", "track_rows",
+           "isatty", "terminal_width"]
 
 PLAIN_WIDTH = 80
 _SEP = "  "
@@ -78,13 +79,15 @@ def _short_reason(reason: str) -> str:
     return "; ".join(p for p in parts if p)
 
 
-def _width(stream: TextIO) -> int:
-    if not _isatty(stream):
+def terminal_width(stream: TextIO) -> int:
+    """Columns to fill on ``stream``: the terminal's (at least 40), 80 off a terminal."""
+    if not isatty(stream):
         return PLAIN_WIDTH
     return max(40, shutil.get_terminal_size((PLAIN_WIDTH, 24)).columns)
 
 
-def _isatty(stream: TextIO) -> bool:
+def isatty(stream: TextIO) -> bool:
+    """True when ``stream`` is a terminal (False for a closed or file-less stream)."""
     try:
         return stream.isatty()
     except (AttributeError, ValueError):
@@ -98,8 +101,8 @@ class AcquireProgress(Progress):
 
     def __init__(self, stream: TextIO, tty: bool | None = None, label: str = "pose") -> None:
         self.stream = stream
-        self.tty = _isatty(stream) if tty is None else tty
-        self.width = _width(stream) if tty is None else (
+        self.tty = isatty(stream) if tty is None else tty
+        self.width = terminal_width(stream) if tty is None else (
             max(40, shutil.get_terminal_size((PLAIN_WIDTH, 24)).columns) if tty
             else PLAIN_WIDTH)
         self.label = label
@@ -291,8 +294,8 @@ class TrackView:
 
     def __init__(self, stream: TextIO, plain: bool = False, redraw_hz: float = 10.0) -> None:
         self.stream = stream
-        self.plain = plain or not _isatty(stream)
-        self.width = _width(stream) if not self.plain else PLAIN_WIDTH
+        self.plain = plain or not isatty(stream)
+        self.width = terminal_width(stream) if not self.plain else PLAIN_WIDTH
         self._period = 1.0 / redraw_hz
         self._drawn = 0
         self._last_draw = -1e9

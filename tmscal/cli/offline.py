@@ -13,15 +13,15 @@ from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,
-    _Finite,
-    _output_files,
-    _plot,
-    _print_json,
-    _read_session,
-    _write_atomic,
+    Finite,
     check_outputs,
     handle_errors,
     main,
+    output_files,
+    print_json,
+    read_session_file,
+    run_plot,
+    write_atomic,
 )
 from .selfcal import ArmName
 
@@ -69,15 +69,15 @@ class _Triple(click.ParamType):
               help="Random seed (≥ 0).")
 @click.option("--samples", type=click.IntRange(1, 10000), default=1, show_default=True,
               help="Tracker observations averaged per pose.")
-@click.option("--fiducial-sigma", type=_Finite(0, 100), default=0.05, show_default=True,
+@click.option("--fiducial-sigma", type=Finite(0, 100), default=0.05, show_default=True,
               help="Tracker fiducial noise σ per coordinate, mm.")
-@click.option("--robot-rot-sigma", type=_Finite(0, 90), default=0.05, show_default=True,
+@click.option("--robot-rot-sigma", type=Finite(0, 90), default=0.05, show_default=True,
               help="Robot rotation noise σ, degrees.")
-@click.option("--robot-trans-sigma", type=_Finite(0, 100), default=0.05,
+@click.option("--robot-trans-sigma", type=Finite(0, 100), default=0.05,
               show_default=True, help="Robot translation noise σ per axis, mm.")
-@click.option("--radius", type=_Finite(0, 1e5), default=None,
+@click.option("--radius", type=Finite(0, 1e5), default=None,
               help="Translation range ±mm per axis (default 100 for eq14, 500 for random).")
-@click.option("--rotation", type=_Finite(0, 180), default=10.0, show_default=True,
+@click.option("--rotation", type=Finite(0, 180), default=10.0, show_default=True,
               help="eq14 rotation range ±degrees per axis.")
 @click.option("--tracker-scale", type=_Triple(0.5, 2.0, broadcast=True), default="1",
               show_default=True,
@@ -183,7 +183,7 @@ class _Kinematics(click.ParamType):
 _KINEMATICS = _Kinematics()
 
 
-class _MethodChoice(click.Choice):
+class MethodChoice(click.Choice):
     """The registered calibration methods (``tmscal.calib.METHODS``), read when used so that
     every method registered is offered."""
 
@@ -231,7 +231,7 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
 
 @main.command()
 @click.argument("session_file", type=INPUT_FILE)
-@click.option("--method", type=_MethodChoice(), default="qr36", show_default=True,
+@click.option("--method", type=MethodChoice(), default="qr36", show_default=True,
               help="qr36: X, Y, Z jointly (Wang et al. 2018); qr24: each body on its own "
                    "(Ernst et al. 2012); and every other registered method (sgo, quat, shah, "
                    "li, handheld, ml; docs/methods.md). tmscal compare runs them side by side.")
@@ -283,11 +283,11 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
               help="With --kinematics estimate: which deviations to estimate: none (X, Y, Z "
                    "on the nominal arm), offsets (the joints' zero offsets), full (every DH "
                    "parameter, and β on parallel axes); auto chooses by held-out error.")
-@click.option("--tolerance-length", type=_Finite(0, lo_open=True), default=None,
+@click.option("--tolerance-length", type=Finite(0, lo_open=True), default=None,
               metavar="MM",
               help="With --kinematics estimate: the prior σ of each length deviation, mm "
                    "(default 0.5; docs/kinematics.md).")
-@click.option("--tolerance-angle", type=_Finite(0, lo_open=True), default=None,
+@click.option("--tolerance-angle", type=Finite(0, lo_open=True), default=None,
               metavar="DEG",
               help="With --kinematics estimate: the prior σ of each angle deviation, degrees "
                    "(default 0.1).")
@@ -338,7 +338,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
             method = "ml"
     opts = _parse_options(options)
     check_outputs({"--output": output, "--plot": plot}, [session_file], force)
-    session = _read_session(session_file, strict)
+    session = read_session_file(session_file, strict)
     if handheld_pose is not None:
         opts.update(_handheld_options(session, handheld_pose))
     cal, res = solve_session(session, method=method.lower(), train=train,
@@ -349,20 +349,19 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
                              **_kinematics_args(kinematics))
     if output is not None:
         from ..exports.calibfile import provenance
-        _write_atomic(output, calibration_yaml(
+        write_atomic(output, calibration_yaml(
             res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
             parameters=cal.extra.get("parameters"), provenance=provenance(session.header),
             arm=cal.arm), force)
     if plot is not None:
-        with _output_files({"plot": plot}, force) as tmp:
-            _plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
-                  tmp["plot"],
-                  f"{session_file.name}: {res.method.upper()} per-pose errors",
-                  outliers=res.outliers)
+        with output_files({"plot": plot}, force) as tmp:
+            run_plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
+                     tmp["plot"], f"{session_file.name}: {res.method.upper()} per-pose errors",
+                     outliers=res.outliers)
     pred = _adaptive_prediction(session)
     if as_json:
         out = res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]}
-        _print_json(out if kin_file is None else {**out, "kinematics": str(kin_file)})
+        print_json(out if kin_file is None else {**out, "kinematics": str(kin_file)})
     else:
         if kin_file is not None:
             click.echo(f"robot poses A recomputed from the recorded joints with {kin_file}\n")
@@ -441,10 +440,10 @@ def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: b
         raise click.BadParameter(f"{calib_file} carries its own identified arm, with which "
                                  "the robot poses are recomputed; leave --kinematics out",
                                  param_hint="--kinematics")
-    session = _with_kinematics(_read_session(session_file, strict), kin_file)
+    session = _with_kinematics(read_session_file(session_file, strict), kin_file)
     res = check_calibration(session, cf, sha256_of(session_file))
     if as_json:
-        _print_json(res)
+        print_json(res)
     else:
         click.echo(format_check(res))
 
@@ -471,28 +470,28 @@ def study(session_file: Path, methods: str, n_max: int, orthonormal: bool, as_js
     and thresholds of Wang et al. 2018 (their Tables 1 and 3, Figure 3; docs/methods.md)."""
     from tqdm import tqdm
 
-    from ..calib import METHODS
+    from ..calib import METHODS, get_method
     from ..errors import CalibrationError
     from ..report.text import format_study, plot_study
     from ..solving.study import study_session
 
     ms = [m.strip().lower() for m in methods.split(",") if m.strip()]
-    bad = [m for m in ms if m not in METHODS]
-    if not ms or bad:
-        raise CalibrationError(f"--methods: unknown method {bad[0] if bad else '(none)'}; "
-                               f"known: {', '.join(METHODS)}")
+    if not ms:
+        raise CalibrationError(f"--methods: no method given; known: {', '.join(METHODS)}")
+    for m in ms:
+        get_method(m, "--methods")
     check_outputs({"--plot": plot}, [session_file], force)
-    session = _read_session(session_file, strict)
+    session = read_session_file(session_file, strict)
     total = len(ms) * max(0, n_max - 4)
     with tqdm(total=total, desc="solving", unit="solve", disable=None, file=sys.stderr,
               leave=False) as bar:
         res = study_session(session, ms, n_max=n_max, orthonormal=orthonormal,
                             progress=bar.update)
     if plot is not None:
-        with _output_files({"plot": plot}, force) as tmp:
-            _plot(plot_study, res, tmp["plot"], title=f"{session_file.name}: convergence")
+        with output_files({"plot": plot}, force) as tmp:
+            run_plot(plot_study, res, tmp["plot"], title=f"{session_file.name}: convergence")
     if as_json:
-        _print_json(res)
+        print_json(res)
     else:
         click.echo(format_study(res))
         if plot is not None:

@@ -12,13 +12,13 @@ from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,
-    _read_session,
-    _write_atomic,
     check_outputs,
     handle_errors,
     main,
+    read_session_file,
+    write_atomic,
 )
-from .offline import _MethodChoice
+from .offline import MethodChoice
 
 
 @main.command()
@@ -28,7 +28,7 @@ from .offline import _MethodChoice
 @click.option("--calib", "calib_file", type=INPUT_FILE, default=None,
               help="Report this stored calibration (`tmscal solve -o` YAML or `tmscal export "
                    "--format json`) evaluated on the session, instead of solving the session.")
-@click.option("--method", type=_MethodChoice(), default="qr36", show_default=True,
+@click.option("--method", type=MethodChoice(), default="qr36", show_default=True,
               help="Without --calib: the method the session is solved with (see tmscal "
                    "solve --help). Methods without their own uncertainty get ml's beside it.")
 @click.option("--folds", type=click.IntRange(2, 100), default=5, show_default=True,
@@ -55,7 +55,7 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
 
     inputs = [session_file] + ([calib_file] if calib_file is not None else [])
     check_outputs({"--output": output}, inputs, force)
-    session = _read_session(session_file, strict)
+    session = read_session_file(session_file, strict)
     calib = read_calibration(calib_file) if calib_file is not None else None
     with tqdm(desc="report", unit="solve", disable=None, file=sys.stderr,
               leave=False) as bar:
@@ -67,5 +67,5 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
                                calib=calib, folds=folds, progress=stage, solves=bar.update)
         except ImportError as e:
             raise MissingExtraError("tmscal report", "plot", str(e)) from None
-    _write_atomic(output, page, force)
+    write_atomic(output, page, force)
     click.echo(f"wrote {output} ({len(page.encode()) / 1e6:.1f} MB)")

@@ -13,7 +13,7 @@ from typing import Any
 
 import click
 
-from .app import _Finite, _print_json, handle_errors, main
+from .app import Finite, handle_errors, main, print_json
 
 
 class ArmName(click.Choice):
@@ -109,10 +109,10 @@ def _print_table(res: Any) -> None:
               help="Wrench readings averaged per configuration (the paper: 100).")
 @click.option("--trials", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Noise draws per design; the errors after are pooled over them.")
-@click.option("--force-noise", type=_Finite(0.0, 1000.0, lo_open=True), default=1.0,
+@click.option("--force-noise", type=Finite(0.0, 1000.0, lo_open=True), default=1.0,
               show_default=True, metavar="N", help="Bound of the force noise per reading (N; "
                                                    "normal, the bound is 3σ).")
-@click.option("--torque-noise", type=_Finite(0.0, 100.0, lo_open=True), default=0.2,
+@click.option("--torque-noise", type=Finite(0.0, 100.0, lo_open=True), default=0.2,
               show_default=True, metavar="NM",
               help="Bound of the torque noise per reading (N·m; normal, the bound is 3σ).")
 @click.option("--no-compare", is_flag=True,
@@ -157,6 +157,6 @@ def simulate(arm: str, errors: str, pool: int, k: int, samples: int, trials: int
             raise click.UsageError(str(e)) from None
         bar.update(1)
     if as_json:
-        _print_json(res.to_dict())
+        print_json(res.to_dict())
     else:
         _print_table(res)

@@ -19,13 +19,13 @@ from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,
-    _fail,
-    _Finite,
-    _read_session,
-    _same_file,
-    _write_atomic,
+    Finite,
     check_outputs,
+    fail,
     handle_errors,
+    read_session_file,
+    same_file,
+    write_atomic,
 )
 from .selfcal import selfcal
 
@@ -60,7 +60,7 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
 @click.option("--pool", type=click.IntRange(1, 100000), default=5000, show_default=True,
               help="Candidate configurations drawn around the arm's joints; those whose "
                    "flange pose leaves the safety envelope are dropped.")
-@click.option("--span-deg", type=_Finite(0, 180, lo_open=True), default=90.0,
+@click.option("--span-deg", type=Finite(0, 180, lo_open=True), default=90.0,
               show_default=True,
               help="Candidates turn the wrist joints up to ± this (deg) from where they are "
                    "now, the other joints up to a third of it.")
@@ -94,9 +94,9 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     from ..config import load_config
     from ..net import split_endpoint
     from .live import AcquireProgress, stderr_to_log
-    from .rig import _StopFlag
+    from .rig_commands import StopFlag
 
-    if _same_file(output, config):
+    if same_file(output, config):
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
     cfg = load_config(config, check_files=False)  # no tracker needed
@@ -112,7 +112,7 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     except ValueError:
         raise click.BadParameter(f"{ft_host!r}: expected HOST or HOST:PORT",
                                  param_hint="--ft-host") from None
-    stop = _StopFlag()
+    stop = StopFlag()
     stop.install()
     try:
         with stderr_to_log(), AcquireProgress(sys.stderr, label="configuration") as bar:
@@ -122,7 +122,7 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
                                   ft_port=ft_addr[1], progress=ProgressGroup(PlanLine(), bar),
                                   should_stop=stop)
     except AcquisitionStopped as e:
-        _fail(f"acquisition stopped: {e}")
+        fail(f"acquisition stopped: {e}")
         return
     state = "stopped early (resumable)" if res.stopped else "complete"
     click.echo(f"session {output}: {state}; {res.recorded} of {res.total} configurations "
@@ -238,7 +238,7 @@ def _print_fit(model0: Any, fit: Any, ident: Any, sigma: np.ndarray, scale: floa
               help="The nominal model to start from, a registered name such as ur5e or "
                    "vs060 (docs/kinematics.md; default: the one the session was acquired "
                    "with).")
-@click.option("--sigma", type=(_Finite(0, lo_open=True), _Finite(0, lo_open=True)),
+@click.option("--sigma", type=(Finite(0, lo_open=True), Finite(0, lo_open=True)),
               default=None, metavar="FORCE_N TORQUE_NM",
               help="Noise of the averaged wrench per force and torque channel (default: from "
                    "the session's recorded spreads).")
@@ -268,7 +268,7 @@ def identify(session_file: Path, output: Path, arm: str | None,
     from ..session import sha256_of
 
     check_outputs({"--output": output}, [session_file], force)
-    session = _read_session(session_file, strict)
+    session = read_session_file(session_file, strict)
     head = session.header.get("selfcal")
     name = arm or (head.get("arm") if isinstance(head, dict) else None)
     if name is None:
@@ -310,6 +310,6 @@ def identify(session_file: Path, output: Path, arm: str | None,
                            session={"path": str(session_file),
                                     "sha256": sha256_of(session_file)},
                            provenance=provenance(session.header))
-    _write_atomic(output, text, force)
+    write_atomic(output, text, force)
     click.echo(f"wrote {output} (the calibrated arm model; tmscal solve SESSION "
                f"--kinematics {output})")

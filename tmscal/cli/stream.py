@@ -11,7 +11,7 @@ from typing import Any, TextIO
 
 import click
 
-from .app import INPUT_FILE, _Finite, handle_errors, main
+from .app import INPUT_FILE, Finite, handle_errors, main
 
 #: seconds between two status lines when stderr is not a terminal
 PLAIN_STATUS_S = 5.0
@@ -22,11 +22,11 @@ class _Status:
     second), one plain line every ``PLAIN_STATUS_S`` seconds elsewhere."""
 
     def __init__(self, stream: TextIO, tools: list[str]) -> None:
-        from .live import _isatty, _width
+        from .live import isatty, terminal_width
 
         self.stream, self.tools = stream, tools
-        self.tty = _isatty(stream)
-        self.width = _width(stream)
+        self.tty = isatty(stream)
+        self.width = terminal_width(stream)
         self._last = -1e9
 
     def text(self, st: Any) -> str:
@@ -86,7 +86,7 @@ def _check_host(host: str, allow_remote: bool) -> None:
 @click.option("--allow-remote", is_flag=True,
               help="Allow a --host that is not a loopback address (e.g. 0.0.0.0 or the "
                    "navigation computer's network address); prints a warning.")
-@click.option("--rate", "rate_hz", type=_Finite(0, 1000, lo_open=True), default=None,
+@click.option("--rate", "rate_hz", type=Finite(0, 1000, lo_open=True), default=None,
               metavar="HZ",
               help="Send at most HZ frames a second (default: every tracker frame).")
 @click.option("--max-clients", type=click.IntRange(1, 1000), default=8, show_default=True,
@@ -123,7 +123,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     from ..config import load_config
     from ..exports import load_calibration
     from ..stream import TRANSFORMS, StreamServer, stream_frames
-    from .rig import _close_quietly, _StopFlag
+    from .rig_commands import StopFlag, close_quietly
 
     _check_host(host, allow_remote)
     cfg = load_config(config)
@@ -136,7 +136,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     if "probe" not in tools:
         click.echo("warning: no 'probe' tool in tracker.tools: CoilToRobotBase and "
                    "CoilToTracker are not sent", err=True)
-    stop = _StopFlag(quiet=True)
+    stop = StopFlag(quiet=True)
     stop.install()
     status = _Status(sys.stderr, tools)
     try:
@@ -163,6 +163,6 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     finally:
         server.stop()
         if interrupted:
-            _close_quietly(tracker)
+            close_quietly(tracker)
         else:
             tracker.close()

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ..poses import PLAN_KINDS
 from .safety import COORD_BOUND_MM
 from .sections import PlanConfig
 from .values import INT_BOUND, build, err, in_range, positive
@@ -41,8 +42,9 @@ def pose_from_config(value: Any, src: str, key: str) -> np.ndarray:
 def parse_plan(data: Any, src: str) -> PlanConfig:
     """The plan section: kind, pose count, ranges, seed, and start ("current" or a pose)."""
     plan = build(PlanConfig, data, src, "plan")
-    if plan.kind not in ("eq14", "sphere"):
-        raise err(src, "plan.kind", f"expected 'eq14' or 'sphere', got {plan.kind!r}")
+    if plan.kind not in PLAN_KINDS:
+        known = " or ".join(repr(k) for k in PLAN_KINDS)
+        raise err(src, "plan.kind", f"expected {known}, got {plan.kind!r}")
     in_range(src, "plan.poses", plan.poses, 1, 100_000)
     positive(src, "plan.radius_mm", plan.radius_mm, allow_zero=True, at_most=COORD_BOUND_MM)
     positive(src, "plan.rotation_deg", plan.rotation_deg, allow_zero=True, at_most=180.0)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ..calib.adaptive import AdaptiveSettings
+    from ..calib.prediction import AdaptiveSettings
 
 from .sections import RunConfig, SamplingConfig
 from .values import build, err, in_range, positive, show
@@ -72,6 +72,6 @@ def parse_run(data: Any, src: str) -> RunConfig:
 def parse_adaptive(data: Any, src: str) -> AdaptiveSettings:
     """The adaptive section (defaults when absent) as the one ``AdaptiveSettings`` dataclass,
     which checks its own ranges; a ConfigError names ``adaptive.<field>``."""
-    from ..calib.adaptive import AdaptiveSettings  # numerics: imported when a config is built
+    from ..calib.prediction import AdaptiveSettings  # numerics: imported when a config is built
 
     return build(AdaptiveSettings, data, src, "adaptive")

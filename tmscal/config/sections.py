@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ..calib.adaptive import AdaptiveSettings
+    from ..calib.prediction import AdaptiveSettings
     from .settings import DriverSettings, TrackerSettings
 
 __all__ = ["RobotConfig", "TrackerConfig", "FTConfig", "PlanConfig", "SamplingConfig",
@@ -158,7 +158,7 @@ class FTConfig:
 
 
 def _default_adaptive() -> AdaptiveSettings:
-    from ..calib.adaptive import AdaptiveSettings  # numerics: imported when a config is built
+    from ..calib.prediction import AdaptiveSettings  # numerics: imported when a config is built
 
     return AdaptiveSettings()
 

@@ -15,26 +15,52 @@ Frames: X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4�
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
+from ..errors import ConfigError
 from .calibfile import load_calibration, read_calibration
 
-__all__ = ["FORMATS", "render", "load_calibration", "read_calibration"]
+__all__ = ["FORMATS", "ExportFormat", "export_format", "render", "load_calibration",
+           "read_calibration"]
 
-#: export format → (module, one line for the help text)
-FORMATS = {
-    "itk": ("itk", "ITK .tfm of Z for 3D Slicer (LPS, resampling direction; affine kept)"),
-    "plus": ("plus", "PLUS device set: NDITracker block + CoordinateDefinitions (mm)"),
-    "easy-handeye": ("easy_handeye", "ROS easy_handeye YAML, eye-on-base (m, quaternion)"),
-    "invesalius": ("invesalius", "InVesalius robot co-registration .rbtf (X, Z; mm)"),
-    "json": ("jsonfmt", "everything, for scripts; tmscal.exports.load_calibration reads it back"),
+
+class ExportFormat(NamedTuple):
+    """One export format: ``module`` (in :mod:`tmscal.exports`, imported when the format is
+    rendered; its ``render(cf, **options) -> str``) and ``help`` (one line for the help
+    text)."""
+
+    module: str
+    help: str
+
+
+#: export format name → its entry, in the order the help lists them
+FORMATS: dict[str, ExportFormat] = {
+    "itk": ExportFormat("itk", "ITK .tfm of Z for 3D Slicer (LPS, resampling direction; "
+                        "affine kept)"),
+    "plus": ExportFormat("plus", "PLUS device set: NDITracker block + CoordinateDefinitions "
+                         "(mm)"),
+    "easy-handeye": ExportFormat("easy_handeye", "ROS easy_handeye YAML, eye-on-base (m, "
+                                 "quaternion)"),
+    "invesalius": ExportFormat("invesalius", "InVesalius robot co-registration .rbtf (X, Z; "
+                               "mm)"),
+    "json": ExportFormat("jsonfmt", "everything, for scripts; tmscal.exports.load_calibration "
+                         "reads it back"),
 }
 
 
+def export_format(name: str) -> ExportFormat:
+    """The export format ``name``; an unknown name is a ConfigError listing the known ones."""
+    fmt = FORMATS.get(name) if isinstance(name, str) else None
+    if fmt is None:
+        raise ConfigError(f"unknown export format {name!r}; known formats: "
+                          f"{', '.join(FORMATS)}")
+    return fmt
+
+
 def render(fmt: str, cf: Any, **options: Any) -> str:
-    """The text of export ``fmt`` (a key of :data:`FORMATS`) for a calibration file read by
-    :func:`tmscal.exports.calibfile.read_calibration`."""
+    """The text of export ``fmt`` (a name of :data:`FORMATS`; ConfigError otherwise) for a
+    calibration file read by :func:`tmscal.exports.calibfile.read_calibration`."""
     import importlib
 
-    module = importlib.import_module(f".{FORMATS[fmt][0]}", __name__)
+    module = importlib.import_module(f".{export_format(fmt).module}", __name__)
     return module.render(cf, **options)

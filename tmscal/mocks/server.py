@@ -155,7 +155,7 @@ class MockDevice(ABC):
 
     ``TRANSPORTS`` says what a tracker's mock can serve on, through ``start_pty()`` (a new
     pty, as a serial line) and ``start_tcp(host, port)`` (loopback TCP): the mock rig
-    (``mocks.rig``) serves a tracker on a pty only when "pty" is listed, else on TCP."""
+    (``mocks.launch``) serves a tracker on a pty only when "pty" is listed, else on TCP."""
 
     #: the transports the mock serves on: "tcp" (loopback), "pty" (a serial line)
     TRANSPORTS: ClassVar[tuple[str, ...]] = ("tcp",)

@@ -47,7 +47,7 @@ from ..solving.solve import (
 )
 from ..solving.study import study_session
 from . import text
-from .plots import _pyplot, plot_residuals, plot_study
+from .plots import agg_pyplot, plot_residuals, plot_study
 
 __all__ = ["SECTIONS", "html_report"]
 
@@ -151,7 +151,7 @@ def _plan_offsets(session: Session) -> tuple[np.ndarray, np.ndarray, str] | None
 
 
 def _draw_plan(t: np.ndarray, ang: np.ndarray, what: str, path: str) -> None:
-    plt = _pyplot()
+    plt = agg_pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8), layout="constrained")
     for k, axis in enumerate("xyz"):
         ax[0].hist(t[:, k], bins=30, histtype="step", lw=1.4, label=axis)
@@ -183,7 +183,7 @@ def _plan(session: Session) -> str:
 
 
 def _draw_spreads(session: Session, path: str) -> None:
-    plt = _pyplot()
+    plt = agg_pyplot()
     poses = sorted((p for p in session.poses if p.spread), key=lambda p: p.index)
     fig, ax = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True, layout="constrained")
     for body in session.bodies:
@@ -281,7 +281,7 @@ def _calibration(cal: Calibration, res: SolveResult, source: str,
     shown, note = (res, "") if has_own else unc
     out.append("<h3>Uncertainty</h3>")
     if shown is not None:
-        rows = text._uncertainty_rows(shown)
+        rows = text.uncertainty_rows(shown)
         out.append(_pre("\n".join(rows)) if rows else "")
     if note:
         out.append(f'<p class="note">{_e(note)}</p>')
@@ -295,10 +295,10 @@ def _errors(res: SolveResult, stored: bool) -> str:
             if res.errors_on == "in-sample" else
             f"errors: the stored {res.method.upper()} calibration applied to the {res.n_test} "
             "usable poses of this session (held out: none of them was solved on)")
-    lines = [head, ""] + text._error_rows(res)
+    lines = [head, ""] + text.error_rows(res)
     if res.truth is not None:
-        lines += [""] + text._truth_rows(res)
-    lines += [""] + text._outlier_lines(res) + [""] + text._legend(res)
+        lines += [""] + text.truth_rows(res)
+    lines += [""] + text.outlier_lines(res) + [""] + text.legend_lines(res)
     return _pre("\n".join(lines))
 
 

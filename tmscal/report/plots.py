@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_study", "plot_residuals", "plot_compare", "METRICS_CAPTION"]
+__all__ = ["plot_study", "plot_residuals", "plot_compare", "METRICS_CAPTION", "agg_pyplot"]
 
 #: the metric definitions printed under the study figure (docs/methods.md)
 METRICS_CAPTION = (
@@ -25,7 +25,9 @@ METRICS_CAPTION = (
 _THRESHOLDS_MM = (0.4, 0.3)  # Wang et al. (2018), Table 3
 
 
-def _pyplot() -> Any:
+def agg_pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend (files only, no display); ImportError without
+    matplotlib (the ``plot`` extra)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -37,7 +39,7 @@ def plot_study(study: dict[str, Any], path: str, title: str | None = None) -> No
     number of poses solved on, one colour per method in both panels (QR24's e_z dashed),
     the 0.4 and 0.3 mm thresholds of their Table 3, the noise floor when the study has one
     (``study["noise_floor"]``), the legend and the metric definitions below the axes."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     ns = study["n"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 6.2))
     fig.subplots_adjust(left=0.07, right=0.98, top=0.86, bottom=0.34, wspace=0.22)
@@ -101,7 +103,7 @@ def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
     named by pose index, the rule under the axes. PNG."""
     from ..solving.outliers import RULE, outlier_threshold
 
-    plt = _pyplot()
+    plt = agg_pyplot()
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -170,7 +172,7 @@ def plot_compare(res: dict[str, Any], paths: dict[str, str], title: str | None =
     θ_t (deg) against n; ``paths["time"]``: solve time (ms) against n; ``paths["truth"]``
     (only with a truth): the ground-truth translation error of Y (X when marker-only) and the
     bound when there is one. One colour per method, mean ± SD over folds as a band."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     ns = res["ns"]
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     col = {m: colours[i % len(colours)] for i, m in enumerate(res["methods"])}

@@ -20,7 +20,8 @@ if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
-           "format_matrix", "distortion_text", "arm_rows"]
+           "format_matrix", "distortion_text", "arm_rows", "error_rows", "truth_rows",
+           "uncertainty_rows", "outlier_lines", "legend_lines"]
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
@@ -57,7 +58,7 @@ def _parts(e: dict[str, Any]) -> str:
                       + (["e_z"] if "e_z_mm" in e else []))
 
 
-def _error_rows(res: SolveResult) -> list[str]:
+def error_rows(res: SolveResult) -> list[str]:
     """The hold-out error table: one row per body, e_z (QR24), the total; each followed by
     its SD over folds when cross-validated."""
     e, sd = res.errors, res.errors_sd
@@ -129,7 +130,8 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _truth_rows(res: SolveResult) -> list[str]:
+def truth_rows(res: SolveResult) -> list[str]:
+    """The errors against the truth of a simulated session (translation mm, rotation deg)."""
     t = res.truth or {}
     lines = [f"  {'against the truth (simulated session)':<{_W}}{'translation mm':>15}"
              f"{'rotation deg':>15}"]
@@ -169,7 +171,7 @@ def distortion_text(d: dict[str, Any]) -> str:
     return f"tracker distortion: {model}"
 
 
-def _uncertainty_rows(res: SolveResult) -> list[str]:
+def uncertainty_rows(res: SolveResult) -> list[str]:
     """The predicted uncertainty (1-σ and 95 %) of a statistical solver, and the distortion."""
     lines: list[str] = []
     u = res.uncertainty or {}
@@ -190,7 +192,8 @@ def _uncertainty_rows(res: SolveResult) -> list[str]:
     return lines
 
 
-def _outlier_lines(res: SolveResult) -> list[str]:
+def outlier_lines(res: SolveResult) -> list[str]:
+    """The outlier poses by the solve service's rule, or a line saying there are none."""
     from ..solving.outliers import RULE
     if not res.outliers:
         return textwrap.wrap(f"outlier poses: none (rule: {RULE})", 98,
@@ -203,7 +206,8 @@ def _outlier_lines(res: SolveResult) -> list[str]:
     return lines
 
 
-def _legend(res: SolveResult) -> list[str]:
+def legend_lines(res: SolveResult) -> list[str]:
+    """The legend of the solve table: which matrices the errors apply, what the metrics are."""
     applied = ("raw matrices applied: the errors use the solver's general (non-orthogonal) "
                "3×4 X, Y, Z, the paper's way; the matrices below, and those exported, are the "
                "orthonormal ones (--orthonormal applies those instead)"
@@ -249,15 +253,15 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
     if res.n_skipped:
         lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "
                      "and are not used)")
-    lines += [""] + _error_rows(res)
-    extra = _uncertainty_rows(res)
+    lines += [""] + error_rows(res)
+    extra = uncertainty_rows(res)
     if extra:
         lines += [""] + extra
     if res.arm is not None:
         lines += [""] + arm_rows(res.arm)
     if res.truth is not None:
-        lines += [""] + _truth_rows(res)
-    lines += [""] + _outlier_lines(res) + [""] + _legend(res)
+        lines += [""] + truth_rows(res)
+    lines += [""] + outlier_lines(res) + [""] + legend_lines(res)
     if show_matrices:
         for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
                         ("Z", "base_from_tracker")):
@@ -308,7 +312,7 @@ def format_robot_time(rt: dict[str, float]) -> str:
 
 
 def format_prediction(pred: Any, region: str) -> str:
-    """The adaptive prediction (``calib.adaptive.Prediction``) in two lines: the predicted
+    """The adaptive prediction (``calib.prediction.Prediction``) in two lines: the predicted
     coil-placement error (mm) at its confidence and its RMS, the poses and method it rests
     on, and the region it is averaged over (``region``, a description)."""
     return (f"predicted coil-placement error {pred.coil_mm:.3g} mm at "

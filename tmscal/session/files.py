@@ -20,17 +20,17 @@ from typing import Any
 import numpy as np
 
 from ..errors import SessionError
-from .checks import _Bad
+from .checks import BadLine
 from .outputs import fsync_dir, install, new_temp
 from .records import (
     PoseRecord,
-    _check_header,
-    _check_pose,
-    _header_line,
-    _line_for,
-    _loads,
+    header_line,
+    parse_json,
+    record_line,
+    validate_header,
+    validate_pose,
 )
-from .truth import _check_truth, _check_truth_arm
+from .truth import validate_truth, validate_truth_arm
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +63,8 @@ class Session:
         if not t:
             return None
         try:
-            return _check_truth(t)
-        except _Bad as e:
+            return validate_truth(t)
+        except BadLine as e:
             raise SessionError(f"{self.path or 'session'}: header: {e}") from None
 
     @property
@@ -81,8 +81,8 @@ class Session:
         if not isinstance(t, dict) or "arm" not in t:
             return None
         try:
-            return _check_truth_arm(t["arm"])
-        except _Bad as e:
+            return validate_truth_arm(t["arm"])
+        except BadLine as e:
             raise SessionError(f"{self.path or 'session'}: header: {e}") from None
 
     def indices(self) -> set[int]:
@@ -211,19 +211,19 @@ def _parse(data: bytes, p: Path, strict: bool) -> Session:
             try:
                 text = raw.decode("utf-8-sig" if no == 1 else "utf-8")
             except UnicodeDecodeError as e:
-                raise _Bad(f"not valid UTF-8 ({e.reason} at byte {e.start})") from None
+                raise BadLine(f"not valid UTF-8 ({e.reason} at byte {e.start})") from None
             if "\x00" in text:
-                raise _Bad("not valid JSON (holds a NUL byte)")
-            obj = _loads(text, finite=header is None)
+                raise BadLine("not valid JSON (holds a NUL byte)")
+            obj = parse_json(text, finite=header is None)
             if header is None:
-                header = _check_header(obj)
+                header = validate_header(obj)
             else:
-                rec = _check_pose(obj)
+                rec = validate_pose(obj)
                 if rec.index in seen:
-                    raise _Bad(f"pose index {rec.index} already on line {seen[rec.index]}")
+                    raise BadLine(f"pose index {rec.index} already on line {seen[rec.index]}")
                 seen[rec.index] = no
                 poses.append(rec)
-        except _Bad as e:
+        except BadLine as e:
             reason = str(e)
             if header is None:
                 raise SessionError(f"{p}, line {no}: {reason}") from None
@@ -298,7 +298,7 @@ class SessionWriter:
         another process, is refused; with it the existing file is replaced only if no other
         tmscal process holds it locked."""
         p = Path(path)
-        line = _header_line(header, f"{p}: header")
+        line = header_line(header, f"{p}: header")
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
@@ -367,7 +367,7 @@ class SessionWriter:
         reject the line or the index is already recorded."""
         if self._fd is None:
             raise SessionError(f"{self.path}: the session writer is closed")
-        line, back = _line_for(rec, str(self.path))
+        line, back = record_line(rec, str(self.path))
         if back.index in self.session.indices():
             raise SessionError(f"{self.path}: pose index {back.index} is already recorded")
         fd = self._fd

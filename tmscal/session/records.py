@@ -19,16 +19,16 @@ import numpy as np
 
 from ..errors import SessionError
 from .checks import (
-    _MAX_JOINT_RAD,
-    _MAX_JOINTS,
-    _MAX_WRENCH,
-    _Bad,
-    _is_number,
-    _matrix,
-    _numbers,
+    MAX_JOINT_RAD,
+    MAX_JOINTS,
+    MAX_WRENCH,
+    BadLine,
+    is_number,
+    parse_matrix,
+    parse_numbers,
 )
 from .jsonable import json_default
-from .truth import _check_truth
+from .truth import validate_truth
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,7 @@ def _finite_float(text: str) -> float:
     return x
 
 
-def _loads(text: str, finite: bool = True) -> Any:
+def parse_json(text: str, finite: bool = True) -> Any:
     """json.loads that refuses NaN and Infinity literals and, with ``finite``, numbers that
     overflow float64 anywhere (pose lines skip that slower check: every number the reader
     keeps from them is checked for finiteness field by field)."""
@@ -62,16 +62,16 @@ def _loads(text: str, finite: bool = True) -> Any:
         obj = json.loads(text, parse_constant=_reject_constant,
                          parse_float=_finite_float if finite else None)
     except RecursionError:
-        raise _Bad("not valid JSON (nested too deeply)") from None
+        raise BadLine("not valid JSON (nested too deeply)") from None
     except json.JSONDecodeError as e:
-        raise _Bad(f"not valid JSON ({e.msg} at column {e.colno})") from None
+        raise BadLine(f"not valid JSON ({e.msg} at column {e.colno})") from None
     except ValueError as e:  # the int digit limit, our parse hooks
-        raise _Bad(f"not valid JSON ({str(e)[:120]})") from None
+        raise BadLine(f"not valid JSON ({str(e)[:120]})") from None
     if _SURROGATE_ESCAPE.search(text):
         try:
             json.dumps(obj, ensure_ascii=False).encode("utf-8")
         except UnicodeEncodeError:
-            raise _Bad("a string holds an unpaired UTF-16 surrogate (not valid Unicode)") \
+            raise BadLine("a string holds an unpaired UTF-16 surrogate (not valid Unicode)") \
                 from None
     return obj
 
@@ -84,78 +84,78 @@ def _count(x: Any) -> bool:
     return type(x) is int and 0 <= x <= _MAX_COUNT
 
 
-def _check_header(obj: Any) -> dict[str, Any]:
+def validate_header(obj: Any) -> dict[str, Any]:
     if not isinstance(obj, dict):
-        raise _Bad("the header must be a JSON object")
+        raise BadLine("the header must be a JSON object")
     if obj.get("kind") != "header" or obj.get("format") != FORMAT:
-        raise _Bad(f"not a tmscal session header (expected kind 'header' and format '{FORMAT}')")
+        raise BadLine(f"not a tmscal session header (expected kind 'header' and format '{FORMAT}')")
     v = obj.get("version")
     if type(v) is not int or v != VERSION:
-        raise _Bad(f"unsupported session version {v!r} (this tmscal reads version {VERSION})")
+        raise BadLine(f"unsupported session version {v!r} (this tmscal reads version {VERSION})")
     units = obj.get("units", {})
     if not isinstance(units, dict) or units.get("length") != "mm":
-        raise _Bad("field 'units.length' must be 'mm'")
+        raise BadLine("field 'units.length' must be 'mm'")
     bodies = obj.get("bodies")
     if (not isinstance(bodies, list) or not bodies
             or not all(isinstance(b, str) and b for b in bodies)
             or len(set(bodies)) != len(bodies)):
-        raise _Bad("field 'bodies' must be a non-empty list of distinct names")
+        raise BadLine("field 'bodies' must be a non-empty list of distinct names")
     for k in ("config", "devices", "plan", "sampling", "units", "adaptive"):
         if k in obj and not isinstance(obj[k], dict):
-            raise _Bad(f"field '{k}' must be an object")
+            raise BadLine(f"field '{k}' must be an object")
     if "created" in obj and not isinstance(obj["created"], str):
-        raise _Bad("field 'created' must be a string")
+        raise BadLine("field 'created' must be a string")
     t = obj.get("truth")
     if t is not None:
-        _check_truth(t)
+        validate_truth(t)
     return obj
 
 
-def _check_pose(obj: Any) -> PoseRecord:
+def validate_pose(obj: Any) -> PoseRecord:
     if not isinstance(obj, dict):
-        raise _Bad("a pose line must be a JSON object")
+        raise BadLine("a pose line must be a JSON object")
     if obj.get("kind") != "pose":
-        raise _Bad(f"field 'kind' is {str(obj.get('kind'))[:40]!r}, expected 'pose'")
+        raise BadLine(f"field 'kind' is {str(obj.get('kind'))[:40]!r}, expected 'pose'")
     idx = obj.get("index")
     if not _count(idx):
-        raise _Bad(f"field 'index' must be an integer from 0 to {_MAX_COUNT}")
-    mats = {k: _matrix(obj.get(k), k) for k in _MATRIX_KEYS}
+        raise BadLine(f"field 'index' must be an integer from 0 to {_MAX_COUNT}")
+    mats = {k: parse_matrix(obj.get(k), k) for k in _MATRIX_KEYS}
     skipped = obj.get("skipped")
     if skipped is not None and not isinstance(skipped, str):
-        raise _Bad("field 'skipped' must be a string")
+        raise BadLine("field 'skipped' must be a string")
     if skipped is None and mats["A"] is None:
-        raise _Bad("field 'A' is missing (and the pose is not skipped)")
+        raise BadLine("field 'A' is missing (and the pose is not skipped)")
     t = obj.get("time", 0.0)
-    if not _is_number(t):
-        raise _Bad("field 'time' must be a number")
+    if not is_number(t):
+        raise BadLine("field 'time' must be a number")
     try:
         t = float(t)
     except OverflowError:
         t = math.inf
     if not math.isfinite(t):
-        raise _Bad("field 'time' must be a finite number")
+        raise BadLine("field 'time' must be a finite number")
     samples = obj.get("samples", {})
     if not isinstance(samples, dict) or not all(_count(v) for v in samples.values()):
-        raise _Bad(f"field 'samples' must be an object of counts (integers 0 to {_MAX_COUNT})")
+        raise BadLine(f"field 'samples' must be an object of counts (integers 0 to {_MAX_COUNT})")
     spread = obj.get("spread", {})
     if not isinstance(spread, dict) or not all(
-            isinstance(v, dict) and all(_is_number(x) and abs(x) < 1e300 for x in v.values())
+            isinstance(v, dict) and all(is_number(x) and abs(x) < 1e300 for x in v.values())
             for v in spread.values()):
-        raise _Bad("field 'spread' must be an object of {\"trans_mm\": mm, \"rot_deg\": deg} "
+        raise BadLine("field 'spread' must be an object of {\"trans_mm\": mm, \"rot_deg\": deg} "
                    "objects (finite numbers)")
     pool = obj.get("pool")
     if pool is not None and not _count(pool):
-        raise _Bad(f"field 'pool' must be an integer from 0 to {_MAX_COUNT}")
+        raise BadLine(f"field 'pool' must be an integer from 0 to {_MAX_COUNT}")
     robot_s = obj.get("robot_s")
     if robot_s is not None and not (isinstance(robot_s, dict) and all(
-            _is_number(v) and 0 <= v < 1e9 for v in robot_s.values())):
-        raise _Bad("field 'robot_s' must be an object of seconds (finite numbers ≥ 0)")
-    joints = _numbers(obj.get("joints_rad"), "joints_rad", "joint angles (rad)", _MAX_JOINTS,
-                      _MAX_JOINT_RAD)
-    wrench = _numbers(obj.get("wrench"), "wrench", "[Fx, Fy, Fz N, Tx, Ty, Tz N·m]", 6,
-                      _MAX_WRENCH, exact=True)
-    wspread = _numbers(obj.get("wrench_spread"), "wrench_spread",
-                       "spreads [N, N, N, N·m, N·m, N·m] ≥ 0", 6, _MAX_WRENCH, exact=True,
+            is_number(v) and 0 <= v < 1e9 for v in robot_s.values())):
+        raise BadLine("field 'robot_s' must be an object of seconds (finite numbers ≥ 0)")
+    joints = parse_numbers(obj.get("joints_rad"), "joints_rad", "joint angles (rad)", MAX_JOINTS,
+                      MAX_JOINT_RAD)
+    wrench = parse_numbers(obj.get("wrench"), "wrench", "[Fx, Fy, Fz N, Tx, Ty, Tz N·m]", 6,
+                      MAX_WRENCH, exact=True)
+    wspread = parse_numbers(obj.get("wrench_spread"), "wrench_spread",
+                       "spreads [N, N, N, N·m, N·m, N·m] ≥ 0", 6, MAX_WRENCH, exact=True,
                        nonneg=True)
     return PoseRecord(index=idx, time=t, samples=samples, spread=spread, skipped=skipped,
                       pool=pool, robot_s=robot_s, joints_rad=joints, wrench=wrench,
@@ -235,10 +235,10 @@ def validate_record(rec: PoseRecord, where: str = "") -> PoseRecord:
     matrices with last row [0, 0, 0, 1], an index from 0 to 10⁹, a finite time, counts and
     spreads that are JSON numbers (no NaN). Returns the record as it will read back; raises
     SessionError naming ``where``, the pose index and the field. Writes nothing."""
-    return _line_for(rec, where)[1]
+    return record_line(rec, where)[1]
 
 
-def _line_for(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
+def record_line(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
     """The exact bytes of a record's line and the record as the reader will see it."""
     pre = f"{where}: pose {getattr(rec, 'index', '?')}" if where else \
         f"pose {getattr(rec, 'index', '?')}"
@@ -251,44 +251,44 @@ def _line_for(rec: PoseRecord, where: str = "") -> tuple[bytes, PoseRecord]:
         norm = {}
         for k, v in d.items():
             if k in _MATRIX_KEYS:
-                _matrix(v, k)  # NaN, shape, rigidity
+                parse_matrix(v, k)  # NaN, shape, rigidity
                 norm[k] = v
                 continue
             try:
-                norm[k] = _loads(_dumps(v))
+                norm[k] = parse_json(_dumps(v))
             except (TypeError, ValueError, OverflowError, RecursionError) as e:
-                raise _Bad(f"field '{k}' is not storable as JSON ({e})") from None
-            except _Bad as e:
-                raise _Bad(f"field '{k}': {e}") from None
-        _check_pose(norm)
+                raise BadLine(f"field '{k}' is not storable as JSON ({e})") from None
+            except BadLine as e:
+                raise BadLine(f"field '{k}': {e}") from None
+        validate_pose(norm)
         # then the whole line, exactly as the reader will read it
         try:
             text = _dumps(d)
         except (TypeError, ValueError, OverflowError, RecursionError) as e:
-            raise _Bad(f"not storable as JSON ({e})") from None
-        back = _check_pose(_loads(text))
-    except _Bad as e:
+            raise BadLine(f"not storable as JSON ({e})") from None
+        back = validate_pose(parse_json(text))
+    except BadLine as e:
         raise SessionError(f"{pre}: {e}") from None
     return text.encode("utf-8") + b"\n", back
 
 
-def _header_line(header: Mapping[str, Any], where: str) -> bytes:
+def header_line(header: Mapping[str, Any], where: str) -> bytes:
     """The exact bytes of the header line, validated as the reader will validate it."""
     try:
         h = dict(header)
         for k, v in h.items():  # field by field first, so that the message names the field
             if k == "truth" and isinstance(v, dict):
-                _check_truth(v)  # NaN in a matrix: say which
+                validate_truth(v)  # NaN in a matrix: say which
             try:
                 _dumps(v)
             except (TypeError, ValueError, OverflowError, RecursionError) as e:
-                raise _Bad(f"field '{k}' is not storable as JSON ({e})") from None
+                raise BadLine(f"field '{k}' is not storable as JSON ({e})") from None
         try:
             text = _dumps(h)
         except (TypeError, ValueError, OverflowError, RecursionError) as e:
-            raise _Bad(f"not storable as JSON ({e})") from None
-        _check_header(_loads(text))
-    except _Bad as e:
+            raise BadLine(f"not storable as JSON ({e})") from None
+        validate_header(parse_json(text))
+    except BadLine as e:
         raise SessionError(f"{where}: {e}") from None
     return text.encode("utf-8") + b"\n"
 
@@ -314,7 +314,7 @@ def make_header(bodies: Iterable[str], config: Mapping[str, Any] | None = None,
         except (TypeError, ValueError) as e:
             raise SessionError(f"session header: field 'truth': not numeric ({e})") from None
     h.update(extra)
-    _header_line(h, "session header")
+    header_line(h, "session header")
     return h
 
 

@@ -133,10 +133,8 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
     (``truth_arm``, ``Session.truth_arm``) and the poses' ``joints`` (n, dof) rad, the flange
     goes where that arm's controller takes it (``solving.kinematics.coil_placement``)."""
     methods = list(calib.METHODS) if methods is None else [m.lower() for m in methods]
-    unknown = [m for m in methods if m not in calib.METHODS]
-    if unknown:
-        raise CalibrationError(f"unknown method {unknown[0]!r}; known: "
-                               f"{', '.join(calib.METHODS)}")
+    for m in methods:
+        calib.get_method(m)
     fs = _folds(len(A), folds)
     n_train_max = len(A) - max(len(f) for f in fs)
     ns = default_ns(n_train_max) if ns is None else sorted(set(int(n) for n in ns))
@@ -231,7 +229,7 @@ def handheld_options(method: str, B_a: np.ndarray, C_a: np.ndarray | None) -> di
     {} for other methods or without probe poses."""
     import inspect
 
-    fn = calib.SOLVERS.get(method)
+    fn = calib.METHODS.get(method)
     if fn is None or C_a is None or len(C_a) == 0:
         return {}
     params = inspect.signature(fn).parameters

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calib.adaptive import AdaptiveSettings, predict
+from ..calib.prediction import AdaptiveSettings, predict
 from ..errors import CalibrationError, SessionError
 from ..poses import PlanSpec
 from ..session import Session
@@ -89,7 +89,7 @@ def robot_time_of(poses: list[Any]) -> dict[str, float]:
 
 
 def predict_session(session: Session, settings: Any = None) -> tuple[Any, dict[str, Any]]:
-    """The adaptive prediction (``calib.adaptive.predict``: QR36 then ml, the predicted
+    """The adaptive prediction (``calib.prediction.predict``: QR36 then ml, the predicted
     coil-placement error at a confidence) recomputed from any session whose header records
     a plan: the region is the first ``region`` poses of that plan (the header's ``adaptive``
     settings, else ``settings``, else the defaults). Returns (Prediction, info: region,

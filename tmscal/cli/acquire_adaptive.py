@@ -1,7 +1,8 @@
 """The adaptive parts of ``tmscal acquire --adaptive`` and ``tmscal demo --adaptive``
 (docs/adaptive.md): running the loop with a progress display (the bars and a line per
 prediction), the end-of-run report, and the demo's comparison with the mock rig's truth. The
-commands' options live in :mod:`tmscal.cli.rig`; the run in :mod:`tmscal.acquisition.adaptive`."""
+commands live in :mod:`tmscal.cli.rig_commands`; the run in
+:mod:`tmscal.acquisition.adaptive_run`."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from typing import Any
 import click
 
 from ..acquisition.progress import Progress
-from .app import _Finite
+from .app import Finite
 
 #: the command-line overrides of the ``adaptive:`` section (option → AdaptiveSettings field)
 OVERRIDES = ("target_mm", "confidence", "max_poses", "bootstrap")
@@ -28,11 +29,11 @@ def adaptive_options(fn: Any) -> Any:
                           "--max-poses. The candidates are the config's plan with "
                           "adaptive.pool poses, all checked against the safety envelope "
                           "before anything moves."),
-        click.option("--target-mm", type=_Finite(0, 100, lo_open=True), default=None,
+        click.option("--target-mm", type=Finite(0, 100, lo_open=True), default=None,
                      help="With --adaptive: stop when the predicted coil-placement error (mean "
                           "over the region, at --confidence) is at or below this, mm "
                           "(overrides adaptive.target_mm; default 0.05)."),
-        click.option("--confidence", type=_Finite(0.5, 0.9999), default=None,
+        click.option("--confidence", type=Finite(0.5, 0.9999), default=None,
                      help="With --adaptive: the confidence of the prediction, e.g. 0.95 "
                           "(overrides adaptive.confidence)."),
         click.option("--max-poses", type=click.IntRange(3, 100000), default=None,
@@ -104,7 +105,7 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         quiet: bool = False) -> Any:
     """``acquire_adaptive`` with the progress display (the bars and a line per prediction on
     stderr unless ``quiet``); returns its AcquireResult."""
-    from ..acquisition.adaptive import acquire_adaptive, settings_for
+    from ..acquisition.adaptive_run import acquire_adaptive, settings_for
     from ..acquisition.progress import ProgressGroup
     from .live import AcquireProgress, stderr_to_log
 
@@ -150,15 +151,15 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     same region), and QR36 on the session as ``demo`` prints it."""
     import numpy as np
 
-    from ..calib.adaptive import true_coil_error
-    from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..calib.prediction import true_coil_error
+    from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..net import split_endpoint
     from ..poses import PlanSpec
     from ..report.text import format_prediction, format_result, format_robot_time
     from ..session import read_session
     from ..solving.kinematics import truth_arm_of, truth_controller
     from ..solving.solve import solve_session
-    from .app import _print_json
+    from .app import print_json
 
     truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
     with spawn_mock_rig(cfg_path, transport=transport) as mp:
@@ -184,7 +185,7 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
                    predicted_coil_mm=None if res.prediction is None else res.prediction.coil_mm,
                    confidence=res.settings.confidence, true_coil_mm=true_mm,
                    stop_reason=res.stop, adaptive_method="ml")
-        _print_json(out)
+        print_json(out)
         return
     click.echo(f"{res.message}; poses used {res.recorded} ({res.skipped} skipped)")
     click.echo(format_robot_time(res.robot_time_s))

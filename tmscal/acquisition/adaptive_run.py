@@ -1,7 +1,7 @@
 """Adaptive acquisition (``tmscal acquire --adaptive``): bootstrap a few well-spread poses, then
 after every pose predict the coil-placement error and either stop or move to the candidate
 that buys the largest expected reduction of it per second of robot time (docs/adaptive.md;
-the mathematics is :mod:`tmscal.calib.adaptive`, docs/methods.md).
+the mathematics is :mod:`tmscal.calib.prediction`, docs/methods.md).
 
 A strategy of the one engine (:mod:`.engine`), built on the plan run's (:mod:`.run`), so its
 guarantees hold through the same code:
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calib.adaptive import (
+from ..calib.prediction import (
     AdaptiveSettings,
     Prediction,
     bootstrap_indices,

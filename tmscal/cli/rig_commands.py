@@ -13,18 +13,18 @@ import click
 import numpy as np
 
 from ..net import split_endpoint
-from .adaptive import adaptive_options, check_adaptive_flags
+from .acquire_adaptive import adaptive_options, check_adaptive_flags
 from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
-    _fail,
-    _Finite,
-    _print_json,
-    _same_file,
+    Finite,
     check_outputs,
+    fail,
     handle_errors,
     main,
+    print_json,
+    same_file,
 )
 
 # --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
@@ -85,7 +85,7 @@ def _echo_pose(label: str, T: np.ndarray, rb: Any = None) -> None:
         click.echo("  " + pendant)
 
 
-class _StopFlag:
+class StopFlag:
     """First SIGINT/SIGTERM sets the flag (finish the pose in flight); a second SIGINT raises
     KeyboardInterrupt."""
 
@@ -129,7 +129,7 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
     import threading
 
     from ..config import load_config
-    from ..mocks.rig import start_mock_rig
+    from ..mocks.launch import start_mock_rig
 
     cfg = load_config(config)
     done = threading.Event()
@@ -170,7 +170,7 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
     from .live import TrackView
 
     cfg = load_config(config)
-    stop = _StopFlag(quiet=True)
+    stop = StopFlag(quiet=True)
     stop.install()
     tr = make_tracker(cfg, port)
     tr.open()
@@ -199,12 +199,12 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
         interrupted = True
     finally:
         if interrupted:
-            _close_quietly(tr)
+            close_quietly(tr)
         else:
             tr.close()
 
 
-def _close_quietly(dev: Any) -> None:
+def close_quietly(dev: Any) -> None:
     """Close a device whose link was interrupted mid-reply: its stop command may meet the
     rest of that reply, so the drivers' warnings and errors are held back."""
     import logging
@@ -229,7 +229,7 @@ def _close_quietly(dev: Any) -> None:
                    "fixed base axes (DENSO's P-type; NOT a UR pendant's rotation vector), in "
                    "the robot base frame. The config's safety envelope applies around the "
                    "current pose.")
-@click.option("--speed", type=_Finite(0, lo_open=True), default=None,
+@click.option("--speed", type=Finite(0, lo_open=True), default=None,
               help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
 @handle_errors
@@ -309,18 +309,18 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     from ..config import load_config
     from .live import AcquireProgress, stderr_to_log
 
-    if _same_file(output, config):  # an existing session is the run's to resume, never this
+    if same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     cfg = load_config(config)
     if dry_run:
         if adaptive:  # the candidates: the plan with adaptive.pool poses
-            from ..acquisition.adaptive import settings_for
+            from ..acquisition.adaptive_run import settings_for
             poses = settings_for(cfg, **overrides).pool
         _dry_run(cfg, poses, samples, robot_host)
         return
-    stop = _StopFlag()
+    stop = StopFlag()
     stop.install()
     if adaptive:
         _acquire_adaptive(cfg, config, output, resume, overrides, samples, tracker_port,
@@ -332,7 +332,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
                               tracker_port=tracker_port, robot_host=robot_host,
                               progress=bar, should_stop=stop)
     except AcquisitionStopped as e:
-        _fail(f"acquisition stopped: {e}")
+        fail(f"acquisition stopped: {e}")
         return
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
@@ -343,16 +343,16 @@ def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
                       overrides: dict[str, Any], samples: int | None,
                       tracker_port: str | None, robot_host: str | None, stop: Any) -> None:
     from ..acquisition.engine import AcquisitionStopped
-    from . import adaptive as cli_adaptive
+    from . import acquire_adaptive
 
     try:
-        res = cli_adaptive.run(cfg, output, resume=resume, overrides=overrides,
+        res = acquire_adaptive.run(cfg, output, resume=resume, overrides=overrides,
                                samples=samples, tracker_port=tracker_port,
                                robot_host=robot_host, should_stop=stop)
     except AcquisitionStopped as e:
-        _fail(f"acquisition stopped: {e}")
+        fail(f"acquisition stopped: {e}")
         return
-    cli_adaptive.summary(res, config, output, tracker_port, robot_host)
+    acquire_adaptive.summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
 
@@ -446,7 +446,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     With --kinematics estimate: ml with the arm's kinematics (docs/kinematics.md)."""
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
-    from ..mocks.rig import build_sim_rig, spawn_mock_rig
+    from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..report.text import format_result
     from ..session import read_session
     from ..solving.solve import solve_session
@@ -471,8 +471,8 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
         output = Path(tmp.name) / "demo-session.jsonl"
     try:
         if adaptive:
-            from . import adaptive as cli_adaptive
-            cli_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
+            from . import acquire_adaptive
+            acquire_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
             return
         # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
         with spawn_mock_rig(cfg_path, transport=transport) as mp:
@@ -492,7 +492,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
             return
         _, result = solve_session(session, "qr36")
         if as_json:
-            _print_json(result.to_json())
+            print_json(result.to_json())
             return
         click.echo(f"acquired {res.recorded} poses ({res.skipped} skipped) in "
                    f"{res.elapsed_s:.1f} s through the wire protocols\n")

@@ -1,6 +1,6 @@
 """Adaptive acquisition's mathematics: predict the coil-placement error of the calibration so
 far, choose the next pose, decide when to stop (docs/methods.md, "Adaptive acquisition").
-Pure numerics, no I/O: the acquisition loop (tmscal.acquisition.adaptive) moves the robot.
+Pure numerics, no I/O: the acquisition loop (tmscal.acquisition.adaptive_run) moves the robot.
 
 Frames and units as everywhere (docs/conventions.md): A = base_from_flange, B =
 tracker_from_marker, C = tracker_from_probe, X = flange_from_marker, Y = flange_from_probe,
