@@ -1,16 +1,17 @@
 """A small fixed set of realistic bugs ("mutants") in the motion-safety code (issue 22: the
-envelope over the whole motion): each is applied to a fresh copy of the repository, and the
+envelope over the whole motion) and in the code of the audit's other breaks (resume, stream,
+escaping, units): each is applied to a fresh copy of the repository, and the
 tests that guard that code must FAIL on it. A mutant that survives means a test is missing.
 
-    .venv/bin/python benchmarks/mutation.py            # every mutant (about 3 minutes)
+    .venv/bin/python benchmarks/mutation.py            # every mutant (about 5 minutes)
     .venv/bin/python benchmarks/mutation.py --list     # names only
     .venv/bin/python benchmarks/mutation.py --only sag-margin --only tcp-frame
     .venv/bin/python benchmarks/mutation.py --baseline # the unmutated copy must pass first
 
 Exit status 0 when every mutant was killed (and, with --baseline, the copy passed), 1
-otherwise, so CI can run it. The copy holds tmscal/, tests/ and pyproject.toml; pytest runs
-in it with PYTHONPATH pointing there (checked: ``tmscal.__file__`` must be in the copy), so
-the child processes the e2e tests start import the mutated code too.
+otherwise, so CI can run it. The copy holds tmscal/, tests/, configs/ and pyproject.toml;
+pytest runs in it with PYTHONPATH pointing there (checked: ``tmscal.__file__`` must be in the
+copy), so the child processes the e2e tests start import the mutated code too.
 """
 
 from __future__ import annotations
@@ -85,6 +86,28 @@ MUTANTS = [
            "g = np.stack([lo - pts, hi - pts], axis=-1)",
            (PM + "test_the_audit_sweep_leaves_the_box_mid_path_although_both_ends_are_inside",
             PM + "test_a_controller_that_moves_the_tcp_swings_the_flange_instead")),
+    # beyond the motion code: the audit's other breaks (issue 22, item 4)
+    Mutant("resume-after-max", "a resumed plan run starts after the highest pose recorded: a "
+           "damaged middle line's pose is never measured again", "tmscal/acquisition/strategy.py",
+           "        self._done = session.indices()\n        self._next = 0",
+           "        self._done = session.indices()\n        self._next = max(self._done, "
+           "default=-1) + 1",
+           ("tests/e2e/test_acquire.py::test_resume_reacquires_a_damaged_middle_line",)),
+    Mutant("stream-raw-z", "dropped correction: the streamed coil pose is Z · C, not the "
+           "placement rule (C undistorted)", "tmscal/stream.py",
+           "        return np.asarray(cal.Z, dtype=float) @ targets[0]",
+           "        return np.asarray(cal.Z, dtype=float) @ C",
+           ("tests/e2e/test_stream.py::test_coil_to_robot_base_follows_the_placement_rule_"
+            "under_a_tracker_scale",)),
+    Mutant("html-escape", "removed escape: the report's text is made visible but not "
+           "HTML-escaped", "tmscal/escape.py",
+           "    return html.escape(visible(s, newlines=newlines), quote=True)",
+           "    return visible(s, newlines=newlines)",
+           ("tests/unit/test_report_html.py::test_session_text_is_escaped",)),
+    Mutant("units-speed", "unit slip: a speed in m/s (0.05) accepted as mm/s",
+           "tmscal/config/safety.py", "MIN_MOTION = 1.0", "MIN_MOTION = 0.01",
+           ("tests/unit/test_config_safety.py::test_values_in_metres_are_refused_in_one_short_"
+            "line",)),
 ]
 
 
@@ -92,7 +115,7 @@ def _copy() -> Path:
     """A fresh copy of what the tests need, in a temporary directory."""
     d = Path(tempfile.mkdtemp(prefix="tmscal-mutant-"))
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
-    for name in ("tmscal", "tests"):
+    for name in ("tmscal", "tests", "configs"):
         shutil.copytree(ROOT / name, d / name, ignore=ignore, symlinks=True)
     shutil.copy2(ROOT / "pyproject.toml", d / "pyproject.toml")
     return d
