@@ -216,6 +216,34 @@ def test_the_split_route_goes_through_p0_and_stays_inside():
         prev = leg.target
 
 
+@pytest.mark.parametrize("early", [True, False])
+def test_a_controller_that_cannot_turn_on_the_spot_turns_while_translating(early):
+    # a DENSO MOVE L times only the translation: the turn at the centre could not be timed,
+    # so the route turns on the way to the centre (or, when that leaves, on the way out);
+    # every leg translates, stays inside (sampled finely, by hand) and gets a finite speed
+    denso = MotionLaw(LinearPath(), SharedProfile(0.0, min_speed_mm_s=0.01,
+                                                  min_accel_mm_s2=0.01, name="a DENSO MOVE L"))
+    p0 = make_pose(DOWN, [500.0, 0.0, 400.0])
+    env = Envelope(center=p0, max_offset_mm=300.0, max_rotation_deg=170.0, box_min_mm=BOX[0],
+                   box_max_mm=BOX[1], tool_points_mm=COIL, max_speed_mm_s=250.0,
+                   max_accel_mm_s2=1500.0)
+    S, T = turned(420, 0, 450, 0), turned(420, 0, 450, -127)
+    if not early:
+        S, T = T, S
+    with pytest.raises(SafetyError, match="without translating"):
+        plan_move(env, turned(500, 0, 400, 0), turned(500, 0, 400, -127), denso, 250.0, 1200.0)
+    route = plan_move(env, S, T, denso, 250.0, 1200.0)
+    assert route.split and "x-min wall" in route.why and len(route.legs) == 2
+    np.testing.assert_allclose(route.legs[0].target[:3, 3], [500.0, 0.0, 400.0], atol=1e-9)
+    np.testing.assert_allclose(route.legs[-1].target, T, atol=1e-12)
+    for leg in route.legs:
+        assert np.linalg.norm(leg.target[:3, 3] - leg.start[:3, 3]) > 1.0
+        assert 0 < leg.speed_mm_s <= 250.0 and 0 < leg.accel_mm_s2 <= 1200.0
+        p = points(straight(leg.start, leg.target, np.linspace(0, 1, 5001)),
+                   np.array([[0, 0, 0], *COIL], dtype=float))
+        assert (p >= np.array(BOX[0]) - 1e-9).all() and (p <= np.array(BOX[1]) + 1e-9).all()
+
+
 def test_a_turn_past_the_rotation_limit_goes_back_through_p0s_orientation():
     # +100° and −100° about P0's x axis are both inside a 120° limit, but the geodesic between
     # them (and the same turn at the centre) passes 180° from P0: the route turns back to

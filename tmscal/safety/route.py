@@ -12,9 +12,14 @@ straight path would leave the envelope, and timed so that every tool point keeps
    the target keeping it. If that leaves the envelope too and there is a P0, the turn at the
    centre goes through P0's own orientation (turn back to it, then on to the target's: each
    turn moves monotonically away from or towards P0's orientation, so the rotation limit
-   holds on the way). Each leg (and every waypoint) is checked the same way; a leg of no
-   motion is dropped. If a leg still leaves the envelope, the move is refused, naming the move
-   (from → to, mm), the point (flange origin or tool point i), where, and which wall.
+   holds on the way). A controller that times only the translation (a DENSO ``MOVE L``:
+   :class:`~.laws.SharedProfile` with K = 0) cannot time a turn on the spot once tool points
+   are carried, so for it the turn is made while translating instead: to the centre turning
+   to the target orientation, then to the target keeping it (or the other way round: to the
+   centre keeping the start orientation, then to the target turning). Each leg (and every
+   waypoint) is checked the same way; a leg of no motion is dropped. If a leg still leaves
+   the envelope, the move is refused, naming the move (from → to, mm), the point (flange
+   origin or tool point i), where, and which wall.
 4. Each leg's speed and acceleration are lowered for the fastest point (:mod:`.laws`).
 
 Nothing is sent by this module; a refusal is a ``SafetyError`` ending "Nothing was moved."
@@ -30,7 +35,7 @@ import numpy as np
 from ..errors import SafetyError
 from ..geometry import angle_between, invert, rotvec_from_matrix
 from .envelope import Envelope
-from .laws import AxisProfile, SharedProfile, Timing, scale
+from .laws import NEGLIGIBLE_MM, AxisProfile, SharedProfile, Timing, scale
 from .paths import AxisPath, LinearPath, Violation, check_path
 
 __all__ = ["MotionLaw", "Leg", "Route", "plan_move", "split_waypoints", "DEFAULT_LAW"]
@@ -84,11 +89,8 @@ def split_waypoints(env: Envelope, start: np.ndarray, target: np.ndarray,
     target orientation there; ``via_p0`` turns through P0's own orientation in between (two
     turns, each moving monotonically away from or towards P0's orientation). None when the
     envelope has no centre (or, with ``via_p0``, no P0)."""
-    if env.center is not None:
-        c = np.asarray(env.center)[:3, 3]
-    elif env.has_box and not via_p0:
-        c = 0.5 * (np.asarray(env.box_min_mm) + np.asarray(env.box_max_mm))
-    else:
+    c = _centre(env)
+    if c is None or (via_p0 and env.center is None):
         return None
     w1, w2 = np.array(start, dtype=np.float64), np.array(target, dtype=np.float64)
     w1[:3, 3] = c
@@ -99,6 +101,17 @@ def split_waypoints(env: Envelope, start: np.ndarray, target: np.ndarray,
         if not _same(out[-1], p):
             out.append(p)
     return out
+
+
+def _centre(env: Envelope) -> np.ndarray | None:
+    """Where a split route turns (mm, base frame): P0's position, else the box's centre, else
+    None."""
+    if env.center is not None:
+        return np.asarray(env.center, dtype=np.float64)[:3, 3]
+    if env.has_box:
+        return 0.5 * (np.asarray(env.box_min_mm, dtype=np.float64)
+                      + np.asarray(env.box_max_mm, dtype=np.float64))
+    return None
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
@@ -168,14 +181,25 @@ def _split(env: Envelope, start: np.ndarray, target: np.ndarray, law: MotionLaw,
     inside."""
     why: list[str] = []
     tried: list[list[np.ndarray]] = []
-    for via_p0 in (False, True):
-        poses = split_waypoints(env, start, target, via_p0)
+    candidates = [(split_waypoints(env, start, target, via_p0),
+                   " turning through P0's orientation" if via_p0 else "")
+                  for via_p0 in (False, True)]
+    if _turns_untimed(law, env):
+        timed = [c for c in candidates if c[0] is not None and not _turns_on_the_spot(c[0])]
+        if len(timed) < sum(c[0] is not None for c in candidates):
+            why.append(f"{law.timing.name} cannot time the split route's turn at the centre "
+                       "(it times only the translation; docs/safety.md)")
+        candidates = timed + [
+            (_turning_waypoints(env, start, target, early),
+             " turning on the way in" if early else " turning on the way out")
+            for early in (True, False)]
+    for poses, how in candidates:
         if poses is None or any(len(p) == len(poses) and all(_same(a, b) for a, b in
                                                                zip(p, poses, strict=True))
                                 for p in tried):
             continue
         tried.append(poses)
-        bad = _route_violation(env, poses, law, via_p0)
+        bad = _route_violation(env, poses, law, how)
         if bad is None:
             return poses
         why.append(bad)
@@ -184,13 +208,38 @@ def _split(env: Envelope, start: np.ndarray, target: np.ndarray, law: MotionLaw,
     raise SafetyError(f"{move} refused: {straight}; {'; '.join(why)}. Nothing was moved.")
 
 
-def _route_violation(env: Envelope, poses: list[np.ndarray], law: MotionLaw, via_p0: bool
+def _turns_untimed(law: MotionLaw, env: Envelope) -> bool:
+    """True when ``law`` times only the translation (SharedProfile, K = 0) and the envelope
+    carries tool points, so that a turn on the spot cannot be sent (:mod:`.laws`)."""
+    pts, _ = env.checked_points()
+    far = float(np.linalg.norm(pts, axis=1).max(initial=0.0)) if len(pts) else 0.0
+    return (isinstance(law.timing, SharedProfile) and law.timing.rotation_mm_per_rad <= 0
+            and far > NEGLIGIBLE_MM)
+
+
+def _turning_waypoints(env: Envelope, start: np.ndarray, target: np.ndarray, early: bool
+                       ) -> list[np.ndarray] | None:
+    """A split route without a turn on the spot: [start, W, target] with W at the centre (P0's
+    position, else the box's centre) in the target's orientation (``early``: turn on the way
+    to the centre) or the start's (turn on the way out). None without a centre."""
+    c = _centre(env)
+    if c is None:
+        return None
+    w = np.array(target if early else start, dtype=np.float64)
+    w[:3, 3] = c
+    out = [np.asarray(start, dtype=np.float64)]
+    for p in (w, np.asarray(target, dtype=np.float64)):
+        if not _same(out[-1], p):
+            out.append(p)
+    return out
+
+
+def _route_violation(env: Envelope, poses: list[np.ndarray], law: MotionLaw, how: str
                      ) -> str | None:
-    """Why the split route ``poses`` leaves the envelope (its waypoints, then its legs), or
-    None when it stays inside."""
+    """Why the split route ``poses`` (``how`` it turns, for the message) leaves the envelope
+    (its waypoints, then its legs), or None when it stays inside."""
     centre = _fmt(poses[1]) if len(poses) > 2 else "P0"
-    route = f"the split route through {centre} mm" + (
-        " turning through P0's orientation" if via_p0 else "")
+    route = f"the split route through {centre} mm{how}"
     for w in poses[1:-1]:
         bad = env.violations(w)
         if bad:
@@ -202,8 +251,16 @@ def _route_violation(env: Envelope, poses: list[np.ndarray], law: MotionLaw, via
     return None
 
 
+def _turns_on_the_spot(poses: list[np.ndarray]) -> bool:
+    """Whether a split route has a leg that turns without translating."""
+    return any(np.linalg.norm(a[:3, 3] - b[:3, 3]) <= 1e-9 and not _same(a, b)
+               for a, b in zip(poses[:-1], poses[1:], strict=True))
+
+
 def _leg_name(a: np.ndarray, b: np.ndarray, i: int) -> str:
-    """What leg a → b of a split route does: turn at the centre, or translate to / from it."""
+    """What leg a → b of a split route does: turn at the centre, or translate to / from it
+    (turning on the way, for a controller that cannot turn on the spot)."""
     if np.linalg.norm(a[:3, 3] - b[:3, 3]) <= 1e-9:
         return "turn at the centre"
-    return "translate to the centre" if i == 0 else "translate from the centre"
+    name = "translate to the centre" if i == 0 else "translate from the centre"
+    return name + (", turning" if float(angle_between(a, b)) > 1e-12 else "")
