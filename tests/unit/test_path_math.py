@@ -379,7 +379,7 @@ def test_a_joint_move_passed_stays_inside_at_every_fine_sample(seed, eps):
     P = planar_places(q0, q1, np.linspace(0, 1, 20_001))
     hi = P.max(axis=0) + (eps if rng.random() < 0.5 else -eps)
     hi[2] = 410.0                       # the arm stays at z = 400
-    lo = P.min(axis=0) - 1.0
+    lo = P.min(axis=0) - 4.0            # below hi even when the path is short and hi lowered
     lo[2] = 390.0
     env = Envelope(box_min_mm=tuple(lo), box_max_mm=tuple(hi))
     v = check_joint_path(env, planar_fk, q0, q1, [L1 + L2, L2])
