@@ -14,7 +14,7 @@ import numpy as np
 from ..config import RigConfig
 from ..errors import SafetyError
 from .devices import envelope_for, make_robot
-from .plan import PlanSpec, check_plan, plan_summary
+from .plan import PlanSpec, check_plan, check_plan_moves, plan_summary
 
 __all__ = ["DryRun", "dry_run"]
 
@@ -25,13 +25,18 @@ class DryRun:
     mm); ``p0_source`` says where P0 came from; ``summary`` is ``plan_summary``'s dict
     (offsets and ranges mm, rotation deg, durations s; the box and the flange's and tool
     points' extent in the base frame, mm); ``refusal`` is None when every pose is inside the
-    config's safety envelope, else the reason the run would be refused."""
+    config's safety envelope, else the reason the run would be refused; ``split_moves`` the
+    moves (by the plan pose they go to) whose straight path leaves the envelope and that
+    will go through P0, ``blocked_moves`` why the moves that cannot are refused
+    (``check_plan_moves``)."""
 
     spec: PlanSpec
     p0_source: str
     speed_mm_s: float
     summary: dict[str, Any]
     refusal: str | None
+    split_moves: tuple[int, ...] = ()
+    blocked_moves: tuple[str, ...] = ()
 
 
 def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None,
@@ -57,5 +62,8 @@ def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None
         refusal = None
     except SafetyError as e:
         refusal = str(e)
+    split, blocked = check_plan_moves(plan, envelope, p0)
+    if refusal is None and blocked:
+        refusal = blocked[0]
     return DryRun(spec=spec, p0_source=src, speed_mm_s=speed, summary=summary,
-                  refusal=refusal)
+                  refusal=refusal, split_moves=tuple(split), blocked_moves=tuple(blocked))

@@ -1,5 +1,6 @@
-"""Acquisition plans: the safety check of a whole plan before anything moves (``check_plan``)
-and the dry run's summary (``plan_summary``), both as values: nothing here prints. Poses are
+"""Acquisition plans: the safety check of a whole plan before anything moves (``check_plan``,
+every pose; ``check_plan_moves``, the way between them) and the dry run's summary
+(``plan_summary``), all as values: nothing here prints. Poses are
 base_from_flange 4×4 in mm; which poses a plan visits (``PlanSpec``) and the generators live
 in :mod:`tmscal.poses`.
 """
@@ -12,8 +13,10 @@ import numpy as np
 
 from ..drivers.base import Envelope, SafetyError
 from ..poses import MAX_PLAN_POSES, PlanSpec, make_plan
+from ..safety import DEFAULT_LAW, check_path, plan_move
 
-__all__ = ["MAX_PLAN_POSES", "PlanSpec", "check_plan", "plan_summary", "make_plan"]
+__all__ = ["MAX_PLAN_POSES", "PlanSpec", "check_plan", "check_plan_moves", "plan_summary",
+           "make_plan"]
 
 
 def check_plan(poses: np.ndarray, envelope: Envelope) -> None:
@@ -25,6 +28,30 @@ def check_plan(poses: np.ndarray, envelope: Envelope) -> None:
             pos = np.round(P[:3, 3], 1).tolist()
             raise SafetyError(f"plan pose {i} (flange at {pos} mm in the base frame) leaves "
                               f"the safety envelope: {'; '.join(v)}. Nothing was moved.")
+
+
+def check_plan_moves(poses: np.ndarray, envelope: Envelope, start: np.ndarray
+                     ) -> tuple[list[int], list[str]]:
+    """The way between a plan's poses (from ``start``, P0, through every pose in order; 4×4
+    base_from_flange mm) looked at before the run, as the flange's straight path: (the moves
+    whose straight path leaves the envelope and will be split through P0, the refusals of the
+    moves for which no split route stays inside either). Judged with the most cautious motion
+    law (a straight flange move that turns only while translating: docs/safety.md); at run
+    time each move is planned again with the controller's own law before it is sent. Moves
+    are numbered by the pose they go to."""
+    split: list[int] = []
+    refused: list[str] = []
+    prev = np.asarray(start, dtype=np.float64)
+    for i, P in enumerate(np.asarray(poses, dtype=np.float64)):
+        if not envelope.violations(prev) and not envelope.violations(P) \
+                and check_path(envelope, prev, P, DEFAULT_LAW.path) is not None:
+            try:
+                plan_move(envelope, prev, P, DEFAULT_LAW, 1.0, 1.0, f"move to plan pose {i}")
+                split.append(i)
+            except SafetyError as e:
+                refused.append(str(e))
+        prev = P
+    return split, refused
 
 
 def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s: float,

@@ -401,7 +401,11 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
                f"{d.speed_mm_s:g} mm/s, sampling {s['sampling_s']:.0f} s)")
     if d.refusal is not None:
         raise SafetyError(d.refusal)
-    click.echo("  safety envelope: every pose inside")
+    split = (f"; {len(d.split_moves)} move(s) leave on the straight path and go through P0 "
+             f"(to pose {', '.join(map(str, d.split_moves[:8]))}"
+             f"{', …' if len(d.split_moves) > 8 else ''})" if d.split_moves else "")
+    click.echo(f"  safety envelope: every pose inside, every move's path inside{split} "
+               "(docs/safety.md)")
 
 
 @main.command()
