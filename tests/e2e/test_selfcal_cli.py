@@ -22,7 +22,8 @@ def test_simulate_json_keys_and_calibration_helps():
              "--seed", "3")
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
-    assert {"identifiable", "before", "after", "indices"} <= set(out)
+    assert {"identifiable", "before", "after", "before_absorbed", "after_absorbed",
+            "indices"} <= set(out)
     assert "floor" not in out
     assert all(isinstance(n, str) for n in out["identifiable"])
     assert "theta0_2" in out["identifiable"] and "a_2" not in out["identifiable"]
@@ -31,21 +32,22 @@ def test_simulate_json_keys_and_calibration_helps():
     assert set(out["indices"]) == {"detmax", "O1", "O2", "O3", "O4", "O5", "random"}
     assert all(set(v["after"]) == {"mean_mm", "max_mm", "sd_mm"}
                for v in out["indices"].values())
-    assert out["after"]["mean_mm"] < out["before"]["mean_mm"]
-    assert out["after"]["max_mm"] < out["before"]["max_mm"]
+    assert out["after_absorbed"]["mean_mm"] < out["before_absorbed"]["mean_mm"]
 
 
-def test_simulate_all_errors_json_has_the_floor_and_the_table_prints():
-    p = _run("simulate", "--json", "--errors", "all", "--arm", "vs060", "--pool", "300",
-             "--k", "30", "--trials", "1", "--no-compare")
+def test_simulate_medrue_json_and_the_table_prints():
+    p = _run("simulate", "--json", "--arm", "medrue", "--pool", "300", "--k", "30",
+             "--trials", "1", "--no-compare")
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
-    assert set(out["floor"]) == {"mean_mm", "max_mm", "sd_mm"}
-    assert out["floor"]["mean_mm"] < out["before"]["mean_mm"]
+    assert set(out["after_absorbed"]) == {"mean_mm", "max_mm", "sd_mm"}
+    assert out["settings"]["errors"] == "all" and "L11" in out["in_error"]
+    assert out["after_absorbed"]["mean_mm"] < out["before_absorbed"]["mean_mm"]
     assert list(out["indices"]) == ["detmax"]
     p = _run("simulate", "--pool", "200", "--k", "20", "--trials", "1", "--no-compare")
     assert p.returncode == 0, p.stderr
     assert "before (nominal model)" in p.stdout and "after  (identified)" in p.stdout
+    assert "after the hand/eye" in p.stdout
 
 
 def test_simulate_usage_errors_are_one_line():

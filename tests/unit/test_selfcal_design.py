@@ -206,28 +206,40 @@ def test_wrench_noise_bounded_and_of_the_stated_spread():
     assert np.std(avg[:, 3:]) == pytest.approx(0.2 / 3 / 10, rel=0.06)
 
 
-def test_simulate_without_noise_recovers_the_position_exactly():
-    res = simulate(pool=300, k=30, seed=1, force_n=1e-9, torque_nm=1e-9, samples=1,
-                   compare=False, trials=1)
-    assert res.before["mean_mm"] > 1.0
-    assert res.after["max_mm"] < 1e-4
+def test_simulate_without_noise_recovers_what_the_wrench_sees():
+    # errors on every parameter the wrench sees (alone or in a combination): noise-free, the
+    # identification recovers all of it but the split of confounded offsets, which on the
+    # UR5e moves the TCP far less than the errors did
+    res = simulate(errors="seen", pool=300, k=30, seed=1, force_n=1e-6, torque_nm=1e-7,
+                   samples=1, compare=False, trials=1)
+    assert res.before_absorbed["mean_mm"] > 3.0
+    assert res.after_absorbed["mean_mm"] < res.before_absorbed["mean_mm"] / 3
 
 
-def test_simulate_paper_protocol_errors_only_on_identifiable_parameters():
-    res = simulate(pool=400, k=40, seed=2, compare=False, trials=1)
-    assert res.in_error == res.identifiable
-    assert "base_yaw" not in res.identifiable and "a_2" not in res.identifiable
-    assert res.after["mean_mm"] < res.before["mean_mm"] / 10
-    assert res.floor is None and "floor" not in res.to_dict()
+def test_simulate_protocols_put_errors_where_they_say():
+    kw = {"pool": 300, "k": 30, "seed": 2, "compare": False, "trials": 1, "samples": 10}
+    paper = simulate(errors="paper", **kw)
+    assert set(paper.in_error) == {n for n in paper.identifiable
+                                   if n != "mg" and not n.startswith(("f0_", "t0_"))}
+    assert "base_yaw" not in paper.identifiable and "a_2" not in paper.identifiable
+    seen = simulate(errors="seen", **kw)
+    assert {"theta0_3", "theta0_4", "sensor_roll", "sensor_yaw"} <= set(seen.in_error)
+    assert "a_2" not in seen.in_error and "theta0_1" not in seen.in_error
+    every = simulate(errors="all", **kw)
+    assert {"a_2", "d_1", "theta0_1", "base_x", "base_yaw"} <= set(every.in_error)
+    assert "mg" not in every.in_error and "f0_x" not in every.in_error
+    assert "floor" not in every.to_dict()
+    # link lengths the wrench cannot see stay wrong: what the hand/eye cannot absorb remains
+    assert every.after_absorbed["mean_mm"] > 0.5
+    assert every.after_absorbed["mean_mm"] < every.before_absorbed["mean_mm"]
 
 
-def test_simulate_all_errors_reports_the_floor():
-    res = simulate(errors="all", pool=400, k=40, seed=3, compare=False, trials=1)
-    assert {"a_2", "d_1", "theta0_3"} <= set(res.in_error)
-    assert res.floor is not None and res.floor_true_values is not None
-    assert res.floor["mean_mm"] < res.before["mean_mm"]
-    assert res.floor["mean_mm"] > 0.5  # link-length errors the wrench cannot see remain
-    assert set(res.to_dict()) >= {"floor", "floor_true_values"}
+def test_simulate_runs_on_medrue_whose_lengths_the_wrench_sees():
+    res = simulate(arm="medrue", errors="all", pool=300, k=30, seed=3, compare=False,
+                   trials=1)
+    assert {"L11", "L12", "L22"} <= set(res.identifiable)
+    assert res.parameters == 47
+    assert res.after_absorbed["mean_mm"] < res.before_absorbed["mean_mm"] / 2
 
 
 def test_simulate_compares_every_selection_and_reports_stages():

@@ -30,12 +30,12 @@ import numpy as np
 from ..kinematics import (
     ARMS,
     Arm,
-    forward,
     joint_frames,
     pose_from_rpy,
     pose_jacobian,
     rpy_from_matrix,
 )
+from ..kinematics import forward as _serial_forward
 from ..kinematics.jacobian import rpy_axes
 from ..kinematics.model import check_joints
 
@@ -150,6 +150,15 @@ UR5E = NOMINAL["ur5e"]
 VS060 = NOMINAL["vs060"]
 
 
+def forward(model: Any, q: Any) -> np.ndarray:
+    """World ← flange (…, 4, 4) mm at joints q (…, n): the DH chain of a serial arm
+    (``tmscal.calib.kinematics.forward``), or another mechanism's own ``forward`` (the probe
+    frame of :class:`~tmscal.calib.selfcal.medrue.MedRUE`)."""
+    if isinstance(model, Arm):
+        return _serial_forward(model, q)
+    return model.forward(q)
+
+
 def _up_in_sensor(model: ArmModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(R_wf (…, 3, 3) world ← flange, R_ws (…, 3, 3) world ← sensor, u (…, 3) = R_wsᵀ e_z,
     the world's up in the sensor frame)."""
@@ -164,6 +173,8 @@ def wrench(model: ArmModel, q: Any) -> np.ndarray:
     frame, for joint values q (…, n) rad: f = R_wsᵀ (m g_w) + f0, τ = c × (R_wsᵀ m g_w) + τ0
     with g_w = (0, 0, −g), R_ws the world ← sensor rotation and c the tool's centre of gravity
     (mm, converted to m)."""
+    if not isinstance(model, ArmModel):          # another mechanism (medrue.MedRUE)
+        return model.wrench(q)
     _, _, u = _up_in_sensor(model, check_joints(model, q))
     f = -model.tool_mass_kg * G_STANDARD * u
     tau = np.cross(model.tool_cog_mm * 1e-3, f)
@@ -190,6 +201,8 @@ def jacobian(model: ArmModel, q: Any) -> np.ndarray:
     channels of configuration 0, then of 1, …; columns in the order of
     ``model.parameter_names()`` (units: N or N·m per rad, mm, N, N·m). Lengths (d, a, base and
     sensor positions) do not enter the gravity wrench: their columns are zero."""
+    if not isinstance(model, ArmModel):          # another mechanism (medrue.MedRUE)
+        return model.jacobian(q)
     q = np.atleast_2d(check_joints(model, q))
     if q.ndim != 2:
         raise ValueError(f"q must be (m, {model.n_joints}), got shape {q.shape}")
