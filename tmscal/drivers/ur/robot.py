@@ -18,6 +18,7 @@ run the mock in another process (``tmscal mock``) or the robot in a subprocess.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import threading
 import time
@@ -203,6 +204,7 @@ class URRobot(RTDECalls, Robot):
             if what == "control" and self._stuck:
                 log.warning("ur %s: a control call is stuck in ur_rtde; control interface "
                             "left connected", self.host)
+                _keep_forever(iface)
                 continue
             try:
                 self._call_watched(f"{what} disconnect", iface.disconnect, 5.0, watch=False)
@@ -516,3 +518,11 @@ class URRobot(RTDECalls, Robot):
             else:
                 time.sleep(_FRESH_POLL_S)
 
+
+def _keep_forever(iface: Any) -> None:
+    """Never free ``iface`` (an ur_rtde interface whose call is stuck in its own thread).
+    Freed, its C++ destructor would meet that thread still joinable and abort the whole
+    process (``terminate called without an active exception``), at the latest when Python
+    frees what is left at exit, after the session and the error line were written. One
+    reference more than anyone gives back keeps it alive until the process ends."""
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(iface))
