@@ -35,6 +35,7 @@ from pathlib import Path  # noqa: E402
 import pytest  # noqa: E402
 
 from tests import rigs  # noqa: E402
+from tests.slow import is_slow  # noqa: E402
 from tmscal.drivers.robot_lock import LOCK_DIR_ENV  # noqa: E402
 from tmscal.sim import SimRig  # noqa: E402
 
@@ -85,13 +86,16 @@ def pytest_unconfigure(config) -> None:
 
 def pytest_collection_modifyitems(config, items) -> None:
     """``e2e`` / ``interop`` on every test under ``tests/e2e`` / ``tests/interop`` (so that
-    ``-m "not e2e"`` leaves them all out); under ``--fuzz-long`` the per-test timeout is lifted
-    (10⁵ examples take minutes)."""
+    ``-m "not e2e"`` leaves them all out), ``slow`` on the tests ``tests/slow.py`` lists (``-m
+    "not slow"``: the fast part); under ``--fuzz-long`` the per-test timeout is lifted (10⁵
+    examples take minutes)."""
     for item in items:
         module = item.nodeid.split("::", 1)[0]
         for folder in ("e2e", "interop"):
             if module.startswith(f"tests/{folder}/") and item.get_closest_marker(folder) is None:
                 item.add_marker(getattr(pytest.mark, folder))
+        if is_slow(item.nodeid) and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)
         if config.getoption("--fuzz-long"):
             item.add_marker(pytest.mark.timeout(0))
 
