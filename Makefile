@@ -24,8 +24,16 @@ lint: $(STAMP)
 	$(BIN)/ruff check tmscal tests benchmarks
 	$(BIN)/lint-imports
 
+# the suite in parallel (pytest-xdist: one worker per core, a test file whole on one worker;
+# PYTEST_WORKERS=0 runs it in this process), one BLAS thread per process (OpenBLAS's busy-waiting
+# threads starve the mock servers on a small machine); PYTEST_ARGS adds options, e.g.
+# `make test PYTEST_ARGS="-m 'not slow'"` or PYTEST_ARGS=--durations=0
+PYTEST_WORKERS ?= auto
+PYTEST_ARGS    ?=
+TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -q
+	$(TEST_ENV) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 # every benchmark script (figures for the README; ~5 minutes)
 bench: $(STAMP)

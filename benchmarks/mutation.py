@@ -11,7 +11,10 @@ tests that guard that code must FAIL on it. A mutant that survives means a test 
 Exit status 0 when every mutant was killed (and, with --baseline, the copy passed), 1
 otherwise, so CI can run it. The copy holds tmscal/, tests/, configs/ and pyproject.toml;
 pytest runs in it with PYTHONPATH pointing there (checked: ``tmscal.__file__`` must be in the
-copy), so the child processes the e2e tests start import the mutated code too.
+copy), so the child processes the e2e tests start import the mutated code too. The working tree
+is never edited, so an interrupted run leaves it as it was. ``tests/unit/test_safety_mutants.py``
+runs a few of these mutants in the test suite through ``copy_tree``, ``apply``,
+``imports_the_copy`` and ``pytest_in``.
 """
 
 from __future__ import annotations
@@ -107,13 +110,14 @@ MUTANTS = [
     Mutant("units-speed", "unit slip: a speed in m/s (0.05) accepted as mm/s",
            "tmscal/config/safety.py", "MIN_MOTION = 1.0", "MIN_MOTION = 0.01",
            ("tests/unit/test_config_safety.py::test_values_in_metres_are_refused_in_one_short_"
-            "line",)),
+            "line[speed]",)),
 ]
 
 
-def _copy() -> Path:
-    """A fresh copy of what the tests need, in a temporary directory."""
-    d = Path(tempfile.mkdtemp(prefix="tmscal-mutant-"))
+def copy_tree(dest: Path | None = None) -> Path:
+    """A fresh copy of what the tests need (tmscal/, tests/, configs/, pyproject.toml) in ``dest`` (an
+    empty or missing directory), by default a new temporary directory; returns it."""
+    d = Path(tempfile.mkdtemp(prefix="tmscal-mutant-")) if dest is None else dest
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
     for name in ("tmscal", "tests", "configs"):
         shutil.copytree(ROOT / name, d / name, ignore=ignore, symlinks=True)
@@ -121,20 +125,40 @@ def _copy() -> Path:
     return d
 
 
+def apply(m: Mutant, copy: Path) -> bool:
+    """Apply ``m`` to the copy at ``copy``; False (nothing changed) unless ``m.old`` occurs
+    exactly once in its file."""
+    f = copy / m.path
+    text = f.read_text()
+    if text.count(m.old) != 1:
+        return False
+    f.write_text(text.replace(m.old, m.new))
+    return True
+
+
 def _env(copy: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(copy), "PYTHONDONTWRITEBYTECODE": "1"}
 
 
-def _imports_the_copy(copy: Path) -> bool:
+def imports_the_copy(copy: Path) -> bool:
+    """True when Python started in ``copy`` (as ``pytest_in`` starts it) imports the copy's
+    tmscal, not the installed one."""
     out = subprocess.run([sys.executable, "-c", "import tmscal; print(tmscal.__file__)"],
                          cwd=copy, env=_env(copy), capture_output=True, text=True)
     return out.returncode == 0 and out.stdout.strip().startswith(str(copy))
 
 
+def pytest_in(copy: Path, tests: tuple[str, ...], *args: str,
+              timeout_s: float = 900.0) -> subprocess.CompletedProcess[str]:
+    """``python -m pytest -q -p no:cacheprovider ARGS TESTS`` run in ``copy`` on the copy's
+    code; the finished process (stdout and stderr as text). ``timeout_s`` is a hang guard."""
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                           *args, *tests], cwd=copy, env=_env(copy), capture_output=True,
+                          text=True, timeout=timeout_s, stdin=subprocess.DEVNULL)
+
+
 def _pytest(copy: Path, tests: tuple[str, ...]) -> tuple[int, str]:
-    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider",
-                           *tests], cwd=copy, env=_env(copy), capture_output=True, text=True,
-                          timeout=900)
+    proc = pytest_in(copy, tests, "-x")
     tail = (proc.stdout.strip().splitlines() or ["(no output)"])[-1]
     return proc.returncode, tail
 
@@ -142,9 +166,9 @@ def _pytest(copy: Path, tests: tuple[str, ...]) -> tuple[int, str]:
 def run(mutants: list[Mutant], baseline: bool) -> bool:
     ok = True
     if baseline:
-        copy = _copy()
+        copy = copy_tree()
         try:
-            if not _imports_the_copy(copy):
+            if not imports_the_copy(copy):
                 print("baseline: the copy's tmscal is not the one imported")
                 return False
             tests = tuple(dict.fromkeys(t for m in mutants for t in m.tests))
@@ -154,17 +178,14 @@ def run(mutants: list[Mutant], baseline: bool) -> bool:
         finally:
             shutil.rmtree(copy, ignore_errors=True)
     for m in mutants:
-        copy = _copy()
+        copy = copy_tree()
         try:
-            f = copy / m.path
-            text = f.read_text()
-            if text.count(m.old) != 1:
+            if not apply(m, copy):
                 print(f"{m.name:16s} NOT APPLIED: the text to replace occurs "
-                      f"{text.count(m.old)} times in {m.path}")
+                      f"{(copy / m.path).read_text().count(m.old)} times in {m.path}")
                 ok = False
                 continue
-            f.write_text(text.replace(m.old, m.new))
-            if not _imports_the_copy(copy):
+            if not imports_the_copy(copy):
                 print(f"{m.name:16s} NOT RUN: the copy's tmscal is not the one imported")
                 ok = False
                 continue

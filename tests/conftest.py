@@ -9,21 +9,35 @@ and every mock address the test's own, in the test's tmp_path) and ``loopback_ho
 loopback address no other test and no other pytest run on the machine gets; with
 ``tests.rigs.free_port`` where a server cannot take port 0), so that two runs of the suite
 side by side never meet on an address.
+
+The suite runs in parallel (``make test``: pytest-xdist, ``-n auto --dist loadfile``): each
+worker process has its own loopback blocks (``tests/rigs.py``), robot-lock directory
+(``TMSCAL_LOCK_DIR``) and tmp dirs; a test file runs whole on one worker, so a module-scoped
+fixture is built once. BLAS libraries run one thread per process (``OPENBLAS_NUM_THREADS`` and
+the like, set below before anything imports numpy): OpenBLAS's busy-waiting threads starved the
+mock servers on a 2-core machine.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
-from collections.abc import Callable
-from pathlib import Path
 
-import pytest
+# before numpy is imported (tests.rigs imports it), here and in every process started from here
+# (xdist workers, CLI children): one BLAS thread per process
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from tests import rigs
-from tmscal.drivers.robot_lock import LOCK_DIR_ENV
-from tmscal.sim import SimRig
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from tests import rigs  # noqa: E402
+from tests.slow import is_slow  # noqa: E402
+from tmscal.drivers.robot_lock import LOCK_DIR_ENV  # noqa: E402
+from tmscal.sim import SimRig  # noqa: E402
 
 
 def pytest_addoption(parser) -> None:
@@ -54,9 +68,12 @@ def pytest_configure(config) -> None:
     fuzz.LONG = bool(config.getoption("--fuzz-long"))
     # robot locks (tmscal.drivers.robot_lock) of this test session, and of the processes it
     # starts, in a directory of its own: a suite run elsewhere on the machine at the same time
-    # (same user) does not see them
-    if not os.environ.get(LOCK_DIR_ENV):
-        os.environ[LOCK_DIR_ENV] = tempfile.mkdtemp(prefix="tmscal-test-locks-")
+    # (same user) does not see them. An xdist worker (which inherits the controller's) takes
+    # one of its own, so that two workers' tests never meet on a lock either.
+    worker = getattr(config, "workerinput", None)
+    if worker is not None or not os.environ.get(LOCK_DIR_ENV):
+        tag = f"{worker['workerid']}-" if worker is not None else ""
+        os.environ[LOCK_DIR_ENV] = tempfile.mkdtemp(prefix=f"tmscal-test-locks-{tag}")
         config._tmscal_lock_dir = os.environ[LOCK_DIR_ENV]
 
 
@@ -68,9 +85,18 @@ def pytest_unconfigure(config) -> None:
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Under ``--fuzz-long`` the per-test timeout is lifted (10⁵ examples take minutes)."""
-    if config.getoption("--fuzz-long"):
-        for item in items:
+    """``e2e`` / ``interop`` on every test under ``tests/e2e`` / ``tests/interop`` (so that
+    ``-m "not e2e"`` leaves them all out), ``slow`` on the tests ``tests/slow.py`` lists (``-m
+    "not slow"``: the fast part); under ``--fuzz-long`` the per-test timeout is lifted (10⁵
+    examples take minutes)."""
+    for item in items:
+        module = item.nodeid.split("::", 1)[0]
+        for folder in ("e2e", "interop"):
+            if module.startswith(f"tests/{folder}/") and item.get_closest_marker(folder) is None:
+                item.add_marker(getattr(pytest.mark, folder))
+        if is_slow(item.nodeid) and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)
+        if config.getoption("--fuzz-long"):
             item.add_marker(pytest.mark.timeout(0))
 
 

@@ -45,10 +45,11 @@ def check_report(text: str, cfg: Path, robot: str, verdicts: dict[str, str],
 def test_suite_passes_on_real_time_mock_rig(tmp_path, mock_config, base, robot):
     cfg = mock_config(base, robot=robot, mock={"clock": "real"}, sampling={"settle_s": 0.2})
     report = tmp_path / "report.txt"
-    # the rate is a benchmark's figure (benchmarks/tracker.py): a loaded machine slows the
-    # mock's real-time tracker, so it is judged here only to within a factor of two
+    # the rate is a benchmark's figure (benchmarks/tracker.py), not this test's: a loaded
+    # machine delays the host's reads of the real-time tracker, so the check's tolerance is
+    # opened to 90 % (only a clock or frame counter off by a factor of ten fails it)
     rc, out = run_suite(tmp_path, "--rig", str(cfg), "--rig-report", str(report),
-                        "--rig-rate-tolerance", "0.5")
+                        "--rig-rate-tolerance", "0.9")
     assert rc == 0 and re.search(r"^5 passed in ", out, re.M), out
     text = report.read_text()
     assert "result: PASS (5 passed, 0 failed, 0 skipped)" in text
