@@ -115,8 +115,9 @@ MUTANTS = [
 
 
 def copy_tree(dest: Path | None = None) -> Path:
-    """A fresh copy of what the tests need (tmscal/, tests/, configs/, pyproject.toml) in ``dest`` (an
-    empty or missing directory), by default a new temporary directory; returns it."""
+    """A fresh copy of what the tests need (tmscal/, tests/, configs/, pyproject.toml) in
+    ``dest`` (an empty or missing directory), by default a new temporary directory; returns
+    it."""
     d = Path(tempfile.mkdtemp(prefix="tmscal-mutant-")) if dest is None else dest
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
     for name in ("tmscal", "tests", "configs"):
