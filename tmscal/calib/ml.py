@@ -15,30 +15,42 @@ is undone by G = D⁻¹ (:func:`undistort`). Per pose and body the residual is
 
 and to first order r = Ad-like(W) δ + ε, so the residuals of one pose (marker and probe share
 δ) have the covariance S = J_W Σ_δ J_Wᵀ + blockdiag(Σ_ε), which whitens them. ``ml``
-minimises Σ r_iᵀ S_i⁻¹ r_i by Levenberg–Marquardt (numerical Jacobian, columns scaled), S
-re-evaluated at the estimate once, started from QR36 (QR24 on marker-only data). D is "none",
-"scale" (isotropic), "axis" (per-axis scale) or "affine" (symmetric 3×3: per-axis scale and
-shear; a rotation part of D would turn positions and orientations alike and is Z's rotation,
-so it is not identifiable and not a parameter); "auto" fits all four and keeps the one with
-the smallest information criterion, with the noise level profiled out: AIC = m ln(χ²/m) + 2k
-by default (m residuals, k parameters), or BIC = m ln(χ²/m) + k ln m (``criterion="bic"``).
-AIC because it is asymptotically equivalent to leave-one-out cross-validation (Stone 1977),
-i.e. it keeps a distortion when held-out data support it; BIC's ln m penalty is consistent but
-conservative. Measured on the simulated rig (Eq. 14 plan, 250 training poses, a tracker with
-per-axis scale 1.001/0.999/1 and a 0.05 % shear; 4 sessions): AIC chose "affine" and held
-out 0.191 mm, BIC chose "axis" and held out 0.195 mm; without a distortion (n = 20) both
-chose "none" in 59–60 of 60 sessions at the same held-out error.
+minimises Σ r_iᵀ S_i⁻¹ r_i by Levenberg–Marquardt, started from QR36 (QR24 on marker-only
+data): the Jacobian analytic for X, Y, Z (:meth:`Problem.raw_jacobian`; central differences
+only for the distortion's few parameters), its column-scaled normal matrix factorised once per
+iteration (every damping tried is then a product). D is "none", "scale" (isotropic), "axis"
+(per-axis scale) or "affine" (symmetric 3×3: per-axis scale and shear; a rotation part of D
+would turn positions and orientations alike and is Z's rotation, so it is not identifiable
+and not a parameter).
 
-Noise. Options ``robot_sigma_mm`` (per component) and ``robot_sigma_deg`` (per axis of the
-rotation vector), ``tracker_sigma_mm`` and ``tracker_sigma_deg`` (per component of the
-tracked pose), or ``tracker_cov`` (6×6, body frame, [rot rad; trans mm]); ``spreads`` (one
-session pose record per pose, with "spread" {body: {trans_mm, rot_deg}} and "samples") sets
-the tracker noise per pose from the session's sample spreads instead (σ = spread / √3 /
-√samples per component). The defaults (robot 0.05 mm and 0.03° per axis, tracker 0.025 mm
-and 0.05° per axis) are the simulated rig's noise for one sample per pose (Wang et al. 2018:
-0.05 mm fiducial noise on an NDI 8700340-like tool). These give the relative weights; by default
-(``scale_covariance=True``) the covariance is also multiplied by the a-posteriori variance
-factor χ²/(m − k), so the absolute level is estimated from the residuals.
+Model selection ("auto", the default): the rigid model is fitted, then each distortion model
+with the same noise weights, and a distortion is kept only when an F test says it lowers χ²
+more than noise would (:func:`select_model`: forward none → scale → axis → affine, each step
+at level ``ALPHA`` = 1 %; F = (Δχ²/Δk) / (χ²/(m − k)) against F(Δk, m − k), the
+likelihood-ratio test with the noise level profiled out in its exact small-sample form for
+a linear Gaussian model). Under no distortion the three tests together choose one in at most
+about 3 % of sessions; AIC (``criterion="aic"``: m ln(χ²/m) + 2k), whose penalty amounts to a
+test at about 16 % per parameter, chose one in a third of small sessions (issue 21), and BIC
+(``"bic"``, + k ln m) is kept for comparison. ``benchmarks/ml_selection.py`` prints how often
+each is chosen with and without a 0.1 % tracker scale, the coil placement against QR36 and
+the solve time (docs/methods.md).
+
+Noise. The robot's rotation σ (per axis of the rotation vector) and translation σ (per
+component) are estimated from the residuals by default (``noise="estimate"``): restricted
+maximum likelihood of the variance components (:mod:`tmscal.calib.variance`, which says why
+the residuals and not the robot's own reads), on the model linearised at the QR36 start, then
+the fit with those weights, then once more at the estimate. The tracker's noise comes from
+the session's sample spreads (``spreads``: one session pose record per pose, with "spread"
+{body: {trans_mm, rot_deg}} and "samples"; σ = spread / √3 / √samples per component) or
+``tracker_cov`` (6×6, body frame, [rot rad; trans mm]) when given; otherwise from
+``tracker_sigma_mm`` / ``tracker_sigma_deg`` (per component of the tracked pose) times a
+level that is estimated with the robot's. ``robot_sigma_mm`` and ``robot_sigma_deg`` only
+start the estimate (defaults 0.05 mm, 0.03° per axis: the simulated rig's; Wang et al. 2018).
+The covariance is then (Jᵀ S⁻¹ J)⁻¹ at the estimated noise, split by component in
+``extra["covariance_parts"]`` (their sum), with each component's effective degrees of
+freedom in ``extra["noise"]["dof"]``. ``noise="given"`` takes every σ as given and, with
+``scale_covariance=True``, multiplies the covariance by the a-posteriori variance factor
+χ²/(m − k) (the behaviour before issue 21).
 
 ``tools_mm`` (the tools' fiducials, (k, 3) mm, one array or {body: array}) lets the
 orientation be undistorted as the tracker's rigid fit distorts it (:func:`undistort`); without
@@ -159,14 +171,20 @@ def _covariance(Ws: list[np.ndarray], theta: np.ndarray, T: np.ndarray, n: int
     return np.broadcast_to(S, (n,) + S.shape[-2:])
 
 
-def _fit(prob: Problem, theta: np.ndarray, T: np.ndarray, max_iter: int) -> Fit:
-    """Fit ``prob`` with the noise factors ``theta`` (the robot's part carried through the
-    start's X, Y)."""
+def _residual_count(prob: Problem) -> int:
+    """m, the number of residuals; CalibrationError when the model has as many parameters."""
     m = prob.A.shape[0] * 6 * len(prob.bodies)
     if prob.n_params >= m:
         raise CalibrationError(f"distortion model {prob.model!r} has {prob.n_params} "
                                f"parameters but {prob.A.shape[0]} poses give only {m} "
                                "residuals")
+    return m
+
+
+def _fit(prob: Problem, theta: np.ndarray, T: np.ndarray, max_iter: int) -> Fit:
+    """Fit ``prob`` with the noise factors ``theta`` (the robot's part carried through the
+    start's X, Y)."""
+    m = _residual_count(prob)
     whiten = whitener(_covariance(prob.Ws, theta, T, len(prob.A)))
     prob, its = levenberg_marquardt(prob, whiten, max_iter)
     J = _whitened(whiten, prob.raw_jacobian())
@@ -194,6 +212,7 @@ def fit_model(prob: Problem, theta: np.ndarray, T: np.ndarray, estimate: np.ndar
     components once more at the estimate (returned with the fit). With none flagged: the
     fit, then the fit again with the noise carried through the estimate's X, Y (as the
     start's may be far off)."""
+    _residual_count(prob)
     if estimate.any():
         theta = _components(prob, theta, T, estimate).theta
         fit = _fit(prob, theta, T, max_iter)

@@ -86,7 +86,10 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
         d[d == 0] = 1.0
         H = np.linalg.inv((Jf / d).T @ (Jf / d)) / np.outer(d, d)
         v = rw - Jw @ (H @ (Jf.T @ rw.ravel()))
-        M = Jw @ H @ np.swapaxes(Jw, 1, 2)  # the hat matrix's diagonal blocks (n, q, q)
+        JH = Jw @ H
+        # the hat matrix's diagonal blocks (n, q, q), or only their sum with one shared S
+        M = (np.swapaxes(JH, 0, 1).reshape(q, -1) @ np.swapaxes(Jw, 0, 1).reshape(q, -1).T
+             if shared else JH @ np.swapaxes(Jw, 1, 2))
         Qw = [Li @ Q @ np.swapaxes(Li, -1, -2) for Q in Qn]
         if it >= max_iter or not est.any():
             break
@@ -97,6 +100,9 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
             red = float(_trace_sum(Qw[j], n) - np.sum(Qw[j] * M))
             new[j] = max(theta[j] * num / max(red, 1e-300), floor[j])
         it += 1
+        if not np.all(np.isfinite(new)):
+            max_iter = it - 1  # no information to estimate from: keep the last θ
+            continue
         done = np.all(np.abs(new - theta) <= tol * np.maximum(theta, 1e-300))
         theta = new
         if done:
@@ -114,6 +120,9 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
                 t = (_trace_sum(QQ, n) - 2.0 * np.sum(M * np.swapaxes(QQ, -1, -2))
                      + np.sum((H @ A[ja]) * (H @ A[jb]).T))
                 T[a, b] = T[b, a] = t
-        V = 2.0 * np.linalg.pinv(T)
-        dof[idx] = 2.0 * theta[idx] ** 2 / np.maximum(np.diag(V), 1e-300)
+        if np.all(np.isfinite(T)):
+            V = 2.0 * np.linalg.pinv(T)
+            dof[idx] = 2.0 * theta[idx] ** 2 / np.maximum(np.diag(V), 1e-300)
+        else:
+            dof[idx] = 1.0
     return Components(theta=theta, estimated=est, dof=dof, parts=parts, iterations=it)
