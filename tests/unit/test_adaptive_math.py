@@ -419,7 +419,7 @@ def test_realistic_arm_errors_are_covered_with_model_error() -> None:
                                 spreads=s.spreads)
         plain = ad.predict(A, B, C, REGION, settings, spreads=s.spreads)
 
-        def reached(cmd: np.ndarray) -> np.ndarray:
+        def reached(cmd: np.ndarray, pair=pair, r=r) -> np.ndarray:
             return np.stack([pair.actual(pair.solve(T, r.joints())) for T in cmd])
         true = ad.true_coil_error(with_model.calibration, TRUTH.Y, TRUTH.Z, REGION, reached)
         covered += true <= with_model.coil_mm

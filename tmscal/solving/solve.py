@@ -32,8 +32,8 @@ from .kinematics import (
     usable_joints,
 )
 from .outliers import RULE as OUTLIER_RULE
-from .predict import placement_region, session_prediction
 from .outliers import find_outliers
+from .predict import placement_region, session_prediction
 
 __all__ = ["SolveResult", "solve_session", "session_arrays", "pose_residuals",
            "with_kinematics", "truth_errors_of", "flat_errors", "arm_summary"]
