@@ -1,8 +1,9 @@
 """Adaptive acquisition on the simulated rig: is its predicted coil-placement error honest, and
 what do chosen poses buy over random ones (docs/methods.md, "Adaptive acquisition").
 
-    .venv/bin/python benchmarks/adaptive_coverage.py [--runs 50] [--table-rigs 5]
-        [--config configs/mock-ur-polaris.yaml] [--settle-s 0.5] [--table-samples 20]
+    .venv/bin/python benchmarks/adaptive_coverage.py [--runs 40] [--conditions all]
+        [--table-rigs 5] [--config configs/mock-ur-polaris.yaml] [--settle-s 0.5]
+        [--table-samples 20]
 
 The rig is the config's mock rig (truth, noise, P0), driven directly (tmscal.sim.SimRig:
 move_flange, then ``observe(body, n)`` averaged), on the fast clock. Each of ``--runs`` adaptive
@@ -15,6 +16,15 @@ poses; robot time is the move by tmscal.motion at the config's speed and acceler
 predicted error (mean over the region at the confidence), the true error against the rig's
 truth (``true_coil_error``), whether it is covered, and the simulated robot time; then the
 share of runs with true ≤ predicted beside the confidence (with its 95 % binomial interval).
+
+Each of ``--conditions`` (``CONDITIONS``; issue 21) runs ``--runs`` such runs: the config's
+noise ("default"); the robot's translation or rotation σ 3× or ⅓× (ml starts from its
+defaults and must find the noise in the residuals); a +0.1 % tracker scale (the prediction
+models no distortion); a UR5e under the rig with realistic kinematic errors
+(``make_arm("ur5e", "realistic", seed)``): the robot moves in joint space, the true error is
+where the true arm takes the flange for each command, and the prediction counts the arm's
+error as model error, as it does for a session whose joints follow its arm. A summary of the
+coverage per condition with its 95 % Wilson interval ends the output (goal: ≥ 90 %).
 
 Then the table of the issue on the same rig, ``--table-rigs`` rig seeds: the mean true
 coil-placement error over the region for k = 6, 10, 14, 20 poses, random pool poses solved
