@@ -179,7 +179,8 @@ def coverage(a: argparse.Namespace, cfg, pool: np.ndarray, settings: ad.Adaptive
         per_pose = a.settle_s + samples / rate
         why, p, run, _ = adaptive_run(rig, pool, settings, samples, caps, per_pose,
                                       model_error=model_error)
-        true = ad.true_coil_error(p.calibration, truth.Y, truth.Z, region, reached_by(rig))
+        true = ad.true_coil_error(p.calibration, truth.Y, truth.Z, region, reached_by(rig),
+                                  rig.noise.tracker_distortion if rig.noise.distorted else None)
         ok = true <= p.coil_mm
         covered += ok
         robot_s = run.moving_s + per_pose * len(run.A)

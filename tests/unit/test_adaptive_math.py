@@ -426,3 +426,17 @@ def test_realistic_arm_errors_are_covered_with_model_error() -> None:
         below_plain += true <= plain.coil_mm
     assert covered == 4
     assert below_plain <= 2
+
+
+def test_true_coil_error_with_a_distorted_tracker_commands_the_measured_targets() -> None:
+    """A tracker that measures positions scaled by 1.001 about its origin (1.5 m away): the
+    true X, Y, Z with that distortion recorded place the measured targets exactly; without
+    it the targets are missed by the scale's 0.1 % of their ~1.5 m distance."""
+    D = 1.001 * np.eye(3)
+    kw = dict(X=TRUTH.X, Z=TRUTH.Z, Y=TRUTH.Y, X_raw=TRUTH.X, Z_raw=TRUTH.Z, Y_raw=TRUTH.Y,
+              applied=Applied.ORTHONORMAL)
+    knows = Calibration("t", 3, distortion={"model": "scale", "matrix": D}, **kw)
+    rigid = Calibration("t", 3, **kw)
+    assert ad.true_coil_error(knows, TRUTH.Y, TRUTH.Z, REGION, tracker_distortion=D) < 1e-6
+    e = ad.true_coil_error(rigid, TRUTH.Y, TRUTH.Z, REGION, tracker_distortion=D)
+    assert 1.3 < e < 1.7

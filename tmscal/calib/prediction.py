@@ -42,6 +42,7 @@ from .ml_model import (
     g_of,
     noise_covariance,
     tracker_covs,
+    undistort,
     undistortion,
     whitener,
 )
@@ -495,14 +496,20 @@ def candidate_cost_s(current: np.ndarray, pool: np.ndarray, speed_mm_s: float,
 
 
 def true_coil_error(cal: Calibration, truth_Y: np.ndarray, truth_Z: np.ndarray,
-                    region_flange_poses: np.ndarray, reached: Any = None) -> float:
+                    region_flange_poses: np.ndarray, reached: Any = None,
+                    tracker_distortion: Any = None) -> float:
     """Mean coil-placement error (mm) of ``cal`` over the region against a known truth: the
     targets are where the coil is when the flange is at each region pose, C_i = Z⁻¹ P_i Y
-    (true Y, Z; tracker_from_probe, no tracker distortion), commanded with
-    ``Calibration.flange_command`` and measured by ``calib.metrics.placement_errors``;
-    ``reached`` (a callable, e.g. the controller of a simulated rig's true arm) says where
-    the flange really goes for the commands (default: exactly there)."""
+    (true Y, Z; tracker_from_probe), commanded with ``Calibration.flange_command`` and
+    measured by ``calib.metrics.placement_errors``; ``reached`` (a callable, e.g. the
+    controller of a simulated rig's true arm) says where the flange really goes for the
+    commands (default: exactly there). ``tracker_distortion`` (D, 3×3: the tracker measures
+    a position p as D p, as ``tmscal.sim.Noise`` simulates it): the targets are commanded as
+    that tracker measures them (positions D t, orientations as its rigid fit distorts them,
+    ``ml_model.undistort`` with D), and the error is against where they really are."""
     P = np.asarray(region_flange_poses, dtype=float).reshape(-1, 4, 4)
     Yt, Zt = np.asarray(truth_Y, dtype=float), np.asarray(truth_Z, dtype=float)
     C = invert(Zt)[None] @ P @ Yt[None]
-    return float(placement_errors(cal.flange_command(C), C, Yt, Zt, reached).mean())
+    C_meas = C if tracker_distortion is None else \
+        undistort(C, np.asarray(tracker_distortion, dtype=float), "affine")
+    return float(placement_errors(cal.flange_command(C_meas), C, Yt, Zt, reached).mean())
