@@ -49,6 +49,7 @@ from ..errors import CalibrationError, SessionError
 from ..session import PoseRecord, Session
 from ..solving.predict import (
     adaptive_header,
+    arm_error_counts,
     prediction_inputs,
     robot_time_of,
     settings_from_header,
@@ -155,7 +156,8 @@ def _decide(s: _State, pool: np.ndarray, p0: np.ndarray, settings: AdaptiveSetti
     if s.used >= n_boot:
         A, B, C, opts = prediction_inputs(session.poses, session.bodies)
         try:
-            pred = predict(A, B, C, pool[:settings.region], settings, **opts)
+            pred = predict(A, B, C, pool[:settings.region], settings,
+                           model_error=arm_error_counts(session), **opts)
         except (CalibrationError, np.linalg.LinAlgError) as e:  # degenerate: spread further
             log.warning("no prediction from %d poses yet (%s)", s.used, e)
         if pred is not None:

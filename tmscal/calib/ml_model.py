@@ -21,7 +21,8 @@ from ..geometry import invert, make_pose, orthonormalize
 
 __all__ = ["DISTORTION_MODELS", "STEPS", "G_STEP", "undistortion", "g_of", "tool_moment",
            "undistort", "Problem", "whiten_residuals", "check_sigma", "tracker_covs",
-           "noise_covariance", "whitener", "covariance_from_jacobian", "parameter_names"]
+           "noise_covariance", "robot_parts", "tracker_part", "whitener",
+           "covariance_from_jacobian", "parameter_names"]
 
 #: distortion model → number of parameters
 DISTORTION_MODELS = {"none": 0, "scale": 1, "axis": 3, "affine": 6}
@@ -37,6 +38,13 @@ def _rodrigues(w: np.ndarray) -> np.ndarray:
     if th < 1e-8:
         return np.eye(3) + K + 0.5 * K @ K
     return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * K @ K
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """[v]× (…, 3, 3) of vectors v (…, 3)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    return out - np.swapaxes(out, -1, -2)
 
 
 def _log_so3(R: np.ndarray) -> np.ndarray:
@@ -131,6 +139,47 @@ class Problem:
             out.append(np.concatenate([_log_so3(E[:, :3, :3]), E[:, :3, 3]], axis=1))
         return np.concatenate(out, axis=1)
 
+    def raw_jacobian(self) -> np.ndarray:
+        """Raw Jacobian (n, 6m, k) of :meth:`residuals` at θ = 0 (the start), analytically
+        for the rigid parameters and by central differences for the distortion's g.
+
+        Per body j, with E = W⁻¹ A⁻¹ Z Ñ (Ñ undistorted), φ = log R(E), t_E = t(E):
+        R(E) turns to exp(−ω_W) R(E) exp(R_Ñᵀ ω_Z), so ∂φ/∂ω_W = −J_l⁻¹(φ), ∂φ/∂ω_Z =
+        J_r⁻¹(φ) R_Ñᵀ (J_l⁻¹ ≈ I − ½[φ]×, J_r⁻¹ ≈ I + ½[φ]×, exact to O(|φ|²): residuals
+        are ≪ 1 rad); ∂t_E/∂ω_W = [t_E]×, ∂t_E/∂t_W = −R_Wᵀ, ∂t_E/∂ω_Z = −R_Wᵀ R_Aᵀ R_Z
+        [t_Ñ]×, ∂t_E/∂t_Z = R_Wᵀ R_Aᵀ."""
+        k, m = self.n_params, len(self.Ws)
+        Ws, Z, G = self.unpack(np.zeros(k))
+        n = len(self.A)
+        J = np.zeros((n, 6 * m, k))
+        Ms = self.moments or [None] * m
+        RAt = np.swapaxes(self.A[:, :3, :3], 1, 2)
+        for j, (W, N, M) in enumerate(zip(Ws, self.bodies, Ms, strict=True)):
+            Nt = undistort(N, G, self.model, M)
+            E = invert(self.A @ W) @ (Z @ Nt)
+            phi = _log_so3(E[:, :3, :3])
+            half = 0.5 * _skew(phi)
+            r = 6 * j
+            J[:, r:r + 3, r:r + 3] = -(np.eye(3) - half)
+            J[:, r + 3:r + 6, r:r + 3] = _skew(E[:, :3, 3])
+            J[:, r + 3:r + 6, r + 3:r + 6] = -W[:3, :3].T
+            RNt = np.swapaxes(Nt[:, :3, :3], 1, 2)
+            J[:, r:r + 3, 6 * m:6 * m + 3] = (np.eye(3) + half) @ RNt
+            WAZ = W[:3, :3].T[None] @ RAt @ Z[:3, :3][None]
+            J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -WAZ @ _skew(Nt[:, :3, 3])
+            J[:, r + 3:r + 6, 6 * m + 3:6 * m + 6] = W[:3, :3].T[None] @ RAt
+        for i in range(6 * (m + 1), k):
+            e = np.zeros(k)
+            e[i] = G_STEP
+            J[:, :, i] = (self.residuals(e) - self.residuals(-e)) / (2 * G_STEP)
+        return J
+
+    def recentred(self, th: np.ndarray) -> Problem:
+        """The same problem started at the parameters ``th`` (θ = 0 there)."""
+        Ws, Z, G = self.unpack(th)
+        return Problem(self.A, self.bodies, Ws, Z, self.model, g_of(self.model, G),
+                       self.moments)
+
     def jacobian(self, th: np.ndarray, whiten: np.ndarray) -> np.ndarray:
         """Whitened Jacobian (n·6m, k) by central differences."""
         cols = []
@@ -191,23 +240,37 @@ def tracker_covs(n: int, names: list[str], opts: dict[str, Any]) -> np.ndarray:
     return np.broadcast_to(cov, (n, m, 6, 6))
 
 
-def noise_covariance(Ws: list[np.ndarray], robot_sigma_mm: float, robot_sigma_rad: float,
-                     tracker: np.ndarray) -> np.ndarray:
-    """Residual covariance per pose (n, 6m, 6m): the robot's error δ (shared by the bodies of
-    a pose) carried through each W, plus the tracker's (n, m, 6, 6) on the diagonal blocks."""
+def robot_parts(Ws: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(Q_rot, Q_trans) (6m, 6m): the residual covariance of one pose per unit variance of the
+    robot's rotation error (rad², per axis of its rotation vector, flange frame) and of its
+    translation error (mm², per component): the flange error δ, shared by the bodies of a
+    pose, carried through each W."""
     m = len(Ws)
     J = np.zeros((6 * m, 6))
     for j, W in enumerate(Ws):
         R, t = W[:3, :3], W[:3, 3]
-        tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
         J[6 * j:6 * j + 3, :3] = R.T
-        J[6 * j + 3:6 * j + 6, :3] = -R.T @ tx
+        J[6 * j + 3:6 * j + 6, :3] = -R.T @ _skew(t)
         J[6 * j + 3:6 * j + 6, 3:] = R.T
-    Sd = np.diag([robot_sigma_rad ** 2] * 3 + [robot_sigma_mm ** 2] * 3)
-    S = np.repeat((J @ Sd @ J.T)[None], len(tracker), axis=0)
+    return J[:, :3] @ J[:, :3].T, J[:, 3:] @ J[:, 3:].T
+
+
+def tracker_part(tracker: np.ndarray) -> np.ndarray:
+    """The tracker's residual covariance per pose (n, 6m, 6m) from its per-body covariances
+    (n, m, 6, 6), block diagonal (the bodies' errors are independent)."""
+    n, m = tracker.shape[:2]
+    T = np.zeros((n, 6 * m, 6 * m))
     for j in range(m):
-        S[:, 6 * j:6 * j + 6, 6 * j:6 * j + 6] += tracker[:, j]
-    return S
+        T[:, 6 * j:6 * j + 6, 6 * j:6 * j + 6] = tracker[:, j]
+    return T
+
+
+def noise_covariance(Ws: list[np.ndarray], robot_sigma_mm: float, robot_sigma_rad: float,
+                     tracker: np.ndarray) -> np.ndarray:
+    """Residual covariance per pose (n, 6m, 6m): the robot's error δ (shared by the bodies of
+    a pose) carried through each W, plus the tracker's (n, m, 6, 6) on the diagonal blocks."""
+    Qr, Qt = robot_parts(Ws)
+    return robot_sigma_rad ** 2 * Qr + robot_sigma_mm ** 2 * Qt + tracker_part(tracker)
 
 
 def whitener(S: np.ndarray) -> np.ndarray:

@@ -42,6 +42,7 @@ from .ml_model import (
     g_of,
     noise_covariance,
     tracker_covs,
+    undistort,
     undistortion,
     whitener,
 )
@@ -147,8 +148,10 @@ class Prediction:
     ``problem`` (ml's Problem at the estimate), ``covariance`` (unscaled, the inverse of the
     whitened information), ``variance_factor`` and ``dof`` (its scale and degrees of
     freedom), ``region_q`` (Q = mean_r J_rᵀ J_r, the region's placement Jacobians J_r (3×k)),
-    ``noise`` (robot σ mm, robot σ rad, mean tracker covariance per body (m, 6, 6));
-    ``draws_mm``: the Monte Carlo draws of the mean placement error behind ``coil_mm``."""
+    ``noise`` (robot σ mm, robot σ rad per axis, as ml estimated them, and the mean tracker
+    covariance per body (m, 6, 6)); ``draws_mm``: the Monte Carlo draws of the mean placement
+    error behind ``coil_mm``; ``model_error_mm``: the RMS of the robot's per-pose error at
+    a target when it counts as model error (0 when it does not; :func:`predict`)."""
 
     coil_mm: float
     sigma_mm: float
@@ -162,6 +165,7 @@ class Prediction:
     region_q: np.ndarray
     noise: tuple[float, float, np.ndarray]
     draws_mm: np.ndarray
+    model_error_mm: float = 0.0
 
     def quantile(self, q: float) -> float:
         """The predicted mean coil-placement error over the region (mm) at confidence q."""
@@ -175,11 +179,15 @@ class Prediction:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready summary: predicted_coil_mm, sigma_mm, confidence, n_poses, the fit's
-        variance factor and residual degrees of freedom, the distortion model."""
+        variance factor and residual degrees of freedom, the distortion model, the robot's
+        noise as ml estimated it (robot_sigma_mm per component, robot_sigma_deg per axis)
+        and the model error's RMS (model_error_mm)."""
         return {"predicted_coil_mm": self.coil_mm, "sigma_mm": self.sigma_mm,
                 "confidence": self.confidence, "n_poses": self.n_poses,
                 "variance_factor": self.variance_factor, "dof": self.dof,
-                "distortion": self.problem.model}
+                "distortion": self.problem.model, "robot_sigma_mm": self.noise[0],
+                "robot_sigma_deg": float(np.degrees(self.noise[1])),
+                "model_error_mm": self.model_error_mm}
 
 
 def bootstrap_indices(pool: np.ndarray, k: int, p0: np.ndarray) -> list[int]:
@@ -270,41 +278,60 @@ def placement_jacobians(prob: Problem, region: np.ndarray) -> np.ndarray:
     return J
 
 
-def _scale_draws(vf: float, dof: int, scaled: bool, n: int, rng: np.random.Generator
-                 ) -> np.ndarray:
-    """Draws of the noise scale s (the factor on the unscaled standard deviations): with the
-    covariance scaled by the variance factor (ml's default), s² = vf · ν / χ²_ν, the
-    uncertainty of a variance estimated from ν residual degrees of freedom (this makes the
-    prediction a Student-t-like one and keeps it honest at the bootstrap's few poses);
-    otherwise s = 1 (the noise as given)."""
-    if not scaled:
-        return np.ones(n)
-    return np.sqrt(max(vf, 0.0) * dof / rng.chisquare(max(dof, 1), n))
+def _factor_draws(cal: Calibration, rng: np.random.Generator, n: int
+                  ) -> dict[str, np.ndarray]:
+    """Per variance component of ml's covariance (``extra["covariance_parts"]``) draws (n,)
+    of the factor on its standard deviations. A component estimated from the residuals
+    (REML, ν effective degrees of freedom, tmscal.calib.variance) is uncertain itself:
+    σ²_draw = σ̂² ν / χ²_ν, ν at least 1 (a Student-t-like spread that keeps the prediction
+    honest at the bootstrap's few poses). With the noise as given and the covariance scaled
+    by the variance factor (ν = m − k residual degrees of freedom), one draw of that form is
+    shared by every component; with the noise as given and unscaled, 1."""
+    noise = cal.extra["noise"]
+    names = list(cal.extra["covariance_parts"])
+    if noise.get("scale_covariance"):
+        k = len(cal.extra["parameters"])
+        nu = max(int(cal.extra["residuals"]) - k, 1)
+        f = np.sqrt(nu / rng.chisquare(nu, n))
+        return {c: f for c in names}
+    out = {}
+    for c in names:
+        nu = noise.get("dof", {}).get(c)
+        out[c] = np.ones(n) if nu is None else np.sqrt(max(nu, 1.0)
+                                                        / rng.chisquare(max(nu, 1.0), n))
+    return out
 
 
 def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarray,
-            settings: AdaptiveSettings, **ml_options: Any) -> Prediction:
+            settings: AdaptiveSettings, model_error: bool = False,
+            **ml_options: Any) -> Prediction:
     """Solve QR36 then ``ml`` on the poses so far (A, B, C: (n, 4, 4) mm; C None for a
     marker-only rig, then the marker is the body placed) and predict the coil-placement error
     over ``region`` (flange poses (R, 4, 4) mm where the rig will place coils).
 
-    ``ml_options`` go to ``ml`` (e.g. ``spreads`` from the session, robot sigmas);
-    ``distortion`` defaults to "none" here (a dozen poses inside the plan's envelope do not
-    separate a tracker distortion from Z and the noise, and a model switching between steps
-    would make the predictions jump; pass ``distortion`` to override). The parameter error
-    δθ ~ N(0, s² P) (P ml's unscaled covariance, s² its variance factor drawn as in
-    :func:`_scale_draws`), e_r = J_r δθ (:func:`placement_jacobians`); ``coil_mm`` is the
-    ``settings.confidence`` quantile of mean_r ‖e_r‖ over :data:`MC_DRAWS` draws with a fixed
-    seed, ``sigma_mm`` = √(vf · mean_r tr(J_r P J_rᵀ)). CalibrationError when the poses do not
-    determine the calibration."""
+    ``ml_options`` go to ``ml`` (e.g. ``spreads`` from the session); ``distortion`` defaults
+    to "none" here (a dozen poses inside the plan's envelope do not separate a tracker
+    distortion from Z and the noise, and a model switching between steps would make the
+    predictions jump; pass ``distortion`` to override). ml estimates the robot's rotation and
+    translation noise from the residuals (its default ``noise="estimate"``). The parameter
+    error is δθ = Σ_k f_k δθ_k, δθ_k ~ N(0, P_k) the part of ml's covariance of each noise
+    component and f_k its factor drawn as in :func:`_factor_draws`; e_r = J_r δθ
+    (:func:`placement_jacobians`). ``model_error`` (the rig's arm kinematics are not
+    modelled, so the robot's per-pose error the residuals show recurs where the coil is
+    placed): e_r += R(P_r) (f_t σ_t z + f_r σ_r (w × t_Y)), z, w ~ N(0, I) per target,
+    σ_t, σ_r the robot's estimated translation (mm) and rotation (rad per axis) noise.
+    ``coil_mm`` is the ``settings.confidence`` quantile of mean_r ‖e_r‖ over
+    :data:`MC_DRAWS` draws with a fixed seed, ``sigma_mm`` the RMS of e_r. CalibrationError
+    when the poses do not determine the calibration."""
     opts = {"distortion": "none", **ml_options}
     cal = solve(A, B, C, method="ml", **opts)
     bodies = [np.asarray(B, dtype=float)] + ([] if C is None else [np.asarray(C, dtype=float)])
     A = np.asarray(A, dtype=float)
     prob = _problem_of(cal, A, bodies)
     k = prob.n_params
+    nz = cal.extra["noise"]
     vf = float(cal.extra["variance_factor"])
-    scaled = bool(cal.extra["noise"]["scale_covariance"])
+    scaled = bool(nz["scale_covariance"])
     P = np.asarray(cal.covariance, dtype=float) / (vf if scaled and vf > 0 else 1.0)
     if scaled and vf <= 0:
         P = np.zeros_like(P)
@@ -312,23 +339,37 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     region = np.asarray(region, dtype=float).reshape(-1, 4, 4)
     J = placement_jacobians(prob, region)
     Q = np.einsum("rik,ril->kl", J, J) / len(region)
-    w, V = np.linalg.eigh((P + P.T) / 2)
-    root = V * np.sqrt(np.clip(w, 0.0, None))
     rng = np.random.default_rng(0)
-    d = rng.standard_normal((MC_DRAWS, k)) @ root.T
-    e = np.linalg.norm((J.reshape(-1, k) @ d.T).reshape(len(region), 3, -1), axis=1).mean(0)
-    s = _scale_draws(vf, dof, scaled, MC_DRAWS, rng)
-    draws = e * s
-    coil = float(np.quantile(draws, settings.confidence))
+    f = _factor_draws(cal, rng, MC_DRAWS)
+    d = np.zeros((MC_DRAWS, k))
+    for c, Pc in cal.extra["covariance_parts"].items():
+        w, V = np.linalg.eigh((Pc + Pc.T) / 2)
+        root = V * np.sqrt(np.clip(w, 0.0, None))
+        d += f[c][:, None] * (rng.standard_normal((MC_DRAWS, k)) @ root.T)
+    e = (J.reshape(-1, k) @ d.T).reshape(len(region), 3, -1)
     v = vf if scaled else 1.0
+    sig_t = float(nz["robot_sigma_mm"])
+    sig_r = float(np.radians(nz["robot_sigma_deg"]))
+    var_model = 0.0
+    if model_error:
+        tY = (cal.Y if C is not None else cal.X)[:3, 3]
+        z = rng.standard_normal((len(region), 3, MC_DRAWS)) * (sig_t * f["robot_trans"])
+        wv = rng.standard_normal((len(region), 3, MC_DRAWS)) * (sig_r * f["robot_rot"])
+        m = z + np.cross(wv, tY[None, :, None], axis=1)
+        e = e + region[:, :3, :3] @ m
+        var_model = 3 * sig_t ** 2 + 2 * sig_r ** 2 * float(tY @ tY)
+    draws = np.linalg.norm(e, axis=1).mean(0)
+    coil = float(np.quantile(draws, settings.confidence))
     names = ["marker", "probe"][:len(bodies)]
     o = {**_ml_defaults(), **opts}
-    tracker = tracker_covs(len(A), names, o).mean(axis=0)
-    noise = (float(o["robot_sigma_mm"]), float(np.radians(o["robot_sigma_deg"])), tracker)
-    return Prediction(coil_mm=coil, sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q))),
+    tracker = tracker_covs(len(A), names, o).mean(axis=0) * float(nz["tracker_factor"])
+    noise = (sig_t, sig_r, tracker)
+    return Prediction(coil_mm=coil,
+                      sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q) + var_model)),
                       confidence=settings.confidence, n_poses=len(A), calibration=cal,
                       problem=prob, covariance=P, variance_factor=v, dof=dof, region_q=Q,
-                      noise=noise, draws_mm=draws)
+                      noise=noise, draws_mm=draws,
+                      model_error_mm=float(np.sqrt(var_model)))
 
 
 def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:
@@ -455,14 +496,20 @@ def candidate_cost_s(current: np.ndarray, pool: np.ndarray, speed_mm_s: float,
 
 
 def true_coil_error(cal: Calibration, truth_Y: np.ndarray, truth_Z: np.ndarray,
-                    region_flange_poses: np.ndarray, reached: Any = None) -> float:
+                    region_flange_poses: np.ndarray, reached: Any = None,
+                    tracker_distortion: Any = None) -> float:
     """Mean coil-placement error (mm) of ``cal`` over the region against a known truth: the
     targets are where the coil is when the flange is at each region pose, C_i = Z⁻¹ P_i Y
-    (true Y, Z; tracker_from_probe, no tracker distortion), commanded with
-    ``Calibration.flange_command`` and measured by ``calib.metrics.placement_errors``;
-    ``reached`` (a callable, e.g. the controller of a simulated rig's true arm) says where
-    the flange really goes for the commands (default: exactly there)."""
+    (true Y, Z; tracker_from_probe), commanded with ``Calibration.flange_command`` and
+    measured by ``calib.metrics.placement_errors``; ``reached`` (a callable, e.g. the
+    controller of a simulated rig's true arm) says where the flange really goes for the
+    commands (default: exactly there). ``tracker_distortion`` (D, 3×3: the tracker measures
+    a position p as D p, as ``tmscal.sim.Noise`` simulates it): the targets are commanded as
+    that tracker measures them (positions D t, orientations as its rigid fit distorts them,
+    ``ml_model.undistort`` with D), and the error is against where they really are."""
     P = np.asarray(region_flange_poses, dtype=float).reshape(-1, 4, 4)
     Yt, Zt = np.asarray(truth_Y, dtype=float), np.asarray(truth_Z, dtype=float)
     C = invert(Zt)[None] @ P @ Yt[None]
-    return float(placement_errors(cal.flange_command(C), C, Yt, Zt, reached).mean())
+    C_meas = C if tracker_distortion is None else \
+        undistort(C, np.asarray(tracker_distortion, dtype=float), "affine")
+    return float(placement_errors(cal.flange_command(C_meas), C, Yt, Zt, reached).mean())

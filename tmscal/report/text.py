@@ -144,7 +144,21 @@ def truth_rows(res: SolveResult) -> list[str]:
         over = f" over {n} targets" if n else ""
         lines.append(f"  coil placement error, mm{over}: mean {t['coil_placement_mm']:.4f}, "
                      f"max {t['coil_placement_max_mm']:.4f}")
+        if t.get("coil_placement_region"):
+            lines.append(f"    targets: {t['coil_placement_region']}")
     return lines
+
+
+def prediction_rows(res: SolveResult) -> list[str]:
+    """The predicted coil-placement error of the session (``SolveResult.prediction``)."""
+    p = res.prediction or {}
+    if p.get("coil_placement_mm") is None:
+        return [f"  predicted coil-placement error: none ({p['reason']})"] if p else []
+    return [f"  predicted coil-placement error of ml's calibration {p['coil_placement_mm']:.3g}"
+            f" mm at {p['confidence'] * 100:g} % (RMS {p['sigma_mm']:.3g} mm)",
+            f"    robot noise from the residuals {p['robot_sigma_mm']:.3g} mm, "
+            f"{p['robot_sigma_deg']:.3g}° per axis; model error: {p['model_error']}",
+            f"    mean over {p['region']}"]
 
 
 def _pct(v: float) -> str:
@@ -259,6 +273,8 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
         lines += [""] + extra
     if res.arm is not None:
         lines += [""] + arm_rows(res.arm)
+    if res.prediction:
+        lines += [""] + prediction_rows(res)
     if res.truth is not None:
         lines += [""] + truth_rows(res)
     lines += [""] + outlier_lines(res) + [""] + legend_lines(res)

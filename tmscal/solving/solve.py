@@ -33,6 +33,7 @@ from .kinematics import (
 )
 from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
+from .predict import placement_region, session_prediction
 
 __all__ = ["SolveResult", "solve_session", "session_arrays", "pose_residuals",
            "with_kinematics", "truth_errors_of", "flat_errors", "arm_summary"]
@@ -122,6 +123,9 @@ class SolveResult:
     #: the per-pose residuals the outliers were found on (``pose_residuals`` of the poses as
     #: solved, e.g. recomputed from a kinematics file); not part of ``to_json``
     residuals: dict[str, Any] | None = field(default=None, repr=False)
+    #: the predicted coil-placement error of the session (``predict.session_prediction``:
+    #: coil_placement_mm at confidence, over region, the same region as the truth's)
+    prediction: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
@@ -137,7 +141,7 @@ class SolveResult:
             out["Z_probe"] = _mat(self.Z_probe)
         if self.truth is not None:
             out["truth"] = self.truth
-        for k in ("uncertainty", "distortion", "options", "arm"):
+        for k in ("uncertainty", "distortion", "options", "arm", "prediction"):
             if getattr(self, k) is not None:
                 out[k] = plain(getattr(self, k))
         return out
@@ -292,32 +296,46 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
                               else usable_joints(session, idx)),
         errors_sd=sd, cv=cv, outliers=find_outliers(residuals), residuals=residuals,
         uncertainty=cal.uncertainty, distortion=cal.distortion, options=opts_shown or None,
-        arm=None if cal.arm is None else arm_summary(cal.arm, named_by))
+        arm=None if cal.arm is None else arm_summary(cal.arm, named_by),
+        prediction=session_prediction(session))
     return cal, res
 
 
 def truth_errors_of(session: Session, cal: Calibration, C: np.ndarray | None,
                     joints: np.ndarray | None = None) -> dict[str, Any] | None:
     """Errors of X, Y, Z against a session's truth, and the coil placement error (mean and
-    max over every usable pose's probe pose as a target, mm); None without truth. The robot is
-    commanded ``Calibration.flange_command`` (the placement rule: targets undistorted when
-    the calibration found a tracker distortion; with an identified arm, the pose its
-    controller must be told), as ``tmscal compare`` does; when the truth has an arm
+    max over the targets of the prediction's region, ``predict.placement_region``, mm): the
+    first poses of the plan the header records, each target where the truth puts the coil
+    there (C = Z⁻¹ P Y, true Y, Z), or without a plan every usable pose's probe pose. The
+    robot is commanded ``Calibration.flange_command`` (the placement rule: targets
+    undistorted when the calibration found a tracker distortion; with an identified arm, the
+    pose its controller must be told), as ``tmscal compare`` does; when the truth has an arm
     (``Session.truth_arm``) the flange goes where that arm's controller takes it
-    (``kinematics.coil_placement``). ``joints`` (n, dof) rad: those of the targets' poses
-    (the seeds of the inverse kinematics; default: the session's usable poses' when every
-    one has them)."""
+    (``kinematics.coil_placement``), from the joints of the session's nearest pose.
+    ``joints`` (n, dof) rad: those of the usable poses (default: the session's when every
+    one has them). ``coil_placement_region`` names the region."""
     truth = session.truth
     if not truth:
         return None
     out: dict[str, Any] = dict(truth_errors({"X": cal.X, "Y": cal.Y, "Z": cal.Z}, truth))
     if C is not None and cal.Y is not None and "Y" in truth:
-        if joints is None:
-            joints = usable_joints(session, session.arrays(need_probe=True)[3])
-        coil = coil_placement(cal, C, truth, truth_arm_of(session), joints)
+        A_use, _, _, idx = session.arrays(need_probe=True)
+        if joints is None or len(joints) != len(A_use):
+            joints = usable_joints(session, idx)
+        region, where, from_plan = placement_region(session)
+        targets, seeds = C, joints
+        if from_plan:
+            Yt, Zt = np.asarray(truth["Y"], dtype=float), np.asarray(truth["Z"], dtype=float)
+            targets = np.linalg.inv(Zt)[None] @ region @ Yt[None]
+            if joints is not None and len(A_use):
+                near = np.argmin(np.linalg.norm(region[:, None, :3, 3] - A_use[None, :, :3, 3],
+                                                axis=2), axis=1)
+                seeds = joints[near]
+        coil = coil_placement(cal, targets, truth, truth_arm_of(session), seeds)
         out["coil_placement_mm"] = float(coil.mean())
         out["coil_placement_max_mm"] = float(coil.max())
         out["coil_placement_n"] = int(len(coil))
+        out["coil_placement_region"] = where
     return out
 
 
