@@ -43,12 +43,25 @@ def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return fn(*args, **kwargs)
         except TmscalError as e:
-            fail(str(e))
+            fail(_name_command(str(e)))
         except OSError as e:
             where = f"{e.filename}: " if getattr(e, "filename", None) else ""
             fail(f"{where}{e.strerror or e}")
 
     return wrapper
+
+
+def _name_command(msg: str) -> str:
+    """``msg`` with the command running in place of the words a library message uses for it
+    (``tmscal.filekind.THIS_COMMAND``: "… is a tmscal session; tmscal track expects a rig
+    config …")."""
+    from ..filekind import THIS_COMMAND
+
+    ctx = click.get_current_context(silent=True)
+    if ctx is None or THIS_COMMAND not in msg:
+        return msg
+    words = ["tmscal", *ctx.command_path.split()[1:]]  # the program's name, however invoked
+    return msg.replace(THIS_COMMAND, " ".join(words), 1)
 
 
 def write_atomic(path: Path, text: str, force: bool = False) -> None:
