@@ -209,11 +209,14 @@ def outlier_lines(res: SolveResult) -> list[str]:
 def legend_lines(res: SolveResult) -> list[str]:
     """The legend of the solve table: which matrices the errors apply, what the metrics are."""
     applied = ("raw matrices applied: the errors use the solver's general (non-orthogonal) "
-               "3×4 X, Y, Z, the paper's way; the matrices below, and those exported, are the "
-               "orthonormal ones (--orthonormal applies those instead)"
+               "3×4 X, Y, Z, the paper's way (--orthonormal applies the orthonormal ones "
+               "instead)"
                if res.applied == "raw" else
                "orthonormal matrices applied: the errors use the orthonormal X, Y, Z printed "
-               "below (rotations projected to SO(3), translations re-solved)")
+               "below")
+    leaves = ("the matrices below are the orthonormal X, Y, Z (rotations projected to SO(3), "
+              "translations re-solved): the ones the calibration file's X, Y, Z, every "
+              "export and tmscal stream carry (docs/exports.md)")
     lines = [
         "legend (docs/methods.md):",
         "  E: what is left of A X = Z B (marker) or A Y = Z C (probe) on one pose; e_trans ="
@@ -237,11 +240,12 @@ def legend_lines(res: SolveResult) -> list[str]:
                      "(deg) land when the robot places it")
     if res.distortion:
         lines.append("  tracker distortion: the map D of tracker-frame positions the solver "
-                     "found (measured = D · true), as a scale in %; the raw matrices and the "
-                     "export carry it")
+                     "found (measured = D · true), as a scale in %; the calibration file (raw, "
+                     "distortion) carries it, and stream's CoilToRobotBase applies it")
     lines.append("  " + applied)
+    lines.append("  " + leaves)
     return [w for ln in lines for w in textwrap.wrap(ln, 98, subsequent_indent="      ",
-                                                    ) or [""]]
+                                                    break_on_hyphens=False) or [""]]
 
 
 def format_result(res: SolveResult, show_matrices: bool = True) -> str:
