@@ -230,6 +230,23 @@ def _warn_damage(session: Any) -> None:
         click.echo(f"warning: {session.path}: {summary}", err=True)
 
 
+#: help of the options that override a device's address: each names its device (the one scheme
+#: of every command; a server's own address, as stream's, is --host/--port)
+TRACKER_PORT_HELP = ("Tracker address (overrides the config's): an NDI's device path or "
+                     "socket://host:port; an OpenIGTLink source's host:port.")
+ROBOT_HOST_HELP = "Robot address (overrides the config)."
+
+
+def old_spelling(new: str | None, old: str | None, new_name: str, old_name: str
+                 ) -> str | None:
+    """The value of option ``new_name`` given either as itself or by its old, hidden
+    spelling ``old_name`` (kept so that scripts keep working); both at once is refused."""
+    if new is not None and old is not None:
+        raise click.BadParameter(f"{old_name} is the old spelling of {new_name}; give one",
+                                 param_hint=old_name)
+    return new if new is not None else old
+
+
 FORCE_HELP = "Overwrite existing output files (never an input file)."
 STRICT_HELP = ("Refuse a session with a damaged line (default: skip it with a warning naming "
                "the line).")

@@ -18,11 +18,14 @@ from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
+    ROBOT_HOST_HELP,
+    TRACKER_PORT_HELP,
     Finite,
     check_outputs,
     fail,
     handle_errors,
     main,
+    old_spelling,
     print_json,
     same_file,
 )
@@ -149,16 +152,16 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
 
 @main.command()
 @click.argument("config", type=INPUT_FILE)
-@click.option("--port", "port", default=None,
-              help="Tracker address (overrides the config's): an NDI's /dev/ttyUSB0, pty or "
-                   "socket://host:port; an OpenIGTLink source's host:port.")
+@click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
+@click.option("--port", "old_port", default=None, hidden=True)
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many distinct frames (default: until Ctrl-C).")
 @click.option("--plain", is_flag=True,
               help="Print every frame's lines one after another instead of a table redrawn "
                    "in place (the default off a terminal).")
 @handle_errors
-def track(config: Path, port: str | None, frames: int | None, plain: bool) -> None:
+def track(config: Path, tracker_port: str | None, old_port: str | None, frames: int | None,
+          plain: bool) -> None:
     """Connect to the tracker, list the tools and show a live table: per tool whether it is
     seen, its position (mm) and rotation (rotation vector, deg) in the tracker frame, the
     tracker's RMS fit error (mm), volume flags, and the tracker's frame rate (Hz).
@@ -169,6 +172,7 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
     from ..config import load_config
     from .live import TrackView
 
+    port = old_spelling(tracker_port, old_port, "--tracker-port", "--port")
     cfg = load_config(config)
     stop = StopFlag(quiet=True)
     stop.install()
@@ -222,7 +226,8 @@ def close_quietly(dev: Any) -> None:
 
 @main.command()
 @click.argument("config", type=INPUT_FILE)
-@click.option("--host", default=None, help="Robot address (overrides the config).")
+@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
+@click.option("--host", "old_host", default=None, hidden=True)
 @click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
               help="Jog the flange to this pose after a confirmation: x, y, z in mm and "
                    "roll, pitch, yaw in degrees with R = Rz(yaw)·Ry(pitch)·Rx(roll) about the "
@@ -233,13 +238,14 @@ def close_quietly(dev: Any) -> None:
               help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
 @handle_errors
-def robot(config: Path, host: str | None, move_to: str | None, speed: float | None,
-          yes: bool) -> None:
+def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: str | None,
+          speed: float | None, yes: bool) -> None:
     """Connect to the robot, report its identity and flange pose; optionally jog."""
     from ..acquisition.devices import envelope_for, make_robot
     from ..config import load_config
     from ..geometry import matrix_from_denso_p
 
+    host = old_spelling(robot_host, old_host, "--robot-host", "--host")
     target = None
     if move_to is not None:  # parsed before anything connects
         try:
@@ -283,10 +289,8 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
               help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
 @click.option("--dry-run", is_flag=True,
               help="Print the plan's extent and estimated duration; move nothing.")
-@click.option("--tracker-port", default=None,
-              help="Tracker address (overrides the config's): an NDI's device path or "
-                   "socket://host:port; an OpenIGTLink source's host:port.")
-@click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
+@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
 @adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,

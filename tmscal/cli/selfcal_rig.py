@@ -18,6 +18,7 @@ from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
+    ROBOT_HOST_HELP,
     STRICT_HELP,
     Finite,
     check_outputs,
@@ -68,7 +69,7 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
               help="Seed of the candidates and of DETMAX.")
 @click.option("--samples", type=click.IntRange(1, 100000), default=None,
               help="Force-torque readings averaged per configuration (default: ft.samples).")
-@click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
 @click.option("--ft-host", default=None, metavar="HOST[:PORT]",
               help="Force-torque sensor address (overrides ft.host and ft.port).")
 @click.option("--dry-run", is_flag=True,
