@@ -283,19 +283,23 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
               help="Session file (JSON Lines) to write or, with --resume, to continue.")
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted session: same plan, same P0, done poses skipped.")
-@click.option("--poses", type=click.IntRange(1, 100000), default=None,
-              help="Number of poses (overrides plan.poses).")
+@click.option("--poses", type=click.IntRange(3, 100000), default=None,
+              help="Number of poses (overrides plan.poses); at least 3, the fewest a solve "
+                   "takes.")
 @click.option("--samples", type=click.IntRange(1), default=None,
               help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
 @click.option("--dry-run", is_flag=True,
               help="Print the plan's extent and estimated duration; move nothing.")
 @click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
 @click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
+@click.option("--force", is_flag=True,
+              help="Record anew over an existing session at OUTPUT (removed once the config "
+                   "is read, never one another tmscal is recording); not with --resume.")
 @adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             samples: int | None, dry_run: bool, tracker_port: str | None,
-            robot_host: str | None, adaptive: bool, **overrides: Any) -> None:
+            robot_host: str | None, force: bool, adaptive: bool, **overrides: Any) -> None:
     """Move the robot through the plan and record a session (A, B, C at every pose).
 
     Each pose: move, settle, average N distinct tracker frames (and the robot pose read
@@ -316,8 +320,13 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     if same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
+    if force and resume:
+        raise click.BadParameter("--force records the session anew; --resume continues it",
+                                 param_hint="--force")
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     cfg = load_config(config)
+    if force and not dry_run:
+        replace_session(output, config)
     if dry_run:
         if adaptive:  # the candidates: the plan with adaptive.pool poses
             from ..acquisition.adaptive_run import settings_for
@@ -341,6 +350,16 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
+
+
+def replace_session(output: Path, config: Path) -> None:
+    """``--force`` of the acquiring commands: remove the session at ``output`` so that the run
+    records it anew, by the one output rule (never an input, never a file another tmscal
+    holds locked)."""
+    from ..session.outputs import remove_output
+
+    check_outputs({"--output": output}, [config], True)
+    remove_output(output)
 
 
 def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,

@@ -9,6 +9,7 @@ and bidirectional overrides as visible escapes (``tmscal.escape.visible``).
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,13 +22,42 @@ if TYPE_CHECKING:
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
            "format_matrix", "distortion_text", "arm_rows", "error_rows", "truth_rows",
-           "uncertainty_rows", "outlier_lines", "legend_lines"]
+           "uncertainty_rows", "outlier_lines", "legend_lines", "number", "plain_value"]
+
+
+def number(v: float, spec: str = "g") -> str:
+    """``v`` formatted by ``spec`` (e.g. ".2f"), never as a negative zero: what rounds to
+    zero is shown as 0 ("0.00", not "-0.00")."""
+    s = format(float(v), spec)
+    return format(0.0, spec) if "-" in s and float(s) == 0.0 else s
+
+
+def plain_value(v: Any, nested: bool = False) -> str:
+    """A value from a session header or a device's identity as a reader sees it, never a
+    Python repr: None is "none", booleans "yes"/"no", numbers without a negative zero, a
+    mapping "key value, key value" (in parentheses when nested), a list "[a, b, c]"."""
+    if v is None:
+        return "none"
+    if isinstance(v, bool | np.bool_):
+        return "yes" if v else "no"
+    if isinstance(v, int | np.integer):
+        return str(int(v))
+    if isinstance(v, float | np.floating):
+        return number(float(v), "g")
+    if isinstance(v, np.ndarray):
+        return plain_value(v.tolist(), nested)
+    if isinstance(v, Mapping):
+        body = ", ".join(f"{k} {plain_value(x, True)}" for k, x in v.items())
+        return (f"({body})" if nested else body) if body else "none"
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(plain_value(x, True) for x in v) + "]"
+    return str(v)
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
-    """A 4×4 matrix as aligned rows (mm in the last column)."""
+    """A 4×4 matrix as aligned rows (mm in the last column); no negative zeros."""
     A = np.asarray(M, dtype=float)
-    return "\n".join(indent + "  ".join(f"{v:>11.5f}" for v in row) for row in A)
+    return "\n".join(indent + "  ".join(number(v, ">11.5f") for v in row) for row in A)
 
 
 _W = 44  # label column width of the solve table
