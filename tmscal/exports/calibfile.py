@@ -45,12 +45,6 @@ FORMAT = "tmscal-calibration"
 VERSION = 1
 _MATRICES = ("X", "Y", "Z", "Z_probe")
 
-#: the first lines of the calibration file: which of its matrices leave tmscal
-FILE_COMMENT = ("# tmscal calibration (docs/exports.md). X, Y, Z (Z_probe): orthonormal, rigid, "
-                "4x4 mm: the matrices every\n# export and tmscal stream carry. raw: the "
-                "solver's general matrices, which the errors use when\n# applied is raw; "
-                "distortion: a tracker distortion, which tmscal applies itself.\n")
-
 
 @dataclass
 class CalibrationFile:
@@ -175,8 +169,7 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
         doc["provenance"] = provenance
     if arm is not None:
         doc["arm"] = arm_section(arm)
-    return FILE_COMMENT + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None,
-                                         width=120)
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
 
 
 def _header(doc: Any, src: str) -> tuple[str, Applied, int]:
