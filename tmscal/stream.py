@@ -15,7 +15,8 @@ MarkerToTracker      tracker ← coil marker: B, as the tracker measures it
 TrackerToRobotBase   robot base ← tracker: Z of the calibration
 ==================== ============================================================
 
-Z is the calibration's orthonormal base_from_tracker (the ``Z`` of ``tmscal solve -o``). With a
+Z is the calibration's orthonormal base_from_tracker (``Calibration.exported()``, the ``Z`` of
+``tmscal solve -o`` and of every export: docs/exports.md, "Which matrices leave tmscal"). With a
 tracker distortion in the calibration (the ``ml`` solver), CoilToRobotBase is Z applied to the
 undistorted probe pose, as the robot would place the coil (``Calibration.placement``); the
 tracker poses are sent as measured. With an identified arm in the calibration (``tmscal solve
@@ -104,7 +105,7 @@ def frame_transforms(frame: TrackerFrame, cal: Calibration, marker: str = "marke
     tool is usable in the frame (present, inside the volume), CoilToTracker and
     CoilToRobotBase only when the ``probe`` tool is (and, with an identified arm in the
     calibration, CoilToRobotBase only when that arm can reach the probe pose)."""
-    Z = np.asarray(cal.Z, dtype=float)
+    Z = np.asarray(cal.exported()["Z"], dtype=float)
     out: dict[str, np.ndarray] = {}
     C = _usable(frame, probe)
     if C is not None:
@@ -125,9 +126,9 @@ def _coil_command(cal: Calibration, C: np.ndarray) -> np.ndarray | None:
     (``Calibration.flange_command``), None when the arm cannot reach it."""
     if cal.arm is None or cal.Y is None:
         targets, _, _ = cal.placement(C[None])  # undistorted when the calibration says so
-        return np.asarray(cal.Z, dtype=float) @ targets[0]
+        return np.asarray(cal.exported()["Z"], dtype=float) @ targets[0]
     try:
-        return cal.flange_command(C[None])[0] @ np.asarray(cal.Y, dtype=float)
+        return cal.flange_command(C[None])[0] @ np.asarray(cal.exported()["Y"], dtype=float)
     except CalibrationError as e:
         log.debug("no CoilToRobotBase in this frame: %s", e)
         return None

@@ -133,6 +133,8 @@ def test_readme_tour_runs_as_written(tmp_path):
     recovers the mock rig's truth (coil placement within 0.3 mm)."""
     commands = tour_commands(README.read_text(encoding="utf-8"))
     outputs = run_tour(commands, tour_folder(tmp_path))
+    # every file it wrote is in out/ (.gitignore covers it), nothing beside the configs
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["configs", "out"]
     demo = [out for cmd, out in outputs.items() if cmd.startswith("tmscal demo")]
     assert demo, "the tour has no `tmscal demo` command"
     result = json.loads(demo[-1])

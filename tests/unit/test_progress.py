@@ -112,6 +112,20 @@ def test_skip_watch_warns_once_past_the_first_share_and_stops_past_the_second():
                                   "last 15 poses")
 
 
+def test_a_stop_for_skips_gives_the_windows_count_and_the_sessions_total():
+    """The session already holds 3 skipped poses (a resumed run); in the window, 11 poses are
+    skipped, 9 for the hidden probe and 2 for an invalid measurement: the message says the
+    commonest cause's count, the window's 11 and the session's 14 (issue 24, item 6)."""
+    w = SkipWatch(RunConfig(warn_skip_share=0.1, stop_skip_share=0.5, skip_window=20),
+                  skipped_before=3)
+    causes = [_HIDDEN] * 9 + ["invalid measurement (pose 'A' is not finite)"] * 2
+    said = [w.add(_rec(i, skipped=c)) for i, c in enumerate(causes)]
+    assert said[-1][1] == ("probe not seen (missing or out of volume) in 9 of the last 11 "
+                           "poses (11 skipped in the window, 14 in the session), above "
+                           "run.stop_skip_share 0.5")
+    assert w.session_skipped == 14
+
+
 def test_skip_watch_warns_again_after_the_share_fell_back():
     w = SkipWatch(RunConfig(warn_skip_share=0.0, stop_skip_share=1.0, skip_window=3))
     seq = [_HIDDEN, None, None, None, _HIDDEN]

@@ -267,7 +267,7 @@ class Engine:
         t_offset = max((p.time for p in session.poses), default=0.0)
         strategy.begin(session)
         progress.started(*strategy.tally(session))
-        watch = SkipWatch(self.cfg.run)
+        watch = SkipWatch(self.cfg.run, sum(p.skipped is not None for p in session.poses))
         clock = PhaseClock(progress)
         faults = new = 0
         stopped = False

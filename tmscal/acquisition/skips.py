@@ -2,8 +2,10 @@
 the last ``run.skip_window`` poses warns once (until the share falls back), a share above
 ``run.stop_skip_share`` stops the run, which the session leaves resumable. Both messages name
 the commonest reason, e.g. "probe not seen (missing or out of volume) in 12 of the last 20
-poses". Shares are of the window's full length, so the first skips of a run count as much as
-later ones and a single early skip does not read as 100 %.
+poses"; when the window holds skips of other causes too, or the session holds more (earlier
+windows, a resumed run's first part), they add both counts: "(11 skipped in the window, 14 in
+the session)". Shares are of the window's full length, so the first skips of a run count as
+much as later ones and a single early skip does not read as 100 %.
 """
 
 from __future__ import annotations
@@ -18,7 +20,9 @@ __all__ = ["SkipWatch"]
 class SkipWatch:
     """Feed it every pose record of a run (``add``); it says when to warn and when to stop."""
 
-    def __init__(self, run: RunConfig) -> None:
+    def __init__(self, run: RunConfig, skipped_before: int = 0) -> None:
+        """``skipped_before``: the skipped poses the session already holds (a resumed run)."""
+        self.session_skipped = skipped_before
         self.window = run.skip_window
         self.warn_share = run.warn_skip_share
         self.stop_share = run.stop_skip_share
@@ -29,6 +33,7 @@ class SkipWatch:
         """(warning, stop reason) after pose ``rec``: each None or one line naming the
         commonest cause of the skips in the window and how many poses it hit."""
         self._last.append(skip_cause(rec.skipped) if rec.skipped else None)
+        self.session_skipped += rec.skipped is not None
         causes = Counter(c for c in self._last if c is not None)
         k = sum(causes.values())
         if k == 0:
@@ -36,8 +41,8 @@ class SkipWatch:
             return None, None
         cause, n = causes.most_common(1)[0]
         what = f"{cause} in {n} of the last {len(self._last)} poses"
-        if n != k:
-            what += f" ({k} skipped in all)"
+        if n != k or self.session_skipped != k:
+            what += f" ({k} skipped in the window, {self.session_skipped} in the session)"
         if k > self.stop_share * self.window:
             return None, f"{what}, above run.stop_skip_share {self.stop_share:g}"
         if k > self.warn_share * self.window:

@@ -89,6 +89,16 @@ class Calibration:
                    for k, v in out.items()}
         return out
 
+    def exported(self) -> dict[str, np.ndarray | None]:
+        """The matrices that leave tmscal: {"X", "Y", "Z", "Z_probe"}, the orthonormal ones
+        (rigid 4×4 mm: rotations projected to SO(3), translations re-solved), whichever set
+        the calibration :attr:`applied`. Every export format, ``tmscal stream`` and the
+        matrices ``tmscal solve`` prints carry these (docs/exports.md, "Which matrices leave
+        tmscal"); the raw matrices and a tracker distortion's correction stay with tmscal
+        (the calibration file's ``raw`` and ``distortion``, which :meth:`errors` and
+        :meth:`placement` apply)."""
+        return {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
+
     def placement(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(targets, Y, Z) with which a robot places the coil at measured probe poses C
         (n, 4, 4) mm: the applied Y and Z; with a tracker ``distortion``, the targets

@@ -43,12 +43,25 @@ def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return fn(*args, **kwargs)
         except TmscalError as e:
-            fail(str(e))
+            fail(_name_command(str(e)))
         except OSError as e:
             where = f"{e.filename}: " if getattr(e, "filename", None) else ""
             fail(f"{where}{e.strerror or e}")
 
     return wrapper
+
+
+def _name_command(msg: str) -> str:
+    """``msg`` with the command running in place of the words a library message uses for it
+    (``tmscal.filekind.THIS_COMMAND``: "… is a tmscal session; tmscal track expects a rig
+    config …")."""
+    from ..filekind import THIS_COMMAND
+
+    ctx = click.get_current_context(silent=True)
+    if ctx is None or THIS_COMMAND not in msg:
+        return msg
+    words = ["tmscal", *ctx.command_path.split()[1:]]  # the program's name, however invoked
+    return msg.replace(THIS_COMMAND, " ".join(words), 1)
 
 
 def write_atomic(path: Path, text: str, force: bool = False) -> None:
@@ -215,6 +228,23 @@ def _warn_damage(session: Any) -> None:
     summary = session.damage_summary(limit=3)
     if summary:
         click.echo(f"warning: {session.path}: {summary}", err=True)
+
+
+#: help of the options that override a device's address: each names its device (the one scheme
+#: of every command; a server's own address, as stream's, is --host/--port)
+TRACKER_PORT_HELP = ("Tracker address (overrides the config's): an NDI's device path or "
+                     "socket://host:port; an OpenIGTLink source's host:port.")
+ROBOT_HOST_HELP = "Robot address (overrides the config)."
+
+
+def old_spelling(new: str | None, old: str | None, new_name: str, old_name: str
+                 ) -> str | None:
+    """The value of option ``new_name`` given either as itself or by its old, hidden
+    spelling ``old_name`` (kept so that scripts keep working); both at once is refused."""
+    if new is not None and old is not None:
+        raise click.BadParameter(f"{old_name} is the old spelling of {new_name}; give one",
+                                 param_hint=old_name)
+    return new if new is not None else old
 
 
 FORCE_HELP = "Overwrite existing output files (never an input file)."

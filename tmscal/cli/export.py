@@ -64,9 +64,10 @@ def _notes(fmt: str, cf: object, out_suffix: str) -> list[str]:
     assert isinstance(cf, CalibrationFile)
     cal = cf.calibration
     out = []
-    if cal.distortion and fmt in ("plus", "easy-handeye", "invesalius"):
-        out.append("the calibration found a tracker distortion; this format holds rigid "
-                   "matrices only and does not correct it (the itk and json exports do)")
+    if cal.distortion and fmt != "json":
+        out.append("the calibration found a tracker distortion; this format holds the rigid "
+                   "X, Y, Z, as every export and tmscal stream, and does not correct it (the "
+                   "json export records it; tmscal stream's CoilToRobotBase applies it)")
     if cal.arm is not None and fmt != "json":
         out.append(f"the calibration carries an identified {cal.arm.nominal.name} arm "
                    f"(docs/kinematics.md); {fmt} has no place for it, and X, Y, Z hold with "

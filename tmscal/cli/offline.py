@@ -253,7 +253,9 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "instead of cross-validating.")
 @click.option("--orthonormal", is_flag=True,
               help="Apply the orthonormal matrices (rotations projected, translations "
-                   "re-solved) instead of the raw non-orthogonal ones (the paper's way).")
+                   "re-solved) instead of the raw non-orthogonal ones (the paper's way) in "
+                   "the errors. The matrices printed, stored as X, Y, Z and exported are "
+                   "the orthonormal ones either way (docs/exports.md).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the calibration YAML here.")

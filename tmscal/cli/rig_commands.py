@@ -18,11 +18,14 @@ from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
+    ROBOT_HOST_HELP,
+    TRACKER_PORT_HELP,
     Finite,
     check_outputs,
     fail,
     handle_errors,
     main,
+    old_spelling,
     print_json,
     same_file,
 )
@@ -149,16 +152,16 @@ def mock(config: Path, transport: str, as_json: bool) -> None:
 
 @main.command()
 @click.argument("config", type=INPUT_FILE)
-@click.option("--port", "port", default=None,
-              help="Tracker address (overrides the config's): an NDI's /dev/ttyUSB0, pty or "
-                   "socket://host:port; an OpenIGTLink source's host:port.")
+@click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
+@click.option("--port", "old_port", default=None, hidden=True)
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many distinct frames (default: until Ctrl-C).")
 @click.option("--plain", is_flag=True,
               help="Print every frame's lines one after another instead of a table redrawn "
                    "in place (the default off a terminal).")
 @handle_errors
-def track(config: Path, port: str | None, frames: int | None, plain: bool) -> None:
+def track(config: Path, tracker_port: str | None, old_port: str | None, frames: int | None,
+          plain: bool) -> None:
     """Connect to the tracker, list the tools and show a live table: per tool whether it is
     seen, its position (mm) and rotation (rotation vector, deg) in the tracker frame, the
     tracker's RMS fit error (mm), volume flags, and the tracker's frame rate (Hz).
@@ -169,6 +172,7 @@ def track(config: Path, port: str | None, frames: int | None, plain: bool) -> No
     from ..config import load_config
     from .live import TrackView
 
+    port = old_spelling(tracker_port, old_port, "--tracker-port", "--port")
     cfg = load_config(config)
     stop = StopFlag(quiet=True)
     stop.install()
@@ -222,7 +226,8 @@ def close_quietly(dev: Any) -> None:
 
 @main.command()
 @click.argument("config", type=INPUT_FILE)
-@click.option("--host", default=None, help="Robot address (overrides the config).")
+@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
+@click.option("--host", "old_host", default=None, hidden=True)
 @click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
               help="Jog the flange to this pose after a confirmation: x, y, z in mm and "
                    "roll, pitch, yaw in degrees with R = Rz(yaw)·Ry(pitch)·Rx(roll) about the "
@@ -233,13 +238,14 @@ def close_quietly(dev: Any) -> None:
               help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
 @handle_errors
-def robot(config: Path, host: str | None, move_to: str | None, speed: float | None,
-          yes: bool) -> None:
+def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: str | None,
+          speed: float | None, yes: bool) -> None:
     """Connect to the robot, report its identity and flange pose; optionally jog."""
     from ..acquisition.devices import envelope_for, make_robot
     from ..config import load_config
     from ..geometry import matrix_from_denso_p
 
+    host = old_spelling(robot_host, old_host, "--robot-host", "--host")
     target = None
     if move_to is not None:  # parsed before anything connects
         try:
@@ -277,21 +283,23 @@ def robot(config: Path, host: str | None, move_to: str | None, speed: float | No
               help="Session file (JSON Lines) to write or, with --resume, to continue.")
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted session: same plan, same P0, done poses skipped.")
-@click.option("--poses", type=click.IntRange(1, 100000), default=None,
-              help="Number of poses (overrides plan.poses).")
+@click.option("--poses", type=click.IntRange(3, 100000), default=None,
+              help="Number of poses (overrides plan.poses); at least 3, the fewest a solve "
+                   "takes.")
 @click.option("--samples", type=click.IntRange(1), default=None,
               help="Distinct tracker frames averaged per pose (overrides sampling.samples).")
 @click.option("--dry-run", is_flag=True,
               help="Print the plan's extent and estimated duration; move nothing.")
-@click.option("--tracker-port", default=None,
-              help="Tracker address (overrides the config's): an NDI's device path or "
-                   "socket://host:port; an OpenIGTLink source's host:port.")
-@click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
+@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
+@click.option("--force", is_flag=True,
+              help="Record anew over an existing session at OUTPUT (removed once the config "
+                   "is read, never one another tmscal is recording); not with --resume.")
 @adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             samples: int | None, dry_run: bool, tracker_port: str | None,
-            robot_host: str | None, adaptive: bool, **overrides: Any) -> None:
+            robot_host: str | None, force: bool, adaptive: bool, **overrides: Any) -> None:
     """Move the robot through the plan and record a session (A, B, C at every pose).
 
     Each pose: move, settle, average N distinct tracker frames (and the robot pose read
@@ -312,8 +320,13 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     if same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
+    if force and resume:
+        raise click.BadParameter("--force records the session anew; --resume continues it",
+                                 param_hint="--force")
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     cfg = load_config(config)
+    if force and not dry_run:
+        replace_session(output, config)
     if dry_run:
         if adaptive:  # the candidates: the plan with adaptive.pool poses
             from ..acquisition.adaptive_run import settings_for
@@ -337,6 +350,16 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
+
+
+def replace_session(output: Path, config: Path) -> None:
+    """``--force`` of the acquiring commands: remove the session at ``output`` so that the run
+    records it anew, by the one output rule (never an input, never a file another tmscal
+    holds locked)."""
+    from ..session.outputs import remove_output
+
+    check_outputs({"--output": output}, [config], True)
+    remove_output(output)
 
 
 def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,

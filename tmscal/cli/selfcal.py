@@ -135,7 +135,7 @@ def _print_table(res: Any) -> None:
               help="Bound of the torque noise per reading (N·m; normal, the bound is 3σ).")
 @click.option("--no-compare", is_flag=True,
               help="Skip the selection comparison (O1…O5 greedy, random): DETMAX only.")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="Random seed (pool, errors, noise).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @handle_errors

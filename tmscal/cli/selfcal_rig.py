@@ -18,6 +18,7 @@ from .app import (
     EXIT_INTERRUPTED,
     FORCE_HELP,
     INPUT_FILE,
+    ROBOT_HOST_HELP,
     STRICT_HELP,
     Finite,
     check_outputs,
@@ -68,16 +69,19 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
               help="Seed of the candidates and of DETMAX.")
 @click.option("--samples", type=click.IntRange(1, 100000), default=None,
               help="Force-torque readings averaged per configuration (default: ft.samples).")
-@click.option("--robot-host", default=None, help="Robot address (overrides the config).")
+@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
 @click.option("--ft-host", default=None, metavar="HOST[:PORT]",
               help="Force-torque sensor address (overrides ft.host and ft.port).")
 @click.option("--dry-run", is_flag=True,
               help="Connect to the robot, make the plan and check it against the safety "
                    "envelope; move nothing, write nothing.")
+@click.option("--force", is_flag=True,
+              help="Record anew over an existing session at OUTPUT (removed once the config "
+                   "is read, never one another tmscal is recording); not with --resume.")
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, pool: int,
             span_deg: float, seed: int, samples: int | None, robot_host: str | None,
-            ft_host: str | None, dry_run: bool) -> None:
+            ft_host: str | None, dry_run: bool, force: bool) -> None:
     """Move the robot through configurations chosen for self-calibration and record, at each,
     the joint angles and the averaged wrist force-torque reading (a session; docs/selfcal.md).
 
@@ -94,11 +98,14 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     from ..config import load_config
     from ..net import split_endpoint
     from .live import AcquireProgress, stderr_to_log
-    from .rig_commands import StopFlag
+    from .rig_commands import StopFlag, replace_session
 
     if same_file(output, config):
         raise click.BadParameter(f"{output} is the config file; it is never written over",
                                  param_hint="--output")
+    if force and resume:
+        raise click.BadParameter("--force records the session anew; --resume continues it",
+                                 param_hint="--force")
     cfg = load_config(config, check_files=False)  # no tracker needed
     name = _arm_name(arm, cfg)
     if name is None and not resume:
@@ -107,6 +114,8 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     if dry_run:
         _dry_run(cfg, name, k, pool, seed, span_deg, robot_host)
         return
+    if force:
+        replace_session(output, config)
     try:
         ft_addr = split_endpoint(ft_host) if ft_host else (None, None)
     except ValueError:

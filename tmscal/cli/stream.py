@@ -11,7 +11,7 @@ from typing import Any, TextIO
 
 import click
 
-from .app import INPUT_FILE, Finite, handle_errors, main
+from .app import INPUT_FILE, TRACKER_PORT_HELP, Finite, handle_errors, main
 
 #: seconds between two status lines when stderr is not a terminal
 PLAIN_STATUS_S = 5.0
@@ -94,9 +94,7 @@ def _check_host(host: str, allow_remote: bool) -> None:
                    "closed at once).")
 @click.option("--frames", type=click.IntRange(1), default=None,
               help="Stop after this many tracker frames (default: until Ctrl-C).")
-@click.option("--tracker-port", default=None,
-              help="Tracker address (overrides the config's): an NDI's /dev/ttyUSB0, pty or "
-                   "socket://host:port; an OpenIGTLink source's host:port.")
+@click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
 @handle_errors
 def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: bool,
            rate_hz: float | None, max_clients: int, frames: int | None,

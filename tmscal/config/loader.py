@@ -13,6 +13,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError
+from ..filekind import wrong_kind
 from .devices import parse_ft, parse_robot, parse_tracker
 from .mock import parse_mock
 from .plan import parse_plan
@@ -82,6 +83,9 @@ def load_config(path: str | os.PathLike[str], *, check_files: bool = True) -> Ri
         raise ConfigError(f"{p}: cannot read config ({e.strerror or e})") from None
     except UnicodeDecodeError:
         raise ConfigError(f"{p}: not a UTF-8 text file") from None
+    other = wrong_kind(str(p), text, "config")  # a session, calibration, … given as a config
+    if other is not None:
+        raise ConfigError(other)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:

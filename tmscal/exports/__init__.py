@@ -11,6 +11,10 @@ module per export format:
 robot co-registration) and :mod:`.jsonfmt` (everything, for scripts).
 
 Frames: X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
+Which matrices leave tmscal: the orthonormal (rigid) X, Y, Z, ``Calibration.exported()``, in
+every format; the raw matrices and a tracker distortion's correction only in the calibration
+file itself and the ``json`` export, which describe the calibration for tmscal
+(docs/exports.md).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ class ExportFormat(NamedTuple):
 #: export format name → its entry, in the order the help lists them
 FORMATS: dict[str, ExportFormat] = {
     "itk": ExportFormat("itk", "ITK .tfm of Z for 3D Slicer (LPS, resampling direction; "
-                        "affine kept)"),
+                        "rigid)"),
     "plus": ExportFormat("plus", "PLUS device set: NDITracker block + CoordinateDefinitions "
                          "(mm)"),
     "easy-handeye": ExportFormat("easy_handeye", "ROS easy_handeye YAML, eye-on-base (m, "

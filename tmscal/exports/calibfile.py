@@ -248,7 +248,7 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     4×4 mm. Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
-    doc = _load_text(read_text_file(p, "calibration file"), src)
+    doc = _load_text(read_text_file(p, "calibration file", "calibration"), src)
     cal = parse_calibration(doc, src)
     cal.extra.setdefault("source", src)
     return CalibrationFile(calibration=cal, path=p, doc=doc)

@@ -47,7 +47,7 @@ def render(cf: CalibrationFile, version: int = 1, name: str = "tmscal_eye_on_bas
            frames: dict[str, str] | None = None) -> str:
     """The YAML text for easy_handeye (``version`` 1) or easy_handeye2 (2)."""
     f = {**FRAMES, **(frames or {})}
-    t, q = transform_m_xyzw(cf.calibration.Z)
+    t, q = transform_m_xyzw(cf.calibration.exported()["Z"])
     doc: dict[str, Any]
     if version == 1:
         doc = {"parameters": {"eye_on_hand": False, "namespace": f"/{name}/",

@@ -30,14 +30,14 @@ __all__ = ["matrices", "render", "tcp_offset_mm"]
 
 def matrices(cf: CalibrationFile) -> list[np.ndarray]:
     """[X, Y, affine] in tms-robot-control's order, from tmscal's X and Z (4×4, mm)."""
-    cal = cf.calibration
-    return [np.asarray(cal.X, dtype=float), np.asarray(cal.Z, dtype=float),
-            np.asarray(cal.Z, dtype=float)]
+    m = cf.calibration.exported()  # rigid, as every export (docs/exports.md)
+    X, Z = np.asarray(m["X"], dtype=float), np.asarray(m["Z"], dtype=float)
+    return [X, Z, Z.copy()]
 
 
 def tcp_offset_mm(cf: CalibrationFile) -> list[float]:
     """The robot TCP offset (flange frame, mm, no rotation) the file assumes: t(X)."""
-    return [float(v) for v in np.asarray(cf.calibration.X, dtype=float)[:3, 3]]
+    return [float(v) for v in np.asarray(cf.calibration.exported()["X"], dtype=float)[:3, 3]]
 
 
 def render(cf: CalibrationFile) -> str:

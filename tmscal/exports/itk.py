@@ -9,8 +9,9 @@ tracker (tracker points into the robot base, mm). The file therefore holds
     T = C · Z⁻¹ · C      (LPS, base → tracker: the resampling direction)
 
 as ``AffineTransform_double_3_3``: the 3×3 block row by row, then the translation (mm),
-FixedParameters 0 0 0 (centre of rotation at the origin). Z is the applied one
-(``Calibration.used()``): a raw or distortion-correcting (affine) Z stays affine.
+FixedParameters 0 0 0 (centre of rotation at the origin). Z is the orthonormal (rigid) one,
+``Calibration.exported()``, as in every export and in ``tmscal stream``'s TrackerToRobotBase
+(docs/exports.md, "Which matrices leave tmscal").
 """
 
 from __future__ import annotations
@@ -37,18 +38,18 @@ def _num(v: float) -> str:
     return repr(float(v))
 
 
-def _kind(Z: np.ndarray, cal: Calibration) -> str:
-    if np.allclose(Z[:3, :3] @ Z[:3, :3].T, np.eye(3), atol=1e-9):
-        return "rigid (orthonormal rotation)"
-    why = ("it undoes the tracker distortion the solver found" if cal.distortion
-           else f"the solver's {cal.applied} matrix")
-    return f"affine, not rigid: {why}"
+def _kind(cal: Calibration) -> str:
+    what = "rigid: the orthonormal Z, as every export and tmscal stream carry"
+    if cal.distortion:
+        return f"{what} (the tracker distortion the solver found is not corrected here)"
+    return what
 
 
 def render(cf: CalibrationFile) -> str:
-    """The ``.tfm`` text for the applied Z of ``cf`` (comment lines name frames and units)."""
+    """The ``.tfm`` text for the orthonormal Z of ``cf`` (comment lines name frames and
+    units)."""
     cal = cf.calibration
-    Z = cal.used()["Z"]
+    Z = cal.exported()["Z"]
     T = itk_matrix(Z)
     params = [*T[:3, :3].ravel(), *T[:3, 3]]
     src = cf.session.get("path", "?")
@@ -58,7 +59,7 @@ def render(cf: CalibrationFile) -> str:
         "# Z = base_from_tracker (robot base <- NDI tracker), frames taken as RAS; stored as ITK",
         "# does: LPS, resampling direction = C Z^-1 C, C = diag(-1,-1,1). Load in 3D Slicer: the",
         "# transform node's to-parent maps tracker points into the robot base (docs/exports.md).",
-        f"# {_kind(Z, cal)}",
+        f"# {_kind(cal)}",
         "#Transform 0",
         "Transform: AffineTransform_double_3_3",
         "Parameters: " + " ".join(_num(v) for v in params),

@@ -375,7 +375,7 @@ def read_kinematics(path: str | Path) -> KinematicsFile:
     Raises CalibrationError naming the file (and the key)."""
     p = Path(path)
     src = str(p)
-    kf = parse_kinematics(_load_text(read_text_file(p, "kinematics file"), src), src)
+    kf = parse_kinematics(_load_text(read_text_file(p, "kinematics file", "kinematics"), src), src)
     kf.path = p
     return kf
 

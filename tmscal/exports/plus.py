@@ -157,8 +157,9 @@ def render(cf: CalibrationFile) -> str:
              'Description="CoilMarker and CoilCentre tracked; the calibration in '
              'CoordinateDefinitions" />',
              *_device(cf, driver, settings), "  </DataCollection>", "  <CoordinateDefinitions>"]
+    exported = cal.exported()  # rigid, as every export (docs/exports.md)
     for k, (a, b) in FRAMES.items():
-        M = getattr(cal, k)
+        M = exported[k]
         if M is None:
             continue
         lines.append(f'    <Transform From="{a}" To="{b}" Matrix="{matrix_text(M)}" '

@@ -48,6 +48,7 @@ from ..solving.solve import (
 from ..solving.study import study_session
 from . import text
 from .plots import agg_pyplot, plot_residuals, plot_study
+from .text import number, plain_value
 
 __all__ = ["SECTIONS", "html_report"]
 
@@ -85,8 +86,13 @@ def _pre(body: str) -> str:
 
 
 def _table(rows: list[list[Any]], head: list[str] | None = None) -> str:
+    """An HTML table; cells that are not text are shown by ``text.plain_value`` (no Python
+    reprs: none, yes/no, "key value, …")."""
+    def cell(c: Any) -> str:
+        return _e(c if isinstance(c, str) else plain_value(c))
+
     h = "" if head is None else "<tr>" + "".join(f"<th>{_e(c)}</th>" for c in head) + "</tr>"
-    body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in r) + "</tr>" for r in rows)
+    body = "".join("<tr>" + "".join(f"<td>{cell(c)}</td>" for c in r) + "</tr>" for r in rows)
     return f"<table>{h}{body}</table>"
 
 
@@ -113,14 +119,14 @@ def _rig(session: Session, sha256: str) -> str:
     h = session.header
     cfg = h.get("config") or {}
     name = cfg.get("name") if isinstance(cfg, dict) else None
-    rows = [["session file", session.path], ["SHA-256", sha256],
+    rows = [["session file", str(session.path)], ["SHA-256", sha256],
             ["created", h.get("created", "?")], ["config", name or "(no name)"],
             ["bodies", ", ".join(session.bodies)],
             ["poses recorded", len(session.poses)]]
     if isinstance(cfg, dict) and isinstance(cfg.get("simulate"), dict):
-        rows.append(["simulated", ", ".join(f"{k} {v}" for k, v in cfg["simulate"].items())])
+        rows.append(["simulated", plain_value(cfg["simulate"])])
     if h.get("sampling"):
-        rows.append(["sampling", ", ".join(f"{k} {v}" for k, v in h["sampling"].items())])
+        rows.append(["sampling", plain_value(h["sampling"])])
     if session.truth:
         rows.append(["truth", "simulated session: the header carries X, Y, Z"])
     if session.damaged or session.torn_tail:
@@ -161,6 +167,9 @@ def _draw_plan(t: np.ndarray, ang: np.ndarray, what: str, path: str) -> None:
     ax[1].hist(ang, bins=30, color="0.4")
     ax[1].set_xlabel(f"flange rotation away from {what} (deg)")
     ax[1].set_ylabel("poses")
+    from matplotlib.ticker import MaxNLocator
+    for a in ax:  # pose counts are whole numbers
+        a.yaxis.set_major_locator(MaxNLocator(integer=True))
     fig.suptitle(f"plan spread: {len(t)} poses", fontsize=11)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -174,9 +183,10 @@ def _plan(session: Session) -> str:
     if off is None:
         return "\n".join(out + ['<p class="note">No robot poses recorded.</p>'])
     t, ang, what = off
-    rows = [[f"{a} offset (mm)", f"{t[:, k].min():.1f}", f"{t[:, k].max():.1f}",
-             f"{t[:, k].std():.1f}"] for k, a in enumerate("xyz")]
-    rows.append(["rotation (deg)", f"{ang.min():.2f}", f"{ang.max():.2f}", f"{ang.std():.2f}"])
+    rows = [[f"{a} offset (mm)", number(t[:, k].min(), ".1f"), number(t[:, k].max(), ".1f"),
+             number(t[:, k].std(), ".1f")] for k, a in enumerate("xyz")]
+    rows.append(["rotation (deg)", number(ang.min(), ".2f"), number(ang.max(), ".2f"),
+                 number(ang.std(), ".2f")])
     out.append(_table(rows, [f"commanded flange pose relative to {what}", "min", "max", "SD"]))
     out.append(_figure(lambda p: _draw_plan(t, ang, what, p), "plan spread"))
     return "\n".join(out)

@@ -81,11 +81,12 @@ def _minor_label(v: float, _: Any) -> str:
 
 def _study_axes(plt: Any, axes: Any, ns: list[int]) -> None:
     """Labels, log scale with plain tick numbers, and grids for the two study panels."""
-    from matplotlib.ticker import FuncFormatter
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
 
     plain = FuncFormatter(lambda v, _: f"{v:g}")
     for ax, label in zip(axes, ("(a) translation e_t (mm)", "(b) rotation θ_t (deg)")):
         ax.set_xlabel("poses solved on (n)")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # pose counts are whole
         ax.set_ylabel(label)
         ax.set_yscale("log")
         ax.yaxis.set_major_formatter(plain)
@@ -140,6 +141,8 @@ def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
         ax.set_ylim(bottom=0)
         ax.grid(True, alpha=0.3)
     axes[1].set_xlabel("session pose index")
+    from matplotlib.ticker import MaxNLocator
+    axes[1].xaxis.set_major_locator(MaxNLocator(integer=True))  # pose indices are whole
     if outliers:
         handles.append(Line2D([], [], ls="", marker="o", mfc="none", mec="red", ms=8,
                               label="outlier pose"))

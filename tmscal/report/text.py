@@ -9,6 +9,7 @@ and bidirectional overrides as visible escapes (``tmscal.escape.visible``).
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,13 +22,42 @@ if TYPE_CHECKING:
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
            "format_matrix", "distortion_text", "arm_rows", "error_rows", "truth_rows",
-           "uncertainty_rows", "outlier_lines", "legend_lines"]
+           "uncertainty_rows", "outlier_lines", "legend_lines", "number", "plain_value"]
+
+
+def number(v: float, spec: str = "g") -> str:
+    """``v`` formatted by ``spec`` (e.g. ".2f"), never as a negative zero: what rounds to
+    zero is shown as 0 ("0.00", not "-0.00")."""
+    s = format(float(v), spec)
+    return format(0.0, spec) if "-" in s and float(s) == 0.0 else s
+
+
+def plain_value(v: Any, nested: bool = False) -> str:
+    """A value from a session header or a device's identity as a reader sees it, never a
+    Python repr: None is "none", booleans "yes"/"no", numbers without a negative zero, a
+    mapping "key value, key value" (in parentheses when nested), a list "[a, b, c]"."""
+    if v is None:
+        return "none"
+    if isinstance(v, bool | np.bool_):
+        return "yes" if v else "no"
+    if isinstance(v, int | np.integer):
+        return str(int(v))
+    if isinstance(v, float | np.floating):
+        return number(float(v), "g")
+    if isinstance(v, np.ndarray):
+        return plain_value(v.tolist(), nested)
+    if isinstance(v, Mapping):
+        body = ", ".join(f"{k} {plain_value(x, True)}" for k, x in v.items())
+        return (f"({body})" if nested else body) if body else "none"
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(plain_value(x, True) for x in v) + "]"
+    return str(v)
 
 
 def format_matrix(M: Any, indent: str = "    ") -> str:
-    """A 4×4 matrix as aligned rows (mm in the last column)."""
+    """A 4×4 matrix as aligned rows (mm in the last column); no negative zeros."""
     A = np.asarray(M, dtype=float)
-    return "\n".join(indent + "  ".join(f"{v:>11.5f}" for v in row) for row in A)
+    return "\n".join(indent + "  ".join(number(v, ">11.5f") for v in row) for row in A)
 
 
 _W = 44  # label column width of the solve table
@@ -223,11 +253,14 @@ def outlier_lines(res: SolveResult) -> list[str]:
 def legend_lines(res: SolveResult) -> list[str]:
     """The legend of the solve table: which matrices the errors apply, what the metrics are."""
     applied = ("raw matrices applied: the errors use the solver's general (non-orthogonal) "
-               "3×4 X, Y, Z, the paper's way; the matrices below, and those exported, are the "
-               "orthonormal ones (--orthonormal applies those instead)"
+               "3×4 X, Y, Z, the paper's way (--orthonormal applies the orthonormal ones "
+               "instead)"
                if res.applied == "raw" else
                "orthonormal matrices applied: the errors use the orthonormal X, Y, Z printed "
-               "below (rotations projected to SO(3), translations re-solved)")
+               "below")
+    leaves = ("the matrices below are the orthonormal X, Y, Z (rotations projected to SO(3), "
+              "translations re-solved): the ones the calibration file's X, Y, Z, every "
+              "export and tmscal stream carry (docs/exports.md)")
     lines = [
         "legend (docs/methods.md):",
         "  E: what is left of A X = Z B (marker) or A Y = Z C (probe) on one pose; e_trans ="
@@ -251,11 +284,12 @@ def legend_lines(res: SolveResult) -> list[str]:
                      "(deg) land when the robot places it")
     if res.distortion:
         lines.append("  tracker distortion: the map D of tracker-frame positions the solver "
-                     "found (measured = D · true), as a scale in %; the raw matrices and the "
-                     "export carry it")
+                     "found (measured = D · true), as a scale in %; the calibration file (raw, "
+                     "distortion) carries it, and stream's CoilToRobotBase applies it")
     lines.append("  " + applied)
+    lines.append("  " + leaves)
     return [w for ln in lines for w in textwrap.wrap(ln, 98, subsequent_indent="      ",
-                                                    ) or [""]]
+                                                    break_on_hyphens=False) or [""]]
 
 
 def format_result(res: SolveResult, show_matrices: bool = True) -> str:

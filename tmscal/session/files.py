@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SessionError
+from ..filekind import wrong_kind
 from .checks import BadLine
 from .outputs import fsync_dir, install, new_temp
 from .records import (
@@ -226,7 +227,8 @@ def _parse(data: bytes, p: Path, strict: bool) -> Session:
         except BadLine as e:
             reason = str(e)
             if header is None:
-                raise SessionError(f"{p}, line {no}: {reason}") from None
+                other = wrong_kind(str(p), data[:65536].decode("utf-8", "replace"), "session")
+                raise SessionError(other or f"{p}, line {no}: {reason}") from None
             if (last and not ends_with_newline and reason.startswith("not valid")):
                 log.warning("%s, line %d: torn last line ignored (an interrupted write)", p, no)
                 torn = True

@@ -243,6 +243,9 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
                                "out the poses after N; --in-sample holds out none)")
     n_solve = n if train is None else train
     if n_solve < 3:
+        if train is None:
+            raise CalibrationError(f"{session.path}: {n} usable pose{'s' if n != 1 else ''}; "
+                                   "a solve needs at least 3")
         raise CalibrationError(f"--train {train}: need at least 3 poses to solve")
     if n_solve > n:
         raise CalibrationError(f"--train {train}: the session has only {n} usable poses")

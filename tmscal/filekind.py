@@ -1,0 +1,114 @@
+"""Which kind of tmscal file a text is, from its first lines, so that a file given where
+another kind is expected gets one message saying what it is and what was expected (a session
+given to ``track``, a rig config given to ``solve``, a session given as ``--calib``, …).
+
+Kinds (:data:`KINDS`): ``session`` (JSON Lines, a header with format ``tmscal-session``),
+``config`` (a rig config: YAML with ``robot``/``tracker``/``plan``/``safety`` sections),
+``calibration`` (``format: tmscal-calibration``, YAML of ``solve -o`` or the ``json``
+export), ``kinematics`` (``format: tmscal-kinematics``), and the exports other programs read
+(``itk``, ``plus``, ``easy-handeye``, ``invesalius``) and the HTML report. The sniffing reads
+keys and first lines only; it never decides whether a file is valid (the readers do).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+__all__ = ["KINDS", "THIS_COMMAND", "sniff", "wrong_kind"]
+
+#: kind → (what such a file is, how to recognise it or where it comes from)
+KINDS: dict[str, tuple[str, str]] = {
+    "session": ("a tmscal session", "JSON Lines: a header, then one pose per line; written by "
+                "acquire, simulate or selfcal acquire"),
+    "config": ("a rig config", "YAML with robot, tracker, plan and safety sections, e.g. "
+               "configs/mock-ur-polaris.yaml"),
+    "calibration": ("a calibration file", "written by tmscal solve -o or tmscal export "
+                    "--format json"),
+    "kinematics": ("a kinematics file", "written by tmscal selfcal identify -o"),
+    "itk": ("an ITK transform file", "tmscal export --format itk"),
+    "plus": ("a PLUS device set", "tmscal export --format plus"),
+    "easy-handeye": ("an easy_handeye calibration", "tmscal export --format easy-handeye"),
+    "invesalius": ("an InVesalius robot co-registration file",
+                   "tmscal export --format invesalius"),
+    "report": ("an HTML report", "tmscal report"),
+}
+
+#: the words a message uses for the command; the CLI puts the command's name in their place
+THIS_COMMAND = "this command"
+
+#: the top-level sections of a rig config (tmscal.config)
+_CONFIG_KEYS = {"robot", "tracker", "plan", "sampling", "safety", "run", "mock", "adaptive",
+                "ft"}
+_FORMATS = {"tmscal-session": "session", "tmscal-calibration": "calibration",
+            "tmscal-kinematics": "kinematics"}
+_TOP_KEY = re.compile(r"^([A-Za-z_][\w-]*)\s*:(.*)$")
+_SNIFF_CHARS = 65536
+
+
+def sniff(text: str) -> str | None:
+    """The kind (a key of :data:`KINDS`) of a file whose text starts with ``text``, or None
+    when it looks like none of them. Only the first 64 KiB are looked at."""
+    head = text[:_SNIFF_CHARS].lstrip("\ufeff")
+    stripped = head.lstrip()
+    if stripped.startswith("#Insight Transform File"):
+        return "itk"
+    if stripped.startswith("<"):
+        low = stripped[:2000].lower()
+        if "<plusconfiguration" in low:
+            return "plus"
+        if "<html" in low or "<!doctype html" in low:
+            return "report"
+        return None
+    if stripped.startswith("{"):
+        return _sniff_json(stripped)
+    if re.fullmatch(r"(?:[-+0-9.eE]+[\t ]*\r?\n)+[-+0-9.eE]*\s*", stripped[:4000] + "\n"):
+        return "invesalius" if stripped.count("\n") >= 40 else None
+    keys: dict[str, str] = {}
+    for line in head.splitlines():
+        m = _TOP_KEY.match(line)
+        if m:
+            keys.setdefault(m.group(1), m.group(2).strip().strip("'\""))
+    fmt = keys.get("format")
+    if fmt in _FORMATS:
+        return _FORMATS[fmt]
+    if "transformation" in keys and "parameters" in keys or (
+            "transform" in keys and "parameters" in keys):
+        return "easy-handeye"
+    if {"robot", "tracker", "ft"} & keys.keys() and set(keys) - {"name", "description"} \
+            <= _CONFIG_KEYS:
+        return "config"
+    return None
+
+
+def _sniff_json(text: str) -> str | None:
+    first = text.split("\n", 1)[0]
+    try:
+        obj = json.loads(first)
+    except (ValueError, RecursionError):  # e.g. one object over several lines: a JSON export
+        obj = None
+        fmt = re.search(r'"format"\s*:\s*"([^"]{0,40})"', text[:4000])
+        if fmt and fmt.group(1) in _FORMATS:
+            return _FORMATS[fmt.group(1)]
+        return None
+    if isinstance(obj, dict):
+        fmt = obj.get("format")
+        if fmt in _FORMATS:
+            return _FORMATS[fmt]
+        if obj.get("kind") == "header":
+            return "session"
+        if _CONFIG_KEYS & obj.keys() and {"robot", "tracker"} & obj.keys():
+            return "config"
+    return None
+
+
+def wrong_kind(src: str, text: str, expected: str) -> str | None:
+    """The message for a file ``src`` that is of another kind than ``expected`` (a key of
+    :data:`KINDS`): what it is and what the command expects; None when it is of the expected
+    kind or of no kind known here (then the reader's own error says what is wrong)."""
+    kind = sniff(text)
+    if kind is None or kind == expected:
+        return None
+    name, how = KINDS[kind]
+    want, want_how = KINDS[expected]
+    return f"{src} is {name} ({how}); {THIS_COMMAND} expects {want} ({want_how})"
