@@ -45,6 +45,20 @@ def _default_demo_config(name: str = "mock-ur-polaris.yaml") -> Path:
     return Path(configs) / name
 
 
+def demo_config_name(kinematics: bool = False) -> str:
+    """The packaged config ``tmscal demo`` runs without ``--config``: the mock UR + Polaris
+    (``mock-ur-polaris-kin.yaml`` with ``kinematics``), or the mock DENSO + Polaris where
+    ur_rtde is not installed (no wheel for this platform; said on stderr), so that the demo
+    runs from any plain ``pip install tmscal``."""
+    from ..registry import get_spec
+
+    if get_spec("ur", "robot").installed():
+        return "mock-ur-polaris-kin.yaml" if kinematics else "mock-ur-polaris.yaml"
+    click.echo("note: ur_rtde is not installed (pip install 'tmscal[ur]' builds it where PyPI "
+               "has no wheel): the demo runs on the mock DENSO rig instead", err=True)
+    return "mock-denso-polaris-kin.yaml" if kinematics else "mock-denso-polaris.yaml"
+
+
 def _matrix_text(T: np.ndarray) -> str:
     from ..report.text import format_matrix
     return format_matrix(T)
@@ -408,7 +422,8 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
 @click.option("--config", "config", type=INPUT_FILE, default=None,
               help="Mock rig config (default: the packaged mock-ur-polaris.yaml, in "
                    "tmscal/data/configs/; with --kinematics estimate, "
-                   "mock-ur-polaris-kin.yaml, a UR5e with realistic arm errors).")
+                   "mock-ur-polaris-kin.yaml, a UR5e with realistic arm errors; the mock-denso "
+                   "ones where ur_rtde is not installed).")
 @click.option("--kinematics", type=click.Choice(["estimate"]), default=None,
               help="Estimate the arm's kinematics with X, Y, Z (ml; docs/kinematics.md, "
                    "\"Using it\") instead of solving QR36 on the controller's poses, and "
@@ -456,8 +471,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
         raise click.BadParameter("--kinematics estimate solves the session once it is "
                                  "acquired; it does not go with --adaptive",
                                  param_hint="--kinematics")
-    cfg_path = config or _default_demo_config(
-        "mock-ur-polaris-kin.yaml" if kinematics is not None else "mock-ur-polaris.yaml")
+    cfg_path = config or _default_demo_config(demo_config_name(kinematics is not None))
     check_adaptive_flags(adaptive, False, Path(), poses, overrides)
     check_outputs({"--output": output}, [cfg_path], force)
     if output is not None and force:
