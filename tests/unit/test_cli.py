@@ -163,7 +163,7 @@ def test_demo_runs_on_the_mock_denso_where_ur_rtde_is_missing(monkeypatch, capsy
     ur_rtde importable it keeps the mock UR. Both configs load from the package data."""
     from importlib.resources import files
 
-    from tmscal.cli.rig_commands import demo_config_name
+    from tmscal.cli.demo import demo_config_name
     from tmscal.config import load_config
 
     assert demo_config_name(kin) == ur

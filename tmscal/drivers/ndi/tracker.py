@@ -41,7 +41,7 @@ from . import protocol as p
 from .codes import ErrorCode, HandleStatus, PortStatus, SystemStatus, flag_names
 from .replies import ReplyKind
 from .rom import read_roms
-from .wire import open_port
+from .wire import open_port, silence_message
 
 log = logging.getLogger(__name__)
 
@@ -158,7 +158,8 @@ class NDITracker(Tracker):
         except DeviceTimeout as e:
             if self._heard:
                 raise
-            raise DeviceTimeout(self._silence(), device=self.name) from e
+            raise DeviceTimeout(silence_message(self.name, self.port, self.baud, self._broke),
+                                device=self.name) from e
         self._identify()
         if self.baud != 9600 and not self.networked:
             self._command("COMM", f"{p.BAUD_CODES[self.baud]}0000")
@@ -395,19 +396,6 @@ class NDITracker(Tracker):
         log.log(level, "%s: %s status %s", self.name, where, flag_names(flags(bits)))
 
     # --- command / reply ---------------------------------------------------------------------
-    def _silence(self) -> str:
-        """What to check when nothing at all answered the break and INIT (one line)."""
-        if self.networked:
-            return (f"{self.name}: nothing answered on {self.port} (no reply to INIT): check "
-                    "the address and port (tracker.port) and that the tracker is powered on "
-                    "and on this network")
-        rates = "9600" if self.baud == 9600 else f"9600 and {self.baud}"
-        return (f"{self.name}: nothing answered on {self.port} (no reply to "
-                + ("the serial break, nor to " if self._broke else "") + f"INIT at {rates} "
-                "baud): check that the tracker is powered on (its self-test finished), that its "
-                "cable is plugged in at both ends and that this is its port (tracker.port), and "
-                f"the baud rate (tracker.baud: {self.baud})")
-
     def _command(self, name: str, params: str = "", timeout_s: float | None = None
                  ) -> p.Reply:
         """Send a text command and return its (non-error) reply; ERRORxx → DeviceError.
@@ -444,7 +432,6 @@ class NDITracker(Tracker):
         if timeout_s is None:
             timeout_s = max(self.timeout_s, self.command_timeouts.get(name, 0.0))
         last: DeviceError | None = None
-        attempt = 0
         for attempt in range(self.retries + 1):
             if attempt:
                 log.info("%s: retrying %s (attempt %d): %s", self.name, name, attempt + 1, last)
