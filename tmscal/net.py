@@ -9,13 +9,14 @@ resolve to loopback addresses only.
 
 from __future__ import annotations
 
+import errno
 import ipaddress
 import socket
 
 from .errors import ConfigError
 
 __all__ = ["NotLoopbackError", "loopback_family", "is_loopback", "url_host",
-           "split_endpoint"]
+           "split_endpoint", "listen_error", "tcp_probe"]
 
 
 class NotLoopbackError(ConfigError, ValueError):
@@ -83,3 +84,33 @@ def split_endpoint(ep: str) -> tuple[str, int | None]:
         host, _, port = ep.partition(":")
         return host, int(port)
     return ep, None
+
+
+def listen_error(e: OSError, what: str, host: str, port: int, proto: str = "TCP") -> OSError:
+    """The ``OSError`` of a mock that cannot bind ``host:port``, naming ``what``, the address
+    and the port, and for an address in use what to do (``errno`` kept; its text is the
+    message, which the CLI prints as one line)."""
+    where = f"{what}: cannot listen on {url_host(host)}:{port} ({proto})"
+    if e.errno == errno.EADDRINUSE:
+        msg = (f"{where}: the address is already in use, by another tmscal mock or another "
+               "program (stop it, e.g. the earlier `tmscal mock`, or give the config's mock "
+               "another loopback address)")
+    else:
+        msg = f"{where}: {e.strerror or e}"
+    return OSError(e.errno, msg)
+
+
+def tcp_probe(host: str, port: int, timeout_s: float) -> str | None:
+    """Open (and close) a TCP connection to ``host:port``: None when it is accepted, else why
+    not, as "refused" (something answers at the address but nothing listens on the port),
+    "timeout" (no answer within ``timeout_s``: a wrong address, a cable, a device that is
+    off) or the system's text (no route to host, a name that does not resolve, …)."""
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            return None
+    except ConnectionRefusedError:
+        return "refused"
+    except TimeoutError:
+        return "timeout"
+    except OSError as e:
+        return str(e.strerror or e)

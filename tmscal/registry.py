@@ -111,6 +111,10 @@ class DriverSpec:
                                         f"no module named {mod!r}")
         return _import(self.cls, what, self.extra)
 
+    def installed(self) -> bool:
+        """Whether the modules of ``requires`` (the driver's extra) can be imported here."""
+        return all(importlib.util.find_spec(mod) is not None for mod in self.requires)
+
     def load_settings(self) -> type | None:
         """The settings class (None: the spec names none). ``ConfigError`` when it cannot be
         imported: a settings module needs no optional extra."""

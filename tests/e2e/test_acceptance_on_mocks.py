@@ -104,3 +104,46 @@ def test_default_report_name_never_overwrites(tmp_path, mock_config):
         assert names[1] == names[0][:-4] + "-2.txt", names
     for n in names:
         assert "[PASS] tool visibility and frame rate" in (tmp_path / n).read_text()
+
+
+def run_selftest(cwd: Path, *args: str) -> tuple[int, str]:
+    """``tmscal selftest ARGS`` from ``cwd`` (the installed command, no pytest, no tests/);
+    (exit code, stdout+stderr)."""
+    p = subprocess.run([sys.executable, "-m", "tmscal.cli", "selftest", *args], cwd=cwd,
+                       capture_output=True, text=True, timeout=240, stdin=subprocess.DEVNULL)
+    return p.returncode, p.stdout + p.stderr
+
+
+def test_tmscal_selftest_runs_the_same_checks_and_report(tmp_path, mock_config):
+    cfg = mock_config("mock-denso-polaris.yaml", robot={"port": 0})
+    rc, out = run_selftest(tmp_path, "--rig", str(cfg), "--report", "rig.txt")
+    assert rc == 0, out
+    for key, title in CHECK_NAMES.items():
+        assert f"{'SKIP' if key == 'stop' else 'PASS'}  {title}" in out, (title, out)
+    assert "result: PASS (4 passed, 0 failed, 1 skipped)" in out
+    assert "report written to rig.txt" in out
+    check_report((tmp_path / "rig.txt").read_text(), cfg, "denso", {"stop": "SKIP"})
+    rc, out = run_selftest(tmp_path, "--rig", str(cfg), "--report", "rig.txt")
+    assert rc == 2 and "rig.txt already exists" in out  # the one rule for output files
+    rc, out = run_selftest(tmp_path, "--rig", str(cfg))  # the default name, as pytest's
+    assert rc == 0 and list(tmp_path.glob("acceptance-report-*.txt")), out
+
+
+def test_tmscal_selftest_failing_check_exits_3_and_the_report_says_so(tmp_path, mock_config):
+    cfg = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                      mock={"robot": {"faults": {"fail_move_at": 1}}})
+    rc, out = run_selftest(tmp_path, "--rig", str(cfg), "--report", "rig.txt")
+    assert rc == 3, out
+    assert "FAIL  small move inside the envelope and back: RobotFault" in out
+    text = (tmp_path / "rig.txt").read_text()
+    assert "result: FAIL (3 passed, 1 failed, 1 skipped)" in text
+    check_report(text, cfg, "denso", {"move": "FAIL", "stop": "SKIP"})
+
+
+def test_tmscal_selftest_without_a_robot_skips_its_checks_naming_why(tmp_path, mock_config):
+    cfg = mock_config("mock-polaris.yaml")
+    rc, out = run_selftest(tmp_path, "--rig", str(cfg), "--report", "rig.txt")
+    assert rc == 0, out
+    assert f"SKIP  small move inside the envelope and back: {cfg} has no robot section" in out
+    text = (tmp_path / "rig.txt").read_text()
+    assert "[PASS] tool visibility and frame rate" in text and "[SKIP] stop while moving" in text

@@ -1,14 +1,17 @@
-"""CI builds the wheel and runs the demo from it on the fast clock.
+"""CI builds the wheel and runs the demo and the rig acceptance checks from it on the fast
+clock.
 
 The wheel is built from a copy of the sources (``pip wheel --no-deps``, with build isolation as
-a user's pip would), installed with the ``ur`` extra into a fresh venv (``python -m venv``; the
-dependencies come from PyPI or pip's cache), and ``tmscal demo`` runs from a temp folder, so the
-source tree is not importable and the demo's config and tool ROMs must come from the package
-data (``tmscal/data/configs/``): the installed demo config, its mock addresses made the test's
-own (``tests.rigs.unique_addresses``: the packaged UR address, 127.0.0.2, may be in use by
-another test run), its ROM paths pointing into the installed package. SLOW: about a minute
-(building, installing numpy/scipy/ur_rtde from the cache, 20 poses through the wire
-protocols); it needs PyPI or a warm pip cache.
+a user's pip would), installed as a lab installs it, ``pip install tmscal`` with no extra, into
+a fresh venv (``python -m venv``; the dependencies, ur_rtde among them, come from PyPI or pip's
+cache), and ``tmscal demo`` runs from a temp folder, so the source tree is not importable and
+the demo's config and tool ROMs must come from the package data (``tmscal/data/configs/``):
+the installed demo config, its mock addresses made the test's own
+(``tests.rigs.unique_addresses``: the packaged UR address, 127.0.0.2, may be in use by another
+test run), its ROM paths pointing into the installed package. Then ``tmscal selftest --rig``
+runs the acceptance checks (``tests/acceptance`` is not in the wheel) on that mock rig and
+writes its report. SLOW: about a minute (building, installing numpy/scipy/ur_rtde from the
+cache, 20 poses through the wire protocols); it needs PyPI or a warm pip cache.
 """
 
 from __future__ import annotations
@@ -69,7 +72,7 @@ def test_wheel_installs_and_runs_the_demo(tmp_path):
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", str(venv)], tmp_path, env)
     py, tmscal = venv / "bin" / "python", venv / "bin" / "tmscal"
-    _run([str(py), "-m", "pip", "install", "--quiet", f"{wheel}[ur]"], tmp_path, env)
+    _run([str(py), "-m", "pip", "install", "--quiet", str(wheel)], tmp_path, env)
     cwd = tmp_path / "elsewhere"
     cwd.mkdir()
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
@@ -87,3 +90,13 @@ def test_wheel_installs_and_runs_the_demo(tmp_path):
     result = json.loads(out)
     assert result["n_skipped"] == 0
     assert result["truth"]["coil_placement_mm"] < 0.3
+    # the acceptance checks from the installed package, on the same mock rig
+    r = subprocess.run([str(tmscal), "selftest", "--rig", "demo.yaml", "--report", "rig.txt"],
+                       cwd=cwd, env=env, text=True, capture_output=True,
+                       stdin=subprocess.DEVNULL, timeout=STEP_GUARD_S)
+    assert r.returncode == 0, r.stdout + r.stderr
+    text = (cwd / "rig.txt").read_text()
+    assert "result: PASS (4 passed, 0 failed, 1 skipped)" in text, text
+    for line in ("[PASS] connect and identity", "[PASS] small move inside the envelope and back",
+                 "[SKIP] stop while moving", "driver: ur", "driver: ndi"):
+        assert line in text, (line, text)

@@ -2,6 +2,8 @@
 ``error:`` line, non-zero exit, nothing written over)."""
 
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -148,3 +150,27 @@ def test_help_explains():
     assert r.exit_code == 0 and "flange" in r.output and "mm" in r.output
     for cmd in ("simulate", "solve", "study", "demo"):
         assert run(cmd, "--help").exit_code == 0
+
+
+@pytest.mark.parametrize("kin, ur, denso", [(False, "mock-ur-polaris.yaml",
+                                             "mock-denso-polaris.yaml"),
+                                            (True, "mock-ur-polaris-kin.yaml",
+                                             "mock-denso-polaris-kin.yaml")])
+def test_demo_runs_on_the_mock_denso_where_ur_rtde_is_missing(monkeypatch, capsys, kin, ur,
+                                                             denso) -> None:
+    """A plain ``pip install tmscal`` where PyPI has no ur_rtde wheel (no such dependency
+    there): the default demo takes the mock DENSO rig (no extra needed) and says why; with
+    ur_rtde importable it keeps the mock UR. Both configs load from the package data."""
+    from importlib.resources import files
+
+    from tmscal.cli.demo import demo_config_name
+    from tmscal.config import load_config
+
+    assert demo_config_name(kin) == ur
+    assert capsys.readouterr().err == ""
+    for mod in ("rtde_control", "rtde_receive"):
+        monkeypatch.setitem(sys.modules, mod, None)  # not importable, as when not installed
+    assert demo_config_name(kin) == denso
+    assert "ur_rtde is not installed" in capsys.readouterr().err
+    cfg = load_config(Path(str(files("tmscal.data") / "configs" / denso)))
+    assert cfg.robot.driver == "denso" and cfg.mock is not None

@@ -177,3 +177,40 @@ def test_calib_check_on_recomputed_poses(tmp_path) -> None:
     assert e_t[0] < 0.5 and e_t[1] > 10 * e_t[0], e_t
     code, both = _solve(str(s), "--calib", str(cal), "--kinematics", str(kin))
     assert code == 2 and "carries its own identified arm" in both
+
+
+def test_kinematics_file_shows_before_and_after(tmp_path) -> None:
+    """--kinematics KIN reports the same solve on the controller's poses beside the one with
+    the arm: "before" is what solve without --kinematics gives (errors and truth), and with the
+    true arm's parameters "after" is well below it (the arm's millimetres gone)."""
+    s = tmp_path / "s.jsonl"
+    rig = _session(s, "paper", n=40)
+    kin = tmp_path / "kin.yaml"
+    kin.write_text(kinematics_yaml(rig.arm_true))
+    code, out = _solve(str(s), "--json", "--folds", "4")
+    assert code == 0, out
+    plain = json.loads(out)
+    code, out = _solve(str(s), "--json", "--folds", "4", "--kinematics", str(kin))
+    assert code == 0, out
+    got = json.loads(out)
+    before = got["nominal"]
+    assert before["errors"] == plain["errors"] and before["errors_on"] == plain["errors_on"]
+    assert before["truth"]["coil_placement_mm"] == plain["truth"]["coil_placement_mm"]
+    assert got["errors"]["e_t_mm"] < 0.5 * before["errors"]["e_t_mm"]
+    code, text = _solve(str(s), "--folds", "4", "--kinematics", str(kin))
+    assert code == 0, text
+    rows = text[text.index("before → after"):].splitlines()
+    total = next(r for r in rows if r.strip().startswith("total"))
+    b_mm, a_mm = (float(v) for v in total.split()[-4:-2])
+    assert (b_mm, a_mm) == (round(before["errors"]["e_t_mm"], 4),
+                            round(got["errors"]["e_t_mm"], 4))
+    assert any(r.strip().startswith("coil placement vs the truth") for r in rows)
+
+
+def test_without_kinematics_no_before_and_after(tmp_path) -> None:
+    s = tmp_path / "s.jsonl"
+    _session(s, "none", n=12)
+    code, out = _solve(str(s), "--json", "--folds", "3")
+    assert code == 0 and "nominal" not in json.loads(out), out
+    code, out = _solve(str(s), "--folds", "3")
+    assert code == 0 and "before → after" not in out

@@ -2,9 +2,10 @@
 ``tmscal.drivers.base`` exercised on the devices a rig config names, real or mock.
 
 Each check returns a :class:`Check` (pass, fail or skip, the measured values, a note) instead
-of raising, so that one run can report every check: ``pytest tests/acceptance --rig CONFIG``
-asserts on them and ``tmscal selftest CONFIG`` prints them; both write the same text report
-(:func:`format_report`).
+of raising, so that one run can report every check: ``tmscal selftest --rig CONFIG`` prints
+them and ``pytest tests/acceptance --rig CONFIG`` asserts on them, both through
+:class:`tmscal.acquisition.selftest_rig.RigSelftest` (the devices, the order, the skips), and
+both write the same text report (:func:`format_report`).
 
 Frames and units as everywhere (``docs/conventions.md``): poses base_from_flange 4×4 mm,
 distances mm, angles degrees at this edge, rates Hz, times s. Every move goes through
@@ -31,7 +32,7 @@ from .devices import envelope_for
 
 __all__ = ["Check", "Settings", "CHECK_NAMES", "check_connect", "check_tools",
            "check_small_move", "check_stop", "check_reconnect", "format_report",
-           "stable_identity"]
+           "result_text", "stable_identity"]
 
 #: the checks in the order they run, with the line the report gives each
 CHECK_NAMES = {
@@ -357,6 +358,14 @@ def _value_lines(values: dict[str, Any]) -> list[str]:
     return out
 
 
+def result_text(checks: list[Check]) -> str:
+    """The verdict of the checks run: "PASS (5 passed, 0 failed, 0 skipped)" or "FAIL (…)"
+    (a skip does not fail)."""
+    counts = {st: sum(c.status == st for c in checks) for st in ("pass", "fail", "skip")}
+    return (f"{'FAIL' if counts['fail'] else 'PASS'} ({counts['pass']} passed, "
+            f"{counts['fail']} failed, {counts['skip']} skipped)")
+
+
 def format_report(config_path: str, checks: list[Check], meta: dict[str, Any] | None = None,
                   when: _dt.datetime | None = None) -> str:
     """The text report a lab keeps: date, config, ``meta`` (how the run was made), then every
@@ -368,9 +377,7 @@ def format_report(config_path: str, checks: list[Check], meta: dict[str, Any] | 
              f"config: {config_path}", f"tmscal: {__version__}"]
     lines += [f"{k}: {val}" for k, val in (meta or {}).items()]
     by_key = {c.key: c for c in checks}
-    counts = {st: sum(c.status == st for c in checks) for st in ("pass", "fail", "skip")}
-    lines += ["", f"result: {'FAIL' if counts['fail'] else 'PASS'} ({counts['pass']} passed, "
-              f"{counts['fail']} failed, {counts['skip']} skipped)", ""]
+    lines += ["", f"result: {result_text(checks)}", ""]
     for key in [*CHECK_NAMES, *(k for k in by_key if k not in CHECK_NAMES)]:
         c = by_key.get(key) or Check(key, "not run", {}, "")
         lines.append(f"[{c.status.upper()}] {c.title}")

@@ -2,8 +2,8 @@
 
 The group, the shared argument types and the one rule for output files live here; the
 commands are in :mod:`tmscal.cli.offline` (simulate, solve, study),
-:mod:`tmscal.cli.rig_commands` (mock, track, robot, acquire, demo), and compare, export,
-report, stream, selfcal and selfcal_rig (the ``selfcal`` group), one module each.
+:mod:`tmscal.cli.rig_commands` (mock, track, robot, acquire), and compare, demo, export,
+report, stream, selftest, selfcal and selfcal_rig (the ``selfcal`` group), one module each.
 
 Every expected failure (bad input, device error, safety refusal) prints one line
 ``error: …`` naming the problem and exits non-zero; no tracebacks.
@@ -16,4 +16,5 @@ from .app import main
 __all__ = ["main"]
 
 # every command module registers its commands on ``main``
-from . import compare, export, offline, report, rig_commands, selfcal, selfcal_rig, stream  # noqa: E402,F401,I001
+from . import compare, demo, export, offline, report, rig_commands  # noqa: E402,F401,I001
+from . import selfcal, selfcal_rig, selftest, stream  # noqa: E402,F401,I001

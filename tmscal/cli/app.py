@@ -26,6 +26,9 @@ from ..session.jsonable import json_default
 log = logging.getLogger("tmscal")
 
 EXIT_ERROR = 1
+#: a check that ran and failed (``solve --calib`` over its tolerance, ``selftest``): not an
+#: error of tmscal's, a verdict (1 is an error, 2 a usage error)
+EXIT_CHECK_FAILED = 3
 EXIT_INTERRUPTED = 130
 
 
@@ -301,7 +304,9 @@ def main(verbose: int) -> None:
       tmscal acquire CONFIG -o s.jsonl --adaptive
                                            record a session until the predicted
                                            coil error reaches 0.05 mm (--dry-run first)
-      tmscal solve s.jsonl --calib c.yaml  the daily check of a stored calibration
+      tmscal selftest --rig CONFIG         the acceptance checks of the rig's devices
+      tmscal solve s.jsonl --calib c.yaml --tolerance-mm 1
+                                           the daily check of a stored calibration
       tmscal stream CONFIG --calib c.yaml  the live coil pose to 3D Slicer (OpenIGTLink)
       tmscal selfcal acquire CONFIG -o f.jsonl
                                            joints + wrist wrench for self-calibration

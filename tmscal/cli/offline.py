@@ -23,6 +23,7 @@ from .app import (
     run_plot,
     write_atomic,
 )
+from .daily_check import check_stored
 from .selfcal import ArmName
 
 # --- simulate -------------------------------------------------------------------------------
@@ -267,6 +268,12 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "the stored ones, coil placement against the truth when the session has "
                    "one, the calibration's provenance. No fitting; the daily check before a "
                    "TMS session.")
+@click.option("--tolerance-mm", type=Finite(0, lo_open=True), default=None, metavar="MM",
+              help="With --calib: decide. PASS when the total hold-out error e_t (mm, the "
+                   "last row) is at most MM, else FAIL; one line, in the JSON as 'verdict', "
+                   "exit status 0 or 3 (docs/exports.md, \"The daily check\").")
+@click.option("--tolerance-deg", type=Finite(0, lo_open=True), default=None, metavar="DEG",
+              help="With --calib: likewise for the total rotation error θ_t (degrees).")
 @click.option("--kinematics", "kinematics", type=_KINEMATICS, default=None,
               metavar="estimate|KIN",
               help="'estimate': estimate the arm's kinematic deviations together with X, Y, "
@@ -299,6 +306,7 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
 def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_pose: int | None,
           train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
           output: Path | None, plot: Path | None, calib_file: Path | None,
+          tolerance_mm: float | None, tolerance_deg: float | None,
           kinematics: str | Path | None, arm: str | None, level: str,
           tolerance_length: float | None, tolerance_angle: float | None, force: bool,
           strict: bool) -> None:
@@ -329,11 +337,15 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
             raise click.BadParameter("--kinematics estimate solves; --calib only checks a "
                                      "stored calibration (which applies its own arm)",
                                      param_hint="--calib")
-        _check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
-                      fitting=bool(options or handheld_pose is not None or train is not None
-                                   or in_sample or orthonormal or method.lower() != "qr36"),
-                      kin_file=kin_file)
+        check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
+                     fitting=bool(options or handheld_pose is not None or train is not None
+                                  or in_sample or orthonormal or method.lower() != "qr36"),
+                     kin_file=kin_file, tolerance_mm=tolerance_mm, tolerance_deg=tolerance_deg)
         return
+    for opt, tol in (("--tolerance-mm", tolerance_mm), ("--tolerance-deg", tolerance_deg)):
+        if tol is not None:
+            raise click.BadParameter("only with --calib CALIB (the daily check's verdict)",
+                                     param_hint=opt)
     if estimate:
         src = click.get_current_context().get_parameter_source("method")
         if src == click.core.ParameterSource.DEFAULT:
@@ -395,16 +407,6 @@ def _kinematics_args(kinematics: str | Path | None) -> dict[str, Any]:
     return {"kinematics": load_arm(kinematics), "kinematics_source": str(kinematics)}
 
 
-def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
-    """The session with A recomputed from its joints by the arm model of ``kin_file``
-    (``solving.solve.with_kinematics``), or as it is without one."""
-    if kin_file is None:
-        return session
-    from ..exports.kinfile import load_arm
-    from ..solving.solve import with_kinematics
-    return with_kinematics(session, load_arm(kin_file), str(kin_file))
-
-
 def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
     """For a session recorded by ``acquire --adaptive``: the prediction that run stopped on,
     recomputed from the session (``solving.predict.predict_session``; docs/adaptive.md), as
@@ -421,33 +423,6 @@ def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
             + format_robot_time(info["robot_time_s"]))
     return ({**pred.as_dict(), "region": info["region"],
              "robot_time_s": info["robot_time_s"]}, text)
-
-
-def _check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bool,
-                  output: Path | None, plot: Path | None, fitting: bool,
-                  kin_file: Path | None = None) -> None:
-    """``solve SESSION --calib CALIB``: the stored calibration on the session, no fitting."""
-    from ..exports.calibfile import read_calibration
-    from ..exports.check import check_calibration, format_check
-    from ..session import sha256_of
-
-    for opt, given in (("--output", output is not None), ("--plot", plot is not None),
-                       ("--method/--option/--train/--in-sample/--orthonormal/--handheld-pose",
-                        fitting)):
-        if given:
-            raise click.BadParameter(f"{opt} solves or writes a calibration; --calib only "
-                                     "checks a stored one (leave it out)", param_hint="--calib")
-    cf = read_calibration(calib_file)
-    if kin_file is not None and cf.calibration.arm is not None:
-        raise click.BadParameter(f"{calib_file} carries its own identified arm, with which "
-                                 "the robot poses are recomputed; leave --kinematics out",
-                                 param_hint="--kinematics")
-    session = _with_kinematics(read_session_file(session_file, strict), kin_file)
-    res = check_calibration(session, cf, sha256_of(session_file))
-    if as_json:
-        print_json(res)
-    else:
-        click.echo(format_check(res))
 
 
 # --- study ----------------------------------------------------------------------------------

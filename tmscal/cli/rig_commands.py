@@ -1,22 +1,19 @@
 """Commands at the rig (or against ``tmscal mock``): ``mock``, ``track``, ``robot``,
-``acquire``, ``demo``."""
+``acquire`` (``demo`` is in :mod:`tmscal.cli.demo`)."""
 
 from __future__ import annotations
 
 import json
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import click
 import numpy as np
 
-from ..net import split_endpoint
 from .acquire_adaptive import adaptive_options, check_adaptive_flags
 from .app import (
     EXIT_INTERRUPTED,
-    FORCE_HELP,
     INPUT_FILE,
     ROBOT_HOST_HELP,
     TRACKER_PORT_HELP,
@@ -26,27 +23,10 @@ from .app import (
     handle_errors,
     main,
     old_spelling,
-    print_json,
     same_file,
 )
 
-# --- rig commands: mock, track, robot, acquire, demo ------------------------------------------
-
-def _default_demo_config(name: str = "mock-ur-polaris.yaml") -> Path:
-    """A built-in mock rig, ``name`` of the package data (``tmscal/data/configs/``; default
-    ``mock-ur-polaris.yaml``), loaded through importlib.resources so it works from an
-    installed wheel. Its ROM paths are relative to it: the whole folder must be on disk."""
-    import atexit
-    import contextlib
-    from importlib.resources import as_file, files
-
-    configs = files("tmscal.data") / "configs"
-    if not isinstance(configs, Path):  # e.g. a zipped install: extract for this process
-        stack = contextlib.ExitStack()
-        atexit.register(stack.close)
-        configs = stack.enter_context(as_file(configs))
-    return Path(configs) / name
-
+# --- rig commands: mock, track, robot, acquire ------------------------------------------------
 
 def _matrix_text(T: np.ndarray) -> str:
     from ..report.text import format_matrix
@@ -429,107 +409,3 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
              f"{', …' if len(d.split_moves) > 8 else ''})" if d.split_moves else "")
     click.echo(f"  safety envelope: every pose inside, every move's path inside{split} "
                "(docs/safety.md)")
-
-
-@main.command()
-@click.option("--config", "config", type=INPUT_FILE, default=None,
-              help="Mock rig config (default: the packaged mock-ur-polaris.yaml, in "
-                   "tmscal/data/configs/; with --kinematics estimate, "
-                   "mock-ur-polaris-kin.yaml, a UR5e with realistic arm errors).")
-@click.option("--kinematics", type=click.Choice(["estimate"]), default=None,
-              help="Estimate the arm's kinematics with X, Y, Z (ml; docs/kinematics.md, "
-                   "\"Using it\") instead of solving QR36 on the controller's poses, and "
-                   "report the coil placement against the mock rig's truth through the flange "
-                   "commands of the identified arm (true_coil_mm), beside QR36's on the "
-                   "nominal arm. Not with --adaptive.")
-@click.option("--poses", type=click.IntRange(3, 100000), default=None,
-              help="Override plan.poses.")
-@click.option("--samples", type=click.IntRange(1), default=None,
-              help="Override sampling.samples.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Keep the session here (default: a temporary file).")
-@click.option("--transport", type=click.Choice(["tcp", "pty"]), default="tcp",
-              show_default=True,
-              help="How the tracker mock is reached: loopback TCP (an NDI's socket://, an "
-                   "OpenIGTLink host:port) or a pty (an NDI as a serial port; a tracker that "
-                   "speaks TCP only stays on TCP).")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print the solve result (with the mock rig's truth) as one JSON object; "
-                   "with --adaptive it adds robot_time_s (moving, settling, sampling, "
-                   "total), poses_used, predicted_coil_mm, true_coil_mm and stop_reason; with "
-                   "--kinematics estimate it adds the arm, true_coil_mm and nominal "
-                   "{method, true_coil_mm}.")
-@click.option("--force", is_flag=True, help=FORCE_HELP)
-@adaptive_options
-@handle_errors
-def demo(config: Path | None, kinematics: str | None, poses: int | None, samples: int | None,
-         output: Path | None, transport: str, as_json: bool, force: bool, adaptive: bool,
-         **overrides: Any) -> None:
-    """The whole job on the built-in mock rig: start the mock robot and tracker, acquire
-    through the real drivers and wire protocols, solve with QR36, compare with the truth.
-
-    With --adaptive: the adaptive run (docs/adaptive.md), its robot time, the predicted
-    coil-placement error and the true one against the mock rig's truth over the same region.
-    With --kinematics estimate: ml with the arm's kinematics (docs/kinematics.md)."""
-    from ..acquisition.run import acquire as run_acquire
-    from ..config import load_config
-    from ..mocks.launch import build_sim_rig, spawn_mock_rig
-    from ..report.text import format_result
-    from ..session import read_session
-    from ..solving.solve import solve_session
-    from .live import AcquireProgress, stderr_to_log
-
-    if kinematics is not None and adaptive:
-        raise click.BadParameter("--kinematics estimate solves the session once it is "
-                                 "acquired; it does not go with --adaptive",
-                                 param_hint="--kinematics")
-    cfg_path = config or _default_demo_config(
-        "mock-ur-polaris-kin.yaml" if kinematics is not None else "mock-ur-polaris.yaml")
-    check_adaptive_flags(adaptive, False, Path(), poses, overrides)
-    check_outputs({"--output": output}, [cfg_path], force)
-    if output is not None and force:
-        from ..session.outputs import remove_output
-        remove_output(output)  # refused if another tmscal holds it (a session being recorded)
-    cfg = load_config(cfg_path)
-    truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
-    tmp = None
-    if output is None:
-        tmp = tempfile.TemporaryDirectory(prefix="tmscal-demo-")
-        output = Path(tmp.name) / "demo-session.jsonl"
-    try:
-        if adaptive:
-            from . import acquire_adaptive
-            acquire_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
-            return
-        # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
-        with spawn_mock_rig(cfg_path, transport=transport) as mp:
-            ep = mp.endpoints
-            if not as_json:
-                click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
-            host, port = split_endpoint(ep["robot"])
-            with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
-                res = run_acquire(cfg, output, poses=poses, samples=samples,
-                                  tracker_port=ep["tracker"], robot_host=host,
-                                  robot_port=port, progress=bar)
-        session = read_session(output)
-        session.header["truth"] = truth.as_dict()
-        if kinematics is not None:
-            from .kinematics import demo_report
-            demo_report(session, res, as_json)
-            return
-        _, result = solve_session(session, "qr36")
-        if as_json:
-            print_json(result.to_json())
-            return
-        click.echo(f"acquired {res.recorded} poses ({res.skipped} skipped) in "
-                   f"{res.elapsed_s:.1f} s through the wire protocols\n")
-        click.echo(format_result(result))
-        click.echo("\n  truth (the mock rig's):")
-        for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
-                        ("Z", "base_from_tracker")):
-            click.echo(f"  {k} = {name}")
-            click.echo(_matrix_text(np.asarray(getattr(truth, k))))
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
-

@@ -8,7 +8,9 @@ when the session has one (simulated sessions), and the calibration's provenance 
 errors it was stored with. A calibration that carries an identified arm (docs/kinematics.md,
 "Using it") recomputes the session's robot poses from its joints with that arm before
 anything is evaluated, and says how far the controller's frame is from the one it was
-calibrated in. Units mm and degrees.
+calibrated in. Given tolerances, the check decides (:func:`verdict`): PASS when the total
+hold-out errors e_t (mm) and θ_t (degrees) are each within theirs, else FAIL. Units mm and
+degrees.
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from ..solving.outliers import find_outliers
 from ..solving.solve import pose_residuals, truth_errors_of
 from .calibfile import CalibrationFile
 
-__all__ = ["check_calibration", "format_check", "FRAME_MOVED_MM", "FRAME_MOVED_DEG"]
+__all__ = ["check_calibration", "format_check", "verdict", "verdict_line", "FRAME_MOVED_MM",
+           "FRAME_MOVED_DEG"]
 
 #: the controller's frame on the checked session this far from the calibration's is reported
 #: as moved (mm, deg): a tenth of what ``controller_frame`` tolerates within one session
@@ -47,8 +50,31 @@ def _errors(err: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def verdict(errors: dict[str, Any], tolerance_mm: float | None = None,
+            tolerance_deg: float | None = None) -> dict[str, Any] | None:
+    """The daily check's decision on the hold-out ``errors`` (``check_calibration``'s): the
+    total e_t (mm, the sum of the bodies' mean translation errors, and e_z for QR24) within
+    ``tolerance_mm`` and θ_t (degrees, likewise) within ``tolerance_deg``, each judged when
+    given. None when neither is given; else {"result": "PASS" or "FAIL", "tolerance_mm",
+    "tolerance_deg" (None when not given), "e_t_mm", "theta_t_deg", "failed": the keys over
+    their tolerance}."""
+    if tolerance_mm is None and tolerance_deg is None:
+        return None
+    for name, tol in (("tolerance_mm", tolerance_mm), ("tolerance_deg", tolerance_deg)):
+        if tol is not None and not (np.isfinite(tol) and tol > 0):
+            raise CalibrationError(f"{name} must be a finite number > 0, got {tol!r}")
+    e_t, th_t = float(errors["e_t_mm"]), float(errors["theta_t_deg"])
+    failed = [k for k, v, tol in (("e_t_mm", e_t, tolerance_mm),
+                                  ("theta_t_deg", th_t, tolerance_deg))
+              if tol is not None and not v <= tol]
+    return {"result": "FAIL" if failed else "PASS", "tolerance_mm": tolerance_mm,
+            "tolerance_deg": tolerance_deg, "e_t_mm": e_t, "theta_t_deg": th_t,
+            "failed": failed}
+
+
 def check_calibration(session: Session, cf: CalibrationFile,
-                      session_sha256: str | None = None) -> dict[str, Any]:
+                      session_sha256: str | None = None, tolerance_mm: float | None = None,
+                      tolerance_deg: float | None = None) -> dict[str, Any]:
     """Evaluate the stored calibration ``cf`` (X, Y, Z: 4×4 mm) on every usable pose of
     ``session`` (A, B, C: 4×4 mm), no fitting. Returns plain JSON types, errors in mm and
     degrees: "calibration" (file, method, poses, applied, created,
@@ -59,7 +85,8 @@ def check_calibration(session: Session, cf: CalibrationFile,
     and rot_deg, e_z/θ_z for QR24), "outliers", "truth" (None without one), and "arm" (None
     without an identified arm): {"nominal", "source", "frame_change_mm", "frame_change_deg":
     how far the controller's frame found on this session (``controller_frame``) is from the
-    stored one}. Raises CalibrationError when the session has no usable pose or lacks the
+    stored one}, and "verdict" (:func:`verdict` with ``tolerance_mm`` / ``tolerance_deg``;
+    None without either). Raises CalibrationError when the session has no usable pose or lacks the
     marker, and, for a calibration with an arm, when a pose has no joints or the recorded
     poses are not that arm's nominal kinematics."""
     cal = cf.calibration
@@ -82,6 +109,7 @@ def check_calibration(session: Session, cf: CalibrationFile,
                "frame_change_mm": float(np.linalg.norm(D[:3, 3])),
                "frame_change_deg": float(np.degrees(rotation_angle(D[None])[0]))}
     stored = cf.session
+    errors = _errors(cal.errors(A, B, C))
     return {
         "calibration": {"file": str(cf.path), "method": cal.method, "n_poses": cal.n_poses,
                         "applied": str(cal.applied), "created": cf.created,
@@ -92,10 +120,11 @@ def check_calibration(session: Session, cf: CalibrationFile,
                     "n_skipped": sum(p.skipped is not None for p in session.poses),
                     "bodies": ["marker", "probe"] if C is not None else ["marker"]},
         "same_session": bool(session_sha256 and stored.get("sha256") == session_sha256),
-        "errors": _errors(cal.errors(A, B, C)),
+        "errors": errors,
         "outliers": find_outliers(pose_residuals(session, cal)),
         "truth": truth_errors_of(session, cf.calibration, C, q),
         "arm": arm,
+        "verdict": verdict(errors, tolerance_mm, tolerance_deg),
     }
 
 
@@ -171,4 +200,19 @@ def format_check(res: dict[str, Any]) -> str:
                            "rotation angle in degrees, averaged over the poses (Wang et al. "
                            "2018; docs/methods.md). A check error well above the stored one "
                            "means the rig moved: recalibrate.", 98, subsequent_indent="  ")
+    if res.get("verdict"):
+        lines += ["", verdict_line(res["verdict"])]
     return "\n".join(lines)
+
+
+def verdict_line(v: dict[str, Any]) -> str:
+    """"PASS: …" or "FAIL: …": each judged total against its tolerance (mm, degrees)."""
+    parts = []
+    for key, label, unit, tol in (("e_t_mm", "e_t", " mm", v["tolerance_mm"]),
+                                  ("theta_t_deg", "θ_t", "°", v["tolerance_deg"])):
+        if tol is not None:
+            op = ">" if key in v["failed"] else "≤"
+            parts.append(f"{label} {v[key]:.4f}{unit} {op} {tol:g}{unit}")
+    tail = (": recalibrate (tracker, coil mount or robot moved, or a bad session: see the "
+            "outlier poses)" if v["result"] == "FAIL" else " (every pose held out)")
+    return f"{v['result']}: " + ", ".join(parts) + tail

@@ -320,9 +320,9 @@ class MockProcess:
             self.endpoints = json.loads(line)
         except json.JSONDecodeError:
             err = self._stop_and_stderr()
+            last = (err or line).strip().splitlines()
             raise ConfigError(f"mock for {config} did not start: "
-                              f"{(err or line).strip().splitlines()[-1:] or ['no output']}")\
-                from None
+                              f"{last[-1] if last else 'no output'}") from None
 
     def _first_line(self, timeout_s: float) -> str:
         assert self.proc.stdout is not None

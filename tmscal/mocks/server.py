@@ -16,7 +16,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any, ClassVar
 
-from ..net import loopback_family, url_host
+from ..net import listen_error, loopback_family, url_host
 
 log = logging.getLogger(__name__)
 
@@ -61,9 +61,9 @@ class TCPListener:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             s.bind((self.host, self.port))
             s.listen(self.backlog)
-        except OSError:
+        except OSError as e:
             s.close()
-            raise
+            raise listen_error(e, self.what, self.host, self.port) from e
         s.settimeout(_ACCEPT_POLL_S)
         self._sock = s
         self.port = s.getsockname()[1]

@@ -21,7 +21,8 @@ if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
-           "format_matrix", "distortion_text", "arm_rows", "error_rows", "truth_rows",
+           "format_matrix", "distortion_text", "arm_rows", "before_after_rows", "error_rows",
+           "truth_rows",
            "uncertainty_rows", "outlier_lines", "legend_lines", "number", "plain_value"]
 
 
@@ -157,6 +158,40 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
             continue
         lines.append(f"  {head}: {len(combos)}")
         lines += [w for c in combos for w in _wrap(c.get("text", "?"), "    ", "        ")]
+    return lines
+
+
+def before_after_rows(res: SolveResult) -> list[str]:
+    """With an arm (``res.nominal``): the hold-out errors, and the coil placement against the
+    truth of a simulated session, on the controller's poses as recorded (before) beside
+    those with the arm (after); mm and degrees. Empty without an arm."""
+    b = res.nominal
+    if not b or res.arm is None:
+        return []
+    src = res.arm.get("source")
+    how = ("its deviations estimated with X, Y, Z" if src == "estimated"
+           else f"A recomputed from the joints with {src}")
+    lines = _wrap(f"before → after: the controller's poses as recorded (nominal "
+                  f"{res.arm['nominal']} kinematics) → with the arm ({how}); errors "
+                  f"{res.errors_on} in both")
+    lines.append(f"  {'':<{_W - 8}}{'before mm':>11}{'after mm':>11}{'before deg':>12}"
+                 f"{'after deg':>11}")
+
+    def row(label: str, before: tuple[float, float], after: tuple[float, float]) -> str:
+        return (f"  {label:<{_W - 8}}{before[0]:>11.4f}{after[0]:>11.4f}{before[1]:>12.4f}"
+                f"{after[1]:>11.4f}")
+
+    e0, e1 = b["errors"], res.errors
+    for body in ("marker", "probe"):
+        if body in e0 and body in e1:
+            lines.append(row(body, (e0[body]["trans_mm"], e0[body]["rot_deg"]),
+                             (e1[body]["trans_mm"], e1[body]["rot_deg"])))
+    lines.append(row("total  e_t, θ_t", (e0["e_t_mm"], e0["theta_t_deg"]),
+                     (e1["e_t_mm"], e1["theta_t_deg"])))
+    t0, t1 = b.get("truth") or {}, res.truth or {}
+    if "coil_placement_mm" in t0 and "coil_placement_mm" in t1:
+        lines.append(f"  {'coil placement vs the truth, mean mm':<{_W - 8}}"
+                     f"{t0['coil_placement_mm']:>11.4f}{t1['coil_placement_mm']:>11.4f}")
     return lines
 
 
@@ -307,6 +342,9 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
         lines += [""] + extra
     if res.arm is not None:
         lines += [""] + arm_rows(res.arm)
+    extra = before_after_rows(res)
+    if extra:
+        lines += [""] + extra
     if res.prediction:
         lines += [""] + prediction_rows(res)
     if res.truth is not None:

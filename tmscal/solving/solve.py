@@ -120,6 +120,10 @@ class SolveResult:
     #: kinematics file; docs/kinematics.md); None when the controller's poses are taken as
     #: they are
     arm: dict[str, Any] | None = None
+    #: with an arm (``kinematics``): the same solve on the controller's poses as recorded
+    #: (the nominal kinematics), the "before" of the arm's "after": {errors_on, errors,
+    #: errors_sd, truth} in this result's units; None without an arm
+    nominal: dict[str, Any] | None = None
     #: the per-pose residuals the outliers were found on (``pose_residuals`` of the poses as
     #: solved, e.g. recomputed from a kinematics file); not part of ``to_json``
     residuals: dict[str, Any] | None = field(default=None, repr=False)
@@ -141,7 +145,7 @@ class SolveResult:
             out["Z_probe"] = _mat(self.Z_probe)
         if self.truth is not None:
             out["truth"] = self.truth
-        for k in ("uncertainty", "distortion", "options", "arm", "prediction"):
+        for k in ("uncertainty", "distortion", "options", "arm", "nominal", "prediction"):
             if getattr(self, k) is not None:
                 out[k] = plain(getattr(self, k))
         return out
@@ -216,8 +220,10 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     held-out joints; the cross-validation folds keep the level chosen on all poses. An
     :class:`~tmscal.calib.kinematics.Arm` instead recomputes every robot pose from its joints
     with that arm (``kinematics_source`` names it), which the calibration then carries when
-    it is a registered arm the recorded poses follow (``kinematics.given_arm``). Raises
-    CalibrationError for unusable data, bad counts, a pose without joints, an unknown arm."""
+    it is a registered arm the recorded poses follow (``kinematics.given_arm``). With either,
+    the result also holds the same solve on the controller's poses as recorded
+    (``SolveResult.nominal``: before and after). Raises CalibrationError for unusable data,
+    bad counts, a pose without joints, an unknown arm."""
     options = dict(options or {})
     estimate = isinstance(kinematics, str) and kinematics == "estimate"
     if kinematics is not None and not estimate and not isinstance(kinematics, Arm):
@@ -230,6 +236,12 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     if not estimate and (arm is not None or level != "auto" or tolerances is not None):
         raise CalibrationError("--arm, --level and --tolerance-length/--tolerance-angle go "
                                "with --kinematics estimate")
+    as_recorded = None
+    if kinematics is not None:  # before: the same solve on the controller's poses
+        before = solve_session(session, method, train, orthonormal, folds, in_sample,
+                               options)[1]
+        as_recorded = {"errors_on": before.errors_on, "errors": before.errors,
+                   "errors_sd": before.errors_sd, "truth": before.truth}
     given = None
     if isinstance(kinematics, Arm):
         session, given = given_arm(session, kinematics, kinematics_source)
@@ -300,7 +312,7 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         errors_sd=sd, cv=cv, outliers=find_outliers(residuals), residuals=residuals,
         uncertainty=cal.uncertainty, distortion=cal.distortion, options=opts_shown or None,
         arm=None if cal.arm is None else arm_summary(cal.arm, named_by),
-        prediction=session_prediction(session))
+        nominal=as_recorded, prediction=session_prediction(session))
     return cal, res
 
 

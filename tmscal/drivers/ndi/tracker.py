@@ -41,7 +41,7 @@ from . import protocol as p
 from .codes import ErrorCode, HandleStatus, PortStatus, SystemStatus, flag_names
 from .replies import ReplyKind
 from .rom import read_roms
-from .wire import open_port
+from .wire import open_port, silence_message
 
 log = logging.getLogger(__name__)
 
@@ -138,6 +138,8 @@ class NDITracker(Tracker):
         self._identity: dict[str, Any] = {}
         #: status bits last logged, per "system" / tool name (see ``_log_status``)
         self._status_seen: dict[str, int] = {}
+        #: since the port was opened: any byte arrived (a device is there), a break was sent
+        self._heard = self._broke = False
 
     # --- lifecycle ---------------------------------------------------------------------------
     def _open(self) -> None:
@@ -146,11 +148,18 @@ class NDITracker(Tracker):
         self._opens += 1
         self._ser.reset_input_buffer()
         self._status_seen.clear()
+        self._heard = self._broke = False
         do_reset = self.reset if self.reset is not None else all(
             v is not None for v in self.rom_paths.values())
         if do_reset and not self.networked:
             self._break_reset()
-        self._init()
+        try:
+            self._init()
+        except DeviceTimeout as e:
+            if self._heard:
+                raise
+            raise DeviceTimeout(silence_message(self.name, self.port, self.baud, self._broke),
+                                device=self.name) from e
         self._identify()
         if self.baud != 9600 and not self.networked:
             self._command("COMM", f"{p.BAUD_CODES[self.baud]}0000")
@@ -224,6 +233,7 @@ class NDITracker(Tracker):
         except (serial.SerialException, OSError, NotImplementedError) as e:
             log.debug("%s: send_break not possible (%s); INIT only", self.name, e)
             return
+        self._broke = True
         raw = self._read_reply(self.reset_timeout_s)
         if raw == p.RESET_REPLY:
             log.info("%s: device reset", self.name)
@@ -239,10 +249,11 @@ class NDITracker(Tracker):
         except DeviceTimeout:
             if self.baud == 9600 or self.networked:
                 raise
-            # a device left at the working rate by an earlier session without reset
+            # a device left at the working rate by an earlier session without reset (one
+            # running answers at once: after silence at 9600 the short timeout is enough)
             log.info("%s: no answer at 9600 baud; trying INIT at %d", self.name, self.baud)
             self._ser.baudrate = self.baud
-            self._init_tracking_aware()
+            self._init_tracking_aware(None if self._heard else self.timeout_s)
         except DeviceError as e:
             if e.code != ErrorCode.INVALID_MODE:
                 raise
@@ -258,9 +269,9 @@ class NDITracker(Tracker):
             time.sleep(_AFTER_RESET_S)
             self._command("INIT")
 
-    def _init_tracking_aware(self) -> None:
+    def _init_tracking_aware(self, timeout_s: float | None = None) -> None:
         try:
-            self._command("INIT")
+            self._command("INIT", timeout_s=timeout_s)
         except DeviceError as e:
             if isinstance(e, DeviceTimeout) or e.code != ErrorCode.INVALID_MODE:
                 raise
@@ -385,9 +396,11 @@ class NDITracker(Tracker):
         log.log(level, "%s: %s status %s", self.name, where, flag_names(flags(bits)))
 
     # --- command / reply ---------------------------------------------------------------------
-    def _command(self, name: str, params: str = "") -> p.Reply:
-        """Send a text command and return its (non-error) reply; ERRORxx → DeviceError."""
-        raw, attempts = self._transact(name, params)
+    def _command(self, name: str, params: str = "", timeout_s: float | None = None
+                 ) -> p.Reply:
+        """Send a text command and return its (non-error) reply; ERRORxx → DeviceError.
+        ``timeout_s`` overrides the command's reply timeout."""
+        raw, attempts = self._transact(name, params, timeout_s)
         reply = self._parse_text(raw, name)
         if attempts > 1 and reply.kind == ReplyKind.ERROR \
                 and reply.code in _DONE_ON_RETRY.get(name, ()):
@@ -408,13 +421,16 @@ class NDITracker(Tracker):
             log.warning("%s %s: WARNING%02X (%s)", self.name, name, reply.code, reply.meaning)
         return reply
 
-    def _transact(self, name: str, params: str = "") -> tuple[bytes, int]:
+    def _transact(self, name: str, params: str = "", timeout_s: float | None = None
+                  ) -> tuple[bytes, int]:
         """Send ``name:params`` with CRC and return (raw reply, attempts used), re-sending
-        after corrupt, torn or missing replies up to ``retries`` times."""
+        after corrupt, torn or missing replies up to ``retries`` times; not into a line on
+        which nothing has answered since the port was opened (nothing is there to answer)."""
         if self._ser is None:
             raise DeviceError(f"{self.name}: {name} on a closed port", device=self.name)
         cmd = p.encode_command(name, params)
-        timeout_s = max(self.timeout_s, self.command_timeouts.get(name, 0.0))
+        if timeout_s is None:
+            timeout_s = max(self.timeout_s, self.command_timeouts.get(name, 0.0))
         last: DeviceError | None = None
         for attempt in range(self.retries + 1):
             if attempt:
@@ -429,9 +445,13 @@ class NDITracker(Tracker):
             raw, last = self._receive(name, timeout_s)
             if last is None:
                 return raw, attempt + 1
+            if not self._heard:
+                break
         assert last is not None
-        raise type(last)(f"{last} (after {self.retries + 1} attempts)", code=last.code,
-                         text=last.text, device=self.name)
+        tries = (f"after {attempt + 1} attempts" if self._heard
+                 else "not re-sent: nothing has answered on this port yet")
+        raise type(last)(f"{last} ({tries})", code=last.code, text=last.text,
+                         device=self.name)
 
     def _receive(self, name: str, timeout_s: float) -> tuple[bytes, DeviceError | None]:
         """One reply to ``name`` with its framing and CRC checked, or the problem (a corrupt,
@@ -481,6 +501,7 @@ class NDITracker(Tracker):
             except (serial.SerialException, OSError) as e:
                 raise ConnectionLost(f"{self.name}: reading from {self.port} failed: {e}",
                                      device=self.name) from e
+            self._heard = self._heard or bool(chunk)
             buf += chunk
 
 

@@ -21,7 +21,7 @@ import serial
 from ...errors import ConfigError, ConnectionLost
 from .settings import tracker_port_problem
 
-__all__ = ["open_port", "wire_log_problem", "spy_url", "remote_host"]
+__all__ = ["open_port", "wire_log_problem", "spy_url", "remote_host", "silence_message"]
 
 _READ_SLICE_S = 0.05
 
@@ -84,3 +84,18 @@ def open_port(device: str, port: str, write_timeout_s: float, log_file: Path | N
                                      timeout=_READ_SLICE_S, write_timeout=write_timeout_s)
     except (serial.SerialException, OSError, ValueError) as e:
         raise ConnectionLost(f"{device}: cannot open {port}: {e}", device=device) from e
+
+
+def silence_message(device: str, port: str, baud: int, broke: bool) -> str:
+    """What to check when nothing at all answered on ``port`` since it was opened: not the
+    serial break (``broke``: one was sent), nor INIT at 9600 baud and at ``baud``; for a
+    ``socket://`` port, INIT. One line naming the port and what to check."""
+    if port.lower().startswith("socket://"):
+        return (f"{device}: nothing answered on {port} (no reply to INIT): check the address "
+                "and port (tracker.port) and that the tracker is powered on and on this network")
+    rates = "9600" if baud == 9600 else f"9600 and {baud}"
+    return (f"{device}: nothing answered on {port} (no reply to "
+            + ("the serial break, nor to " if broke else "") + f"INIT at {rates} baud): check "
+            "that the tracker is powered on (its self-test finished), that its cable is plugged "
+            "in at both ends and that this is its port (tracker.port), and the baud rate "
+            f"(tracker.baud: {baud})")

@@ -12,12 +12,17 @@ from contextlib import contextmanager
 from typing import Any
 
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, RobotFault
+from ...net import tcp_probe
 from ...timing import Deadline
 
 _POLL_S = 0.005          # how often a wait looks at the worker or the receive stream (s)
 _LINK_GRACE_S = 0.5      # a receive link down this long during a call: the call is abandoned
 #: ur_rtde error texts that name the robot's state, not the link (RobotFault, not retried)
 _ROBOT_STATE_TEXTS = ("remote control", "control script", "control program")
+RTDE_PORT = 30004        # UR's fixed RTDE port
+#: how long the connect check waits for the controller's RTDE port to accept (s): a LAN
+#: answers in milliseconds, and ur_rtde's own connect gives no clear reason when it fails
+CONNECT_TIMEOUT_S = 3.0
 
 
 class RTDECalls:
@@ -31,6 +36,29 @@ class RTDECalls:
     _rx: Any
     _ctl: Any
     _stuck: bool
+
+    def _check_reachable(self) -> None:
+        """Before ur_rtde is asked to connect (its failures print raw text on stderr and say
+        "Timeout" for an instant refusal): open and close a TCP connection to the controller's
+        RTDE port, ``CONNECT_TIMEOUT_S`` at most. ``ConnectionLost`` in one line saying which
+        failure it was and what to check: refused (an address where no UR controller serves
+        RTDE, or one still booting), no answer (address, cable, power, subnet), or the
+        system's reason (no route, a name that does not resolve)."""
+        why = tcp_probe(self.host, RTDE_PORT, CONNECT_TIMEOUT_S)
+        if why is None:
+            return
+        where = f"ur {self.host}: cannot connect to the controller (RTDE, TCP port {RTDE_PORT})"
+        if why == "refused":
+            msg = (f"{where}: connection refused: something answers at {self.host} but no UR "
+                   "controller serves RTDE there; check that robot.host is the controller's "
+                   "address and that the controller has finished booting (PolyScope running)")
+        else:
+            got = (f"no answer within {CONNECT_TIMEOUT_S:g} s" if why == "timeout"
+                   else why)
+            msg = (f"{where}: {got}; check robot.host (the controller's address, on the "
+                   "pendant: Settings > System > Network), the network cable, that the "
+                   "controller is powered on, and that this computer is on the robot's subnet")
+        raise ConnectionLost(msg, device=self.name, text=why)
 
     @contextmanager
     def _translated(self, what: str) -> Iterator[None]:

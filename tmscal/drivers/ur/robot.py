@@ -164,6 +164,7 @@ class URRobot(RTDECalls, Robot):
         # ur_rtde: FLAG_UPLOAD_SCRIPT sends the script to port 30003; FLAG_USE_EXT_UR_CAP
         # serves it to the External Control URCap and skips the remote-control check
         flags = F.FLAG_UPLOAD_SCRIPT if self.upload_script else F.FLAG_USE_EXT_UR_CAP
+        self._check_reachable()
         self._identity = self._dashboard_check("connect")
         self._identity["arm"] = ur_arm(self._identity.get("model"),
                                        self._identity.get("controller_version"),

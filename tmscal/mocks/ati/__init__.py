@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...drivers.ati import codec
-from ...net import loopback_family, url_host
+from ...net import listen_error, loopback_family, url_host
 from ..clock import REAL_TIME, Clock
 from ..server import MockDevice
 
@@ -128,9 +128,9 @@ class ATINetFTMock(MockDevice):
         s = socket.socket(self.family, socket.SOCK_DGRAM)
         try:
             s.bind((self.host, self.port))
-        except OSError:
+        except OSError as e:
             s.close()
-            raise
+            raise listen_error(e, "ATI Net F/T mock", self.host, self.port, "UDP") from e
         s.settimeout(_POLL_S)
         self._sock, self.port = s, s.getsockname()[1]
         self._stop.clear()

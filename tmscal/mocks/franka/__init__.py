@@ -44,7 +44,7 @@ import numpy as np
 
 from ...errors import ConfigError, MissingExtraError
 from ...geometry import angle_between
-from ...net import loopback_family
+from ...net import listen_error, loopback_family
 from ...sim import SimRig
 from ..clock import REAL_TIME, Clock
 from ..server import MockDevice
@@ -210,7 +210,7 @@ class FrankaMock(MockDevice):
         try:
             self._server.init()
         except OSError as e:
-            raise OSError(f"franka mock: cannot bind {self.host}:1337 ({e})") from e
+            raise listen_error(e, "franka mock", self.host, 1337) from e
         self._sim.register_post_step_callback(self._after_step)
         self._update_rig(force=True)
         self._server.run_async()
