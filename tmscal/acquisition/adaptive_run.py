@@ -46,6 +46,7 @@ from ..calib.prediction import (
 from ..config import RigConfig
 from ..drivers.base import ConfigError
 from ..errors import CalibrationError, SessionError
+from ..poses import JOINTS_KIND
 from ..session import PoseRecord, Session
 from ..solving.predict import (
     adaptive_header,
@@ -237,6 +238,10 @@ class AdaptiveStrategy(PlanStrategy):
             raise ConfigError(f"{cfg.path}: key 'tracker.tools': adaptive acquisition predicts "
                               "the coil placement: name the marker tool 'marker' and the probe "
                               "'probe'")
+        if cfg.plan.kind == JOINTS_KIND:
+            raise ConfigError(f"{cfg.path}: key 'plan.kind': the adaptive run's candidates are "
+                              "an eq14 or sphere plan around P0 (its prediction region); a "
+                              "joints plan goes with tmscal acquire without --adaptive")
 
     def prepare(self) -> None:
         self.adaptive = self.adaptive or settings_for(self.cfg)

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..calib.prediction import AdaptiveSettings, predict
 from ..errors import CalibrationError, SessionError
-from ..poses import PlanSpec
+from ..poses import JOINTS_KIND, PlanSpec
 from ..session import Session
 
 __all__ = ["PHASES", "ADAPTIVE_OVERRIDES", "adaptive_header", "settings_from_header",
@@ -104,6 +104,10 @@ def predict_session(session: Session, settings: Any = None) -> tuple[Any, dict[s
         spec = PlanSpec.from_header(session.header)
     except SessionError as e:
         raise CalibrationError(f"{session.path}: no prediction region: {e}") from None
+    if spec.kind == JOINTS_KIND:
+        raise CalibrationError(f"{session.path}: no prediction region: the session's plan is "
+                               "a joints plan (the region is an eq14 or sphere plan's first "
+                               "poses)")
     region = spec.with_n(settings.region).poses()
     A, B, C, opts = prediction_inputs(session.poses, session.bodies)
     if len(A) < 3:
