@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...geometry import rotvec_from_matrix
 from .jacobian import deviation_twists
 from .model import Arm
 
@@ -34,11 +35,9 @@ def _error(chain: Arm, q: np.ndarray, target: np.ndarray
     names = [f"theta0_{i + 1}" for i in range(chain.n_joints)]
     A, J = deviation_twists(chain, q[None], names)
     D = np.linalg.inv(A[0]) @ target
-    R = D[:3, :3]
-    w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    s = float(np.linalg.norm(w))
-    th = float(np.arctan2(s, 0.5 * (np.trace(R) - 1.0)))  # exact near 0, unlike arccos
-    rv = w * (th / s) if s > 1e-12 else w
+    # through the quaternion: exact near 0 and right near π, where the skew part of R
+    # vanishes (a seed turned half a turn from the target would otherwise look converged)
+    rv = rotvec_from_matrix(D[:3, :3])
     return np.concatenate([rv, D[:3, 3]]), J[0]
 
 
