@@ -169,3 +169,11 @@ def test_joints_spec_round_trip():
     back = JointsSpec.from_header(json.loads(json.dumps(j.to_header())))
     assert back.arm == "vs060" and np.array_equal(back.q0, j.q0)
     assert (back.span_deg, back.pool) == (25.0, 100)
+
+
+def test_not_with_adaptive(tmp_path):
+    from tmscal.acquisition.adaptive_run import AdaptiveStrategy
+
+    cfg = load_config(write_config(tmp_path, "mock-ur-polaris-kin.yaml", plan=JOINTS))
+    with pytest.raises(ConfigError, match=r"plan\.kind': the adaptive run's candidates"):
+        AdaptiveStrategy(cfg).check()
