@@ -34,8 +34,9 @@ much robot time) it needs with the default plan and with the joints plan.
 Robot time (s) is the motion model, not the fast mock's clock: straight Cartesian moves from
 P0 through every commanded pose at the config's speed and acceleration caps
 (``tmscal.motion.move_duration``; a move the safety layer splits through P0 takes longer)
-+ a 1 s settle + ``--samples`` / frame rate per pose. Takes about 4 minutes with the
-defaults on a 2-core machine (``--skip-sim`` / ``--skip-rig`` for parts).
++ a 1 s settle + ``--samples`` / frame rate per pose. Takes about 4 minutes of CPU with the
+defaults (12 min of wall time on a shared, busy 2-core machine; ``--skip-sim`` and
+``--skip-rig`` for parts, ``--seeds`` for fewer).
 """
 
 from __future__ import annotations
@@ -210,6 +211,7 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
         all_ = f"{args.ladder[every[0]]}" if every else "not reached"
         print(f"  {arm:6}{kind:8}" + "".join(f"{x:>9.4f}" for x in m) + f"   {first}, {all_}")
         print(f"  {'':6}{'time s':8}" + "".join(f"{x:>9.0f}" for x in tm))
+    print()
 
 
 def _tmscal(*args: object) -> None:
