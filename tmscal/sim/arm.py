@@ -169,7 +169,7 @@ def inverse(model: ArmModel, target: np.ndarray, q0: np.ndarray,
     """Joint angles q (rad) with forward(model, q) = ``target`` (world ← flange 4×4 mm)
     within ``IK_TOL_MM`` / ``IK_TOL_RAD``, inside the joint limits, from ``q0``: the one
     inverse kinematics, :func:`tmscal.calib.kinematics.ik.inverse` (damped least squares on
-    the analytic joint Jacobian), on base⁻¹ · target; None when it does not converge (out of
+    the joint Jacobian), on base⁻¹ · target; None when it does not converge (out of
     reach, or only across a limit)."""
     base_inv = invert(np.asarray(model.base, dtype=np.float64))
     return ik_inverse(model, base_inv @ np.asarray(target, dtype=np.float64),
