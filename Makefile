@@ -47,6 +47,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/acquisition.py --robot denso
 	$(BIN)/python benchmarks/time_to_calibrate.py
 	$(BIN)/python benchmarks/selfcal.py
+	$(BIN)/python benchmarks/kinematics.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -46,6 +46,7 @@ from ..calib.prediction import (
 from ..config import RigConfig
 from ..drivers.base import ConfigError
 from ..errors import CalibrationError, SessionError
+from ..poses import JOINTS_KIND
 from ..session import PoseRecord, Session
 from ..solving.predict import (
     adaptive_header,
@@ -216,6 +217,7 @@ class AdaptiveStrategy(PlanStrategy):
     (their indices are taken)."""
 
     where_at_start = False
+    moves_in_order = False   # it chooses its next pose; each move is checked when planned
     damaged = "those poses are not acquired again"
 
     def __init__(self, cfg: RigConfig, settings: AdaptiveSettings | None = None,
@@ -239,6 +241,10 @@ class AdaptiveStrategy(PlanStrategy):
             raise ConfigError(f"{cfg.path}: key 'tracker.tools': adaptive acquisition predicts "
                               "the coil placement: name the marker tool 'marker' and the probe "
                               "'probe'")
+        if cfg.plan.kind == JOINTS_KIND:
+            raise ConfigError(f"{cfg.path}: key 'plan.kind': the adaptive run's candidates are "
+                              "an eq14 or sphere plan around P0 (its prediction region); a "
+                              "joints plan goes with tmscal acquire without --adaptive")
 
     def prepare(self) -> None:
         self.adaptive = self.adaptive or settings_for(self.cfg)

@@ -13,8 +13,16 @@ import numpy as np
 
 from ..config import RigConfig
 from ..errors import SafetyError
+from ..poses import JOINTS_KIND
 from .devices import envelope_for, make_robot
-from .plan import PlanSpec, check_plan, check_plan_moves, plan_summary
+from .plan import (
+    PlanSpec,
+    check_plan,
+    check_plan_moves,
+    joints_spec,
+    plan_poses,
+    plan_summary,
+)
 
 __all__ = ["DryRun", "dry_run"]
 
@@ -42,17 +50,23 @@ class DryRun:
 def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None,
             robot_host: str | None = None) -> DryRun:
     """The plan of ``cfg`` (``poses``/``samples`` override it) around P0: the robot's current
-    flange pose (read through the configured driver; nothing moves) or ``plan.start``."""
-    if isinstance(cfg.plan.start, str):
+    flange pose (read through the configured driver; nothing moves) or ``plan.start``; a
+    joints plan also reads the robot's joints (and its arm, unless ``plan.arm`` names it)."""
+    joints = None
+    if isinstance(cfg.plan.start, str) or cfg.plan.kind == JOINTS_KIND:
         with make_robot(cfg, envelope_for(cfg, None), robot_host) as rb:
-            p0 = rb.flange_pose()
-        src = "current flange pose"
+            if isinstance(cfg.plan.start, str):
+                p0, src = rb.flange_pose(), "current flange pose"
+            else:
+                p0, src = np.asarray(cfg.plan.start, dtype=float), "plan.start"
+            if cfg.plan.kind == JOINTS_KIND:
+                joints = joints_spec(cfg, rb, p0)
     else:
         p0 = np.asarray(cfg.plan.start, dtype=float)
         src = "plan.start"
-    spec = PlanSpec.from_config(cfg.plan, p0, poses)
-    plan = spec.poses()
+    spec = PlanSpec.from_config(cfg.plan, p0, poses, joints)
     envelope = envelope_for(cfg, p0)
+    plan = plan_poses(spec, envelope)
     speed = cfg.robot.speed_mm_s if cfg.robot else 100.0
     rate = cfg.tracker.frame_rate_hz if cfg.tracker else 60.0
     summary = plan_summary(plan, p0, speed, cfg.sampling.settle_s,

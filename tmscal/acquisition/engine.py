@@ -46,7 +46,7 @@ from ..errors import SessionError, TmscalError
 from ..session import PoseRecord, Session, SessionWriter, make_header, validate_record
 from ..solving.predict import PHASES
 from .devices import Devices, Endpoints, envelope_for
-from .plan import check_plan
+from .plan import check_plan, check_plan_moves
 from .progress import Progress
 from .resume import (
     check_recorded,
@@ -215,6 +215,10 @@ class Engine:
         envelope = envelope_for(self.cfg, p0)
         strategy.make_plan(dev, p0, envelope)
         check_plan(strategy.poses, envelope)
+        if strategy.moves_in_order:  # the way between the poses, with the controller's law
+            _, blocked = check_plan_moves(strategy.poses, envelope, p0, dev.robot.motion_law())
+            if blocked:
+                raise SafetyError(f"the plan was checked before the run: {blocked[0]}")
         dev.robot.envelope = envelope
         notes = strategy.settings(None)
         if strategy.where_at_start:

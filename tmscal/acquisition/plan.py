@@ -1,8 +1,10 @@
-"""Acquisition plans: the safety check of a whole plan before anything moves (``check_plan``,
-every pose; ``check_plan_moves``, the way between them) and the dry run's summary
-(``plan_summary``), all as values: nothing here prints. Poses are
-base_from_flange 4×4 in mm; which poses a plan visits (``PlanSpec``) and the generators live
-in :mod:`tmscal.poses`.
+"""Acquisition plans: the poses of a plan of any kind (``plan_poses``: the one place a plan's
+poses are made; a ``joints`` plan's parameters from the robot, ``joints_spec``), the safety
+check of a whole plan before anything moves (``check_plan``, every pose;
+``check_plan_moves``, the way between them) and the dry run's summary (``plan_summary``), all
+as values: nothing here prints. Poses are base_from_flange 4×4 in mm; which poses a plan
+visits (``PlanSpec``) and the pose generators live in :mod:`tmscal.poses`, the joints plan's
+sampler in :mod:`tmscal.calib.kinematics.excite`.
 """
 
 from __future__ import annotations
@@ -11,12 +13,73 @@ from typing import Any
 
 import numpy as np
 
-from ..drivers.base import Envelope, SafetyError
-from ..poses import MAX_PLAN_POSES, PlanSpec, make_plan
-from ..safety import DEFAULT_LAW, check_path, plan_move
+from ..drivers.base import ConfigError, Envelope, SafetyError
+from ..errors import SessionError
+from ..poses import JOINTS_KIND, MAX_PLAN_POSES, JointsSpec, PlanSpec, make_plan
+from ..safety import DEFAULT_LAW, MotionLaw, check_path, plan_move
 
-__all__ = ["MAX_PLAN_POSES", "PlanSpec", "check_plan", "check_plan_moves", "plan_summary",
-           "make_plan"]
+__all__ = ["MAX_PLAN_POSES", "PlanSpec", "JointsSpec", "check_plan", "check_plan_moves",
+           "plan_summary", "make_plan", "plan_poses", "joints_spec"]
+
+#: a joints plan's q0 must put the nominal arm at its P0 to this (mm, and rotation entries)
+Q0_TOL_MM = 1e-3
+
+
+def plan_poses(spec: PlanSpec, envelope: Envelope | None) -> np.ndarray:
+    """The poses (n, 4, 4) base_from_flange mm of the plan ``spec``: ``spec.poses()`` for the
+    pose kinds; for ``joints`` the configurations of its arm spread inside ``envelope``
+    (:func:`tmscal.calib.kinematics.excite.joints_plan`: ConfigError when too few are
+    inside). SessionError when a joints plan's recorded q0 does not put the nominal arm at
+    its P0 (an edited header)."""
+    if spec.kind != JOINTS_KIND:
+        return spec.poses()
+    from ..calib.kinematics import arm_by_name, base_from_flange
+    from ..calib.kinematics.excite import joints_plan
+
+    j = spec.joints
+    if j is None:
+        raise SessionError("a joints plan without its 'joints' entry (arm, q0_rad, frame)")
+    arm = arm_by_name(j.arm, "the plan's joints.arm")
+    if len(j.q0) != arm.n_joints:
+        raise SessionError(f"the plan's joints.q0_rad has {len(j.q0)} joints; the {arm.name} "
+                           f"arm has {arm.n_joints}")
+    at = j.frame @ base_from_flange(arm, j.q0)
+    if not float(np.abs(at - spec.p0).max()) <= Q0_TOL_MM:
+        raise SessionError(f"the plan's joints.q0_rad put the {arm.name} arm's flange at "
+                           f"{np.round(at[:3, 3], 3).tolist()} mm, not at its P0 "
+                           f"{np.round(spec.p0[:3, 3], 3).tolist()} mm: the plan was edited")
+    return joints_plan(arm, j.q0, j.frame, spec.p0, spec.n, spec.seed, j.pool, j.span_deg,
+                       spec.radius_mm, spec.rotation_deg, envelope).poses
+
+
+def joints_spec(cfg: Any, robot: Any, p0: np.ndarray) -> JointsSpec:
+    """A new joints plan's parameters (:class:`JointsSpec`) for the config ``cfg`` (its
+    ``plan`` section) on ``robot`` (a connected driver) around ``p0`` (base_from_flange 4×4
+    mm): the arm ``plan.arm``, else the one the driver reports; the robot's joints (rad) and
+    flange pose now give the controller frame and the joints of P0. ConfigError naming
+    ``plan.arm`` when no arm is known or P0 is out of its reach, ``robot.driver`` when the
+    driver reports no joints."""
+    from ..calib.kinematics import arm_by_name
+    from ..calib.kinematics.arms import ARM_NAMES
+    from ..calib.kinematics.excite import start_joints
+
+    plan = cfg.plan
+    name = plan.arm or (robot.identity() or {}).get("arm")
+    if not name:
+        raise ConfigError(f"{cfg.path}: key 'plan.arm': the robot driver does not say which "
+                          f"arm it is; name it for the joints plan (one of "
+                          f"{', '.join(ARM_NAMES)})")
+    arm = arm_by_name(name, f"{cfg.path}: key 'plan.arm'")
+    try:
+        q_now = np.asarray(robot.joint_positions(), dtype=float)
+    except NotImplementedError as e:
+        raise ConfigError(f"{cfg.path}: key 'robot.driver': {e}; the joints plan needs the "
+                          "joint angles") from None
+    try:
+        q0, frame = start_joints(arm, p0, q_now, robot.flange_pose())
+    except ConfigError as e:
+        raise ConfigError(f"{cfg.path}: {e}") from None
+    return JointsSpec(arm.name, q0, frame, float(plan.span_deg), int(plan.pool))
 
 
 def check_plan(poses: np.ndarray, envelope: Envelope) -> None:
@@ -30,23 +93,24 @@ def check_plan(poses: np.ndarray, envelope: Envelope) -> None:
                               f"the safety envelope: {'; '.join(v)}. Nothing was moved.")
 
 
-def check_plan_moves(poses: np.ndarray, envelope: Envelope, start: np.ndarray
-                     ) -> tuple[list[int], list[str]]:
+def check_plan_moves(poses: np.ndarray, envelope: Envelope, start: np.ndarray,
+                     law: MotionLaw = DEFAULT_LAW) -> tuple[list[int], list[str]]:
     """The way between a plan's poses (from ``start``, P0, through every pose in order; 4×4
     base_from_flange mm) looked at before the run, as the flange's straight path: (the moves
     whose straight path leaves the envelope and will be split through P0, the refusals of the
-    moves for which no split route stays inside either). Judged with the most cautious motion
-    law (a straight flange move that turns only while translating: docs/safety.md); at run
-    time each move is planned again with the controller's own law before it is sent. Moves
-    are numbered by the pose they go to."""
+    moves for which no split route stays inside either). Judged with ``law``, by default the
+    most cautious one (a straight flange move that turns only while translating:
+    docs/safety.md) for a dry run that knows no controller; a new run gives its robot's own
+    ``motion_law()``, and each move is planned again before it is sent. Moves are numbered by
+    the pose they go to."""
     split: list[int] = []
     refused: list[str] = []
     prev = np.asarray(start, dtype=np.float64)
     for i, P in enumerate(np.asarray(poses, dtype=np.float64)):
         if not envelope.violations(prev) and not envelope.violations(P) \
-                and check_path(envelope, prev, P, DEFAULT_LAW.path) is not None:
+                and check_path(envelope, prev, P, law.path) is not None:
             try:
-                plan_move(envelope, prev, P, DEFAULT_LAW, 1.0, 1.0, f"move to plan pose {i}")
+                plan_move(envelope, prev, P, law, 1.0, 1.0, f"move to plan pose {i}")
                 split.append(i)
             except SafetyError as e:
                 refused.append(str(e))

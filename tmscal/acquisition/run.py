@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,10 +29,11 @@ import numpy as np
 from ..config import RigConfig
 from ..drivers.base import ConfigError
 from ..errors import SessionError
+from ..poses import JOINTS_KIND
 from ..session import PoseRecord, Session
-from .devices import Devices, Endpoints
+from .devices import Devices, Endpoints, envelope_for
 from .engine import AcquireResult, AcquisitionStopped, Engine, valid_or_skipped
-from .plan import PlanSpec
+from .plan import PlanSpec, joints_spec, plan_poses
 from .progress import Progress
 from .resume import POSE_TOL_MM, RESUME_HINT, resume_command
 from .sample import PoseSample, sample_pose
@@ -86,8 +88,12 @@ def check_plan_matches(cfg: RigConfig, session: Session, spec: PlanSpec) -> None
     where = f"{session.path}"
     want = {"kind": cfg.plan.kind, "seed": cfg.plan.seed, "radius_mm": cfg.plan.radius_mm,
             "rotation_deg": cfg.plan.rotation_deg}
+    if spec.joints is not None:
+        want |= {"span_deg": cfg.plan.span_deg, "pool": cfg.plan.pool}
+        if cfg.plan.arm is not None:
+            want["arm"] = cfg.plan.arm
     for k, v in want.items():
-        got = getattr(spec, k)
+        got = getattr(spec.joints, k) if k in ("span_deg", "pool", "arm") else getattr(spec, k)
         if got != v:
             raise SessionError(f"{where}: the session's plan.{k} is {got!r}; {cfg.path} says "
                                f"{v!r}; {RESUME_HINT}")
@@ -103,6 +109,8 @@ class PlanStrategy(Strategy):
     tracker with the sampling settings (``samples`` overrides the count). On a resume the
     plan and the sampling settings are the session header's; a run extended by ``--poses``
     earlier keeps its length unless told otherwise."""
+
+    moves_in_order = True
 
     def __init__(self, cfg: RigConfig, poses: int | None = None,
                  samples: int | None = None) -> None:
@@ -124,12 +132,26 @@ class PlanStrategy(Strategy):
             return super().start_pose(dev)
         return np.asarray(self.cfg.plan.start, dtype=float)
 
+    def _poses(self, spec: PlanSpec) -> np.ndarray:
+        """The plan's poses (``plan.plan_poses``; a joints plan inside the config's envelope
+        around its P0); a ConfigError names the config."""
+        try:
+            return plan_poses(spec, envelope_for(self.cfg, spec.p0))
+        except ConfigError as e:
+            msg = str(e)
+            raise ConfigError(msg if msg.startswith(str(self.cfg.path)) else
+                              f"{self.cfg.path}: {msg}") from None
+
     def _use(self, spec: PlanSpec) -> None:
         self.spec, self.p0, self.plan = spec, spec.p0, spec
-        self.poses = spec.poses()
+        self.poses = self._poses(spec)
 
     def make_plan(self, dev: Devices, p0: np.ndarray, envelope: Any) -> None:
-        self._use(PlanSpec.from_config(self.cfg.plan, p0, self.n))
+        joints = None
+        if self.cfg.plan.kind == JOINTS_KIND:
+            assert dev.robot is not None
+            joints = joints_spec(self.cfg, dev.robot, p0)
+        self._use(PlanSpec.from_config(self.cfg.plan, p0, self.n, joints))
 
     def read(self, session: Session) -> None:
         header = session.header
@@ -138,14 +160,27 @@ class PlanStrategy(Strategy):
         n0 = p_hdr.get("poses", 0) if isinstance(p_hdr, dict) else 0
         spec = PlanSpec.from_header(header)
         n = self.n or (last + 1 if last + 1 > n0 else None)
-        self._use(spec if n is None else spec.with_n(n))
+        try:
+            self._use(spec if n is None else spec.with_n(n))
+        except SessionError as e:
+            raise SessionError(f"{session.path}: the header's plan: {e}; {RESUME_HINT}") \
+                from None
 
     def rederive(self, session: Session) -> tuple[np.ndarray, str]:
-        """The config's plan section around the recorded P0, with the header's length."""
+        """The config's plan section around the recorded P0, with the header's length (a
+        joints plan: with the header's arm, joints of P0 and controller frame, inside the
+        config's envelope)."""
         assert self.spec is not None
         check_plan_matches(self.cfg, session, self.spec)
-        derived = PlanSpec.from_config(self.cfg.plan, self.spec.p0, self.spec.n)
-        return derived.poses(), f"{self.cfg.path}'s plan section around the recorded P0"
+        joints = self.spec.joints
+        if joints is not None:
+            joints = replace(joints, span_deg=self.cfg.plan.span_deg, pool=self.cfg.plan.pool)
+        derived = PlanSpec.from_config(self.cfg.plan, self.spec.p0, self.spec.n, joints)
+        try:
+            poses = self._poses(derived)
+        except SessionError as e:
+            raise SessionError(f"{session.path}: {e}; {RESUME_HINT}") from None
+        return poses, f"{self.cfg.path}'s plan section around the recorded P0"
 
     def settings(self, header: dict[str, Any] | None) -> list[str]:
         self.st = sampling_settings(self.cfg, header, self.samples)

@@ -42,7 +42,9 @@ class Strategy:
     messages ("pose", "configuration"); ``command`` the CLI command that resumes it;
     ``where_at_start``: the arm's position is checked before the session is written (else
     before the first move, once the first pose is chosen); ``damaged``: what a resume does
-    with the poses of damaged lines (for the note), or None for no note.
+    with the poses of damaged lines (for the note), or None for no note; ``moves_in_order``:
+    the run goes from P0 through ``poses`` in order by Cartesian moves, so the way between
+    them is checked before a new run starts.
 
     After ``start``/``resume``: ``p0`` (the envelope's centre, base_from_flange mm),
     ``poses`` (every pose the run may command, checked against the envelope before anything
@@ -54,6 +56,7 @@ class Strategy:
     command = "acquire"
     where_at_start = True
     damaged: str | None = "their poses are acquired again"
+    moves_in_order = False
 
     def __init__(self, cfg: RigConfig) -> None:
         self.cfg = cfg

@@ -7,7 +7,8 @@ A config describes one rig (see ``configs/*.yaml`` for commented examples)::
     tracker:  {driver: ndi|igtl, tools: {marker: ..., probe: ...}, frame_rate_hz,
                options: {...}, + the driver's keys (ndi: port, baud, reply, log_wire, the
                tools' ROM files; igtl: host, port, timeout_s, the tools' TRANSFORM names)}
-    plan:     {kind: eq14|sphere, poses, radius_mm, rotation_deg, seed, start}
+    plan:     {kind: eq14|sphere|joints, poses, radius_mm, rotation_deg, seed, start,
+               joints only: arm, span_deg, pool}
     sampling: {samples, settle_s, min_share, max_frames_factor, robot_reads, settle,
                still_window_s, still_tol_mm, min_samples, sem_mm}
     safety:   {max_offset_mm, max_rotation_deg, workspace_min_mm, workspace_max_mm,

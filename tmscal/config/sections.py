@@ -55,8 +55,12 @@ class TrackerConfig:
 
 @dataclass
 class PlanConfig:
-    """Pose plan around P0: Eq. 14 (±radius_mm per axis, ±rotation_deg per axis) or a sphere
-    of radius_mm. ``start`` is "current" (the flange pose when the run starts) or a 4×4 mm."""
+    """Pose plan around P0: Eq. 14 (±radius_mm per axis, ±rotation_deg per axis), a sphere
+    of radius_mm, or ``joints``: joint configurations of the arm (``arm``, a registered name;
+    default the one the robot driver reports) within ±``span_deg`` (default 30) of its joints
+    at P0, ``pool`` candidates (default 4000), spread out, their flange within radius_mm and
+    rotation_deg of P0 and inside the safety envelope (docs/kinematics.md). ``start`` is
+    "current" (the flange pose when the run starts) or a 4×4 mm."""
 
     kind: str = "eq14"
     poses: int = 500
@@ -64,6 +68,9 @@ class PlanConfig:
     rotation_deg: float = 10.0
     seed: int = 1
     start: Any = "current"
+    arm: str | None = None
+    span_deg: float | None = None
+    pool: int | None = None
 
 
 @dataclass

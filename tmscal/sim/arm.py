@@ -4,7 +4,7 @@ issue 15's kinematic self-calibration (docs/selfcal.md, "On the rig").
 
 A mock robot with an arm moves in joint space, as a real one does: a commanded flange pose
 (base_from_flange, 4×4 mm) becomes joint angles q (rad) by inverse kinematics on the NOMINAL
-model (:func:`inverse`, damped least squares on :func:`tmscal.calib.selfcal.model.forward`);
+model (:func:`inverse`: the one inverse kinematics, :mod:`tmscal.calib.kinematics.ik`);
 the flange really goes where the TRUE model puts those joints (:meth:`ArmPair.actual`), and
 the controller reports the nominal model's flange (:meth:`ArmPair.reported`), which is the
 commanded pose to within the IK tolerance. The tracker therefore sees the true
@@ -64,9 +64,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..calib.kinematics import ARM_NAMES, ARMS, Arm
+from ..calib.kinematics.ik import IK_TOL_MM, IK_TOL_RAD
+from ..calib.kinematics.ik import inverse as ik_inverse
 from ..calib.kinematics.jacobian import parallel_joints
 from ..calib.selfcal.model import NOMINAL, ArmModel, forward, jacobian, perturb
-from ..geometry import invert, rotvec_from_matrix
+from ..geometry import invert
 
 __all__ = ["ArmPair", "Unreachable", "inverse", "reach", "make_arm", "realistic_sigmas",
            "ARM_MOUNTS", "HOME_Q", "ERROR_PROTOCOLS", "REALISTIC_LENGTH_PER_REACH",
@@ -86,13 +88,6 @@ ARM_MOUNTS: dict[str, np.ndarray] = {name: spec.mount for name, spec in ARMS.ite
 #: a joint configuration (rad) near the mock P0 with the tool pointing down, elbow up: the
 #: seed of the first inverse kinematics (the registry entry's ``home_q``)
 HOME_Q: dict[str, tuple[float, ...]] = {name: spec.home_q for name, spec in ARMS.items()}
-#: inverse kinematics converges when the flange is this close to the target (mm, rad)
-IK_TOL_MM = 1e-7
-IK_TOL_RAD = 1e-9
-#: rows of the IK's error: mm and rad weighed as mm and rad × this length (mm)
-_ROT_WEIGHT_MM = 100.0
-#: the largest joint step of one IK iteration (rad): stays on the seed's branch
-_MAX_STEP_RAD = 0.3
 #: fixed configurations :func:`reach` tries after the current joints and the home
 _EXTRA_SEEDS = 12
 #: random configurations that decide which parameters the wrench identifies ("paper")
@@ -169,58 +164,16 @@ def _plain(model: Arm, base: np.ndarray) -> Arm:
                convention=model.convention, flange=model.flange, beta=model.beta)
 
 
-def _pose_error(target: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """(…, 6): position error (mm) and rotation error (rad × ``_ROT_WEIGHT_MM``), base
-    frame, from T (…, 4, 4) to ``target`` (4×4)."""
-    dp = target[:3, 3] - T[..., :3, 3]
-    dr = rotvec_from_matrix(target[:3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2))
-    return np.concatenate([dp, dr * _ROT_WEIGHT_MM], axis=-1)
-
-
-def _jacobian(model: ArmModel, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
-    """(6, n) d(pose error)/dq by central differences (one vectorised forward call)."""
-    n = len(q)
-    Q = q + h * np.concatenate([np.eye(n), -np.eye(n)])
-    T = forward(model, Q)
-    ref = T[0]
-    # the error of each probe relative to a common reference, so differences are tangent
-    e = -_pose_error(ref, T)
-    return (e[:n] - e[n:]).T / (2 * h)
-
-
 def inverse(model: ArmModel, target: np.ndarray, q0: np.ndarray,
-            max_iter: int = 100) -> np.ndarray | None:
-    """Joint angles q (rad) with forward(model, q) = ``target`` (base_from_flange 4×4 mm)
-    within ``IK_TOL_MM`` / ``IK_TOL_RAD``, inside the joint limits, by damped least squares
-    (Levenberg–Marquardt) from ``q0``; None when it does not converge (out of reach, or
-    only across a limit)."""
-    target = np.asarray(target, dtype=np.float64)
-    lo, hi = model.joint_limits_rad[:, 0], model.joint_limits_rad[:, 1]
-    q = np.clip(np.asarray(q0, dtype=np.float64), lo, hi)
-    e = _pose_error(target, forward(model, q))
-    cost = float(e @ e)
-    lam = 1e-3
-    for _ in range(max_iter):
-        if (np.linalg.norm(e[:3]) <= IK_TOL_MM
-                and np.linalg.norm(e[3:]) <= IK_TOL_RAD * _ROT_WEIGHT_MM):
-            return q
-        J = _jacobian(model, q)
-        H = J.T @ J
-        dq = np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-9 * np.eye(len(q))),
-                             J.T @ e)
-        big = np.abs(dq).max()
-        if big > _MAX_STEP_RAD:
-            dq *= _MAX_STEP_RAD / big
-        q_new = np.clip(q + dq, lo, hi)
-        e_new = _pose_error(target, forward(model, q_new))
-        c_new = float(e_new @ e_new)
-        if c_new < cost:
-            q, e, cost, lam = q_new, e_new, c_new, max(lam * 0.2, 1e-12)
-        else:
-            lam *= 10.0
-            if lam > 1e8:
-                return None
-    return None
+            max_iter: int = 200) -> np.ndarray | None:
+    """Joint angles q (rad) with forward(model, q) = ``target`` (world ← flange 4×4 mm)
+    within ``IK_TOL_MM`` / ``IK_TOL_RAD``, inside the joint limits, from ``q0``: the one
+    inverse kinematics, :func:`tmscal.calib.kinematics.ik.inverse` (damped least squares on
+    the joint Jacobian), on base⁻¹ · target; None when it does not converge (out of
+    reach, or only across a limit)."""
+    base_inv = invert(np.asarray(model.base, dtype=np.float64))
+    return ik_inverse(model, base_inv @ np.asarray(target, dtype=np.float64),
+                      [np.asarray(q0, dtype=np.float64)], max_iter=max_iter)
 
 
 def reach(model: ArmModel, target: np.ndarray, q_now: np.ndarray | None,

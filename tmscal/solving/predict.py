@@ -14,7 +14,7 @@ import numpy as np
 
 from ..calib.prediction import AdaptiveSettings, predict
 from ..errors import CalibrationError, SessionError
-from ..poses import PlanSpec
+from ..poses import JOINTS_KIND, PlanSpec
 from ..session import Session
 
 __all__ = ["PHASES", "ADAPTIVE_OVERRIDES", "adaptive_header", "settings_from_header",
@@ -104,9 +104,12 @@ def placement_region(session: Session, settings: Any = None
     try:
         spec = PlanSpec.from_header(session.header)
     except SessionError:
+        spec = None
+    if spec is None or spec.kind == JOINTS_KIND:  # a joints plan's poses need the arm
         A = np.stack([p.A for p in sorted(session.poses, key=lambda p: p.index)
                       if p.skipped is None and p.A is not None] or [np.eye(4)])
-        return A, f"the session's {len(A)} usable poses (no plan in the header)", False
+        why = "no plan in the header" if spec is None else "a joints plan"
+        return A, f"the session's {len(A)} usable poses ({why})", False
     region = spec.with_n(settings.region).poses()
     return region, (f"the first {settings.region} poses of the session's {spec.kind} plan "
                     f"(seed {spec.seed}, ±{spec.radius_mm:g} mm, ±{spec.rotation_deg:g}°)"), True

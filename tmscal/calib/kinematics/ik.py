@@ -1,7 +1,9 @@
 """Inverse kinematics of an :class:`~tmscal.calib.kinematics.model.Arm`: the joints at which
 it puts its flange at a wanted pose (base_from_flange, 4×4 mm, the robot's own base frame;
 ``arm.base`` not applied; joints rad), by damped
-least squares (Levenberg–Marquardt) on the analytic joint Jacobian. Pure numerics, no I/O.
+least squares (Levenberg–Marquardt) on the joint Jacobian. Pure numerics, no I/O. The one
+inverse kinematics of tmscal: the mock and simulated robots' controllers
+(:func:`tmscal.sim.arm.inverse`) solve with it too.
 
 A controller keeps the arm's configuration on a linear move, so the solution sought is the one
 nearest the seed (the joints the arm has, or those of the calibration's poses); seeds further
@@ -12,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jacobian import deviation_twists
-from .model import Arm
+from ...geometry import rotvec_from_matrix
+from .model import Arm, base_from_flange
 
 __all__ = ["inverse", "IK_TOL_MM", "IK_TOL_RAD"]
 
@@ -25,21 +27,27 @@ IK_TOL_RAD = 1e-9
 _MAX_STEP_RAD = 0.3
 #: rotation errors (rad) weighed as mm × this length in the damped step
 _ROT_WEIGHT_MM = 100.0
+#: the joint step (rad) of the Jacobian's central differences
+_H_RAD = 1e-6
 
 
 def _error(chain: Arm, q: np.ndarray, target: np.ndarray
            ) -> tuple[np.ndarray, np.ndarray]:
     """(e, J): the body-frame error twist from A(q) to ``target`` [rotation vector rad;
-    translation mm] and the joint Jacobian (6, n) of the flange's body twist."""
-    names = [f"theta0_{i + 1}" for i in range(chain.n_joints)]
-    A, J = deviation_twists(chain, q[None], names)
-    D = np.linalg.inv(A[0]) @ target
-    R = D[:3, :3]
-    w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    s = float(np.linalg.norm(w))
-    th = float(np.arctan2(s, 0.5 * (np.trace(R) - 1.0)))  # exact near 0, unlike arccos
-    rv = w * (th / s) if s > 1e-12 else w
-    return np.concatenate([rv, D[:3, 3]]), J[0]
+    translation mm] and the joint Jacobian (6, n) of the flange's body twist, by central
+    differences of ``_H_RAD`` on one batched forward kinematics (2n + 1 configurations: about
+    ten times faster than the analytic deviation twists, and the mock robots solve this on
+    every move)."""
+    n = chain.n_joints
+    Q = np.concatenate([q[None], q + _H_RAD * np.eye(n), q - _H_RAD * np.eye(n)])
+    T = base_from_flange(chain, Q)
+    A_inv = np.linalg.inv(T[0])
+    D = A_inv @ np.concatenate([target[None], T[1:]])
+    # through the quaternion: exact near 0 and right near π, where the skew part of R
+    # vanishes (a seed turned half a turn from the target would otherwise look converged)
+    xi = np.concatenate([rotvec_from_matrix(D[:, :3, :3]), D[:, :3, 3]], axis=1)
+    J = (xi[1:n + 1] - xi[n + 1:]).T / (2.0 * _H_RAD)
+    return xi[0], J
 
 
 def inverse(chain: Arm, target: np.ndarray, seeds: list[np.ndarray],
