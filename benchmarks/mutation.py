@@ -98,8 +98,8 @@ MUTANTS = [
            ("tests/e2e/test_acquire.py::test_resume_reacquires_a_damaged_middle_line",)),
     Mutant("stream-raw-z", "dropped correction: the streamed coil pose is Z · C, not the "
            "placement rule (C undistorted)", "tmscal/stream.py",
-           "        return np.asarray(cal.Z, dtype=float) @ targets[0]",
-           "        return np.asarray(cal.Z, dtype=float) @ C",
+           "        return np.asarray(cal.exported()[\"Z\"], dtype=float) @ targets[0]",
+           "        return np.asarray(cal.exported()[\"Z\"], dtype=float) @ C",
            ("tests/e2e/test_stream.py::test_coil_to_robot_base_follows_the_placement_rule_"
             "under_a_tracker_scale",)),
     Mutant("html-escape", "removed escape: the report's text is made visible but not "

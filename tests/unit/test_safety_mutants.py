@@ -82,3 +82,12 @@ def test_the_mutant_is_killed_by_its_tests(tmp_path: Path, name: str) -> None:
     # exit 1: tests ran and failed (not 2-4: interrupted, internal or usage error)
     assert r.returncode == 1, f"{name} SURVIVED ({m.what}):\n{r.stdout[-3000:]}{r.stderr[-2000:]}"
     assert failed(r.stdout) == set(tests), r.stdout[-3000:]
+
+
+@pytest.mark.parametrize("name", list(MUTANTS))
+def test_every_mutant_still_applies_to_the_code(name: str) -> None:
+    """A change to the guarded code must not quietly disable a mutant of the script: the text
+    it replaces is in its file exactly once."""
+    m = MUTANTS[name]
+    assert (REPO / m.path).read_text().count(m.old) == 1, \
+        f"benchmarks/mutation.py: mutant {name!r} no longer applies to {m.path}"
