@@ -33,12 +33,16 @@ ROT_TOL_RAD = np.radians(0.5)
 def test_pyigtl_client_reads_the_mock() -> None:
     rig = SimRig(tms_rig_truth(), noise=Noise(fiducial_sigma_mm=0.05),
                  rng=np.random.default_rng(2), start=TMS_RIG_P0)
-    with IGTLTrackerMock(rig, port=0, clock=FAST) as m:
-        client = OpenIGTLinkClient(host="127.0.0.1", port=m.port)
-        try:
+    # pyigtl's client checks its stop flag only between bursts of messages, and the mock on
+    # the fast clock never pauses: the mock closes first, then the client stops
+    client = None
+    try:
+        with IGTLTrackerMock(rig, port=0, clock=FAST) as m:
+            client = OpenIGTLinkClient(host="127.0.0.1", port=m.port)
             got = {dev: client.wait_for_message(dev, timeout=10)
                    for dev in ("MarkerToTracker", "ProbeToTracker")}
-        finally:
+    finally:
+        if client is not None:
             client.stop()
     for dev, body in (("MarkerToTracker", "marker"), ("ProbeToTracker", "probe")):
         msg = got[dev]
