@@ -134,9 +134,9 @@ def test_slicer_client_receives_the_coil_through_the_calibration(polaris, calib_
             assert not deadline.expired(), f"few messages after 60 s: {len(msgs)}"
             msgs += client.get_latest_messages()
             time.sleep(0.002)
-    finally:
-        client.stop()
+    finally:   # the stream first: pyigtl's client stops only in a pause between messages
         code, out, err = _stop(proc)
+        client.stop()
     assert code == 0, err
     assert re.search(r"stopped: \d+ tracker frames read, [1-9]\d* sent", out), out
 
