@@ -133,7 +133,9 @@ def levenberg_marquardt(prob: Problem, whiten: np.ndarray, max_iter: int = 50
             lam *= 10
         if c_new > cost:
             return prob, it
-        done = cost - c_new <= 1e-12 * max(cost, 1e-300) + 1e-30 or \
+        # converged when χ² falls by less than 1e-10 of itself (far below any difference the
+        # model selection's tests or the covariance could notice) or the step is negligible
+        done = cost - c_new <= 1e-10 * max(cost, 1e-300) + 1e-30 or \
             np.linalg.norm(step * d) < 1e-12 * np.sqrt(k)
         prob, r, cost, lam = cand, r_new, c_new, max(lam / 10, 1e-12)
         if done:
