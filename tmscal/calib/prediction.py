@@ -387,7 +387,7 @@ def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:
     ``poses`` (n, 4, 4) mm, measured where the estimate puts the bodies, Ñ = Ẑ⁻¹ P Ŵ (so
     E = (P W)⁻¹ Z Ñ = I). Without a distortion, analytically: for body j, ∂r/∂ω_W = [−I; 0],
     ∂r/∂t_W = [0; −R̂_Wᵀ], ∂r/∂ω_Z = [R_Ñᵀ; −R_Ñᵀ [t_Ñ]×], ∂r/∂t_Z = [0; R_Ñᵀ R̂_Zᵀ]. With a
-    distortion, by ml's own central differences (:meth:`Problem.jacobian`), the positions of
+    distortion, by ml's analytic Jacobian (:meth:`Problem.raw_jacobian`), the positions of
     Ñ distorted to first order by Ĝ⁻¹."""
     k, m = prob.n_params, len(prob.Ws)
     Ws, Z, G = prob.unpack(np.zeros(k))
