@@ -440,3 +440,36 @@ def test_true_coil_error_with_a_distorted_tracker_commands_the_measured_targets(
     assert ad.true_coil_error(knows, TRUTH.Y, TRUTH.Z, REGION, tracker_distortion=D) < 1e-6
     e = ad.true_coil_error(rigid, TRUTH.Y, TRUTH.Z, REGION, tracker_distortion=D)
     assert 1.3 < e < 1.7
+
+
+def test_prediction_covers_a_tracker_scale_that_a_rigid_model_misses() -> None:
+    """A tracker whose positions are scaled by +0.1 % about its origin (issue 21): on 8 rigs
+    of 20 well-spread poses the default 95 % prediction (ml with the scale,
+    PREDICTION_DISTORTION) covers the true mean placement error over the region, measured as
+    that tracker sees the targets, on at least 7 (an honest 95 % misses one of 8 in 28 % of
+    draws, two or more in 6 %); the prediction without a distortion model covers it on at
+    most one (its calibration keeps the scale's error: true ≈ 0.09–0.10 mm against ≈ 0.08 mm
+    predicted)."""
+    assert ad.PREDICTION_DISTORTION == "scale"
+    idx = ad.bootstrap_indices(POOL, 20, TMS_RIG_P0)
+    noise = Noise(tracker_scale=1.001)
+    covered = covered_rigid = 0
+    for seed in range(8):
+        s = Session(rig(seed, noise))
+        for i in idx:
+            s.measure(POOL[i])
+        settings = ad.AdaptiveSettings()
+        D = noise.tracker_distortion
+        for pred, count in ((s.predict(settings), 1), (None, 0)):
+            if pred is None:
+                A, B, C = s.arrays()
+                pred = ad.predict(A, B, C, REGION, settings, distortion="none",
+                                  spreads=s.spreads)
+            true = ad.true_coil_error(pred.calibration, TRUTH.Y, TRUTH.Z, REGION,
+                                      tracker_distortion=D)
+            if count:
+                covered += true <= pred.coil_mm
+            else:
+                covered_rigid += true <= pred.coil_mm
+    assert covered >= 7
+    assert covered_rigid <= 1

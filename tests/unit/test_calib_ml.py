@@ -209,9 +209,12 @@ def test_spreads_set_the_tracker_noise_per_pose():
     assert err_w < 0.5 * err_u
 
 
-@pytest.mark.parametrize("model", ["none", "scale", "affine"])
-def test_analytic_jacobian_matches_central_differences(model):
-    """Problem.raw_jacobian (analytic for X, Y, Z) against ml's central differences, with the
+@pytest.mark.parametrize("model,moments", [("none", False), ("scale", False),
+                                           ("axis", False), ("axis", True),
+                                           ("affine", False), ("affine", True)])
+def test_analytic_jacobian_matches_central_differences(model, moments):
+    """Problem.raw_jacobian (analytic for X, Y, Z and the distortion, with and without the
+    tools' moments) against ml's central differences, with the
     start 1 mm off the estimate and a robot noise that leaves residuals of about 1°: the
     analytic columns to 1e-4 of each column's size (its log-map correction is exact to
     O(|φ|²) ≈ 1e-4 here)."""
@@ -221,12 +224,12 @@ def test_analytic_jacobian_matches_central_differences(model):
                     noise=Noise(robot_trans_sigma_mm=2.0, robot_rot_sigma_deg=1.0))
     st = solve(d["A"], d["marker"], d["probe"], method="qr36")
     rng = np.random.default_rng(1)
-    g0 = {"none": None, "scale": np.array([1e-3]),
+    g0 = {"none": None, "scale": np.array([1e-3]), "axis": np.array([1e-3, -2e-3, 5e-4]),
           "affine": np.array([1e-3, 0.0, -1e-3, 5e-4, 0.0, 1e-4])}[model]
     M = tool_moment(TOOL_8700340_MM)
     prob = Problem(d["A"], [d["marker"], d["probe"]],
                    [st.X @ make_pose(np.eye(3), rng.normal(0, 1, 3)), st.Y], st.Z, model, g0,
-                   [M, M] if model == "affine" else None)
+                   [M, M] if moments else None)
     Ja = prob.raw_jacobian().reshape(-1, prob.n_params)
     Jn = prob.jacobian(np.zeros(prob.n_params), np.eye(12))
     assert np.all(np.abs(Ja - Jn).max(axis=0) <= 1e-4 * np.abs(Jn).max(axis=0) + 1e-9)

@@ -16,8 +16,8 @@ is undone by G = D⁻¹ (:func:`undistort`). Per pose and body the residual is
 and to first order r = Ad-like(W) δ + ε, so the residuals of one pose (marker and probe share
 δ) have the covariance S = J_W Σ_δ J_Wᵀ + blockdiag(Σ_ε), which whitens them. ``ml``
 minimises Σ r_iᵀ S_i⁻¹ r_i by Levenberg–Marquardt, started from QR36 (QR24 on marker-only
-data): the Jacobian analytic for X, Y, Z (:meth:`Problem.raw_jacobian`; central differences
-only for the distortion's few parameters), its column-scaled normal matrix factorised once per
+data): the Jacobian analytic for X, Y, Z and the distortion (:meth:`Problem.raw_jacobian`),
+its column-scaled normal matrix factorised once per
 iteration (every damping tried is then a product). D is "none", "scale" (isotropic), "axis"
 (per-axis scale) or "affine" (symmetric 3×3: per-axis scale and shear; a rotation part of D
 would turn positions and orientations alike and is Z's rotation, so it is not identifiable
@@ -133,7 +133,9 @@ def levenberg_marquardt(prob: Problem, whiten: np.ndarray, max_iter: int = 50
             lam *= 10
         if c_new > cost:
             return prob, it
-        done = cost - c_new <= 1e-12 * max(cost, 1e-300) + 1e-30 or \
+        # converged when χ² falls by less than 1e-10 of itself (far below any difference the
+        # model selection's tests or the covariance could notice) or the step is negligible
+        done = cost - c_new <= 1e-10 * max(cost, 1e-300) + 1e-30 or \
             np.linalg.norm(step * d) < 1e-12 * np.sqrt(k)
         prob, r, cost, lam = cand, r_new, c_new, max(lam / 10, 1e-12)
         if done:

@@ -141,7 +141,7 @@ class Problem:
 
     def raw_jacobian(self) -> np.ndarray:
         """Raw Jacobian (n, 6m, k) of :meth:`residuals` at θ = 0 (the start), analytically
-        for the rigid parameters and by central differences for the distortion's g.
+        (the distortion's g by :meth:`_distortion_columns`).
 
         Per body j, with E = W⁻¹ A⁻¹ Z Ñ (Ñ undistorted), φ = log R(E), t_E = t(E):
         R(E) turns to exp(−ω_W) R(E) exp(R_Ñᵀ ω_Z), so ∂φ/∂ω_W = −J_l⁻¹(φ), ∂φ/∂ω_Z =
@@ -168,11 +168,46 @@ class Problem:
             WAZ = W[:3, :3].T[None] @ RAt @ Z[:3, :3][None]
             J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -WAZ @ _skew(Nt[:, :3, 3])
             J[:, r + 3:r + 6, 6 * m + 3:6 * m + 6] = W[:3, :3].T[None] @ RAt
-        for i in range(6 * (m + 1), k):
-            e = np.zeros(k)
-            e[i] = G_STEP
-            J[:, :, i] = (self.residuals(e) - self.residuals(-e)) / (2 * G_STEP)
+            if k > 6 * (m + 1):
+                J[:, r:r + 6, 6 * (m + 1):] = self._distortion_columns(N, Nt, M, WAZ, half)
         return J
+
+    def _distortion_columns(self, N: np.ndarray, Nt: np.ndarray, M: np.ndarray | None,
+                            WAZ: np.ndarray, half: np.ndarray) -> np.ndarray:
+        """∂r/∂g (n, 6, k_g) of one body, analytically. t(Ñ) = G t(N), so ∂t_E/∂g_i =
+        R_Wᵀ R_Aᵀ R_Z (∂G/∂g_i) t(N). The orientation (not for "scale", which leaves it) is
+        U = polar(F), F = G R_N M (F = G, U R_N without the tool's moment M): with
+        S = Uᵀ F symmetric, dU = U [ω]× where ((tr S) I − S) ω = vee(Uᵀ dF − dFᵀ U) (from
+        Uᵀ dF = [ω]× S + dS), dF = (∂G/∂g_i) R_N M; that turns R(Ñ) on the right by ω
+        (by R_Nᵀ ω without M), and ∂φ/∂g_i = J_r⁻¹(φ) ω as for Z."""
+        kg = DISTORTION_MODELS[self.model]
+        n = len(N)
+        out = np.zeros((n, 6, kg))
+        dGs = [undistortion(self.model, np.eye(kg)[i]) - np.eye(3) for i in range(kg)]
+        RN = N[:, :3, :3]
+        for i, dG in enumerate(dGs):
+            out[:, 3:, i] = np.einsum("nij,nj->ni", WAZ, N[:, :3, 3] @ dG.T)
+        if self.model == "scale":
+            return out
+        G = self.unpack(np.zeros(self.n_params))[2]
+        if M is None:
+            U = np.broadcast_to(orthonormalize(G), (n, 3, 3))
+            F = np.broadcast_to(G, (n, 3, 3))
+        else:
+            U, F = Nt[:, :3, :3], G[None] @ RN @ M
+        S = np.swapaxes(U, 1, 2) @ F
+        S = 0.5 * (S + np.swapaxes(S, 1, 2))
+        Kinv = np.linalg.inv(np.trace(S, axis1=1, axis2=2)[:, None, None] * np.eye(3) - S)
+        for i, dG in enumerate(dGs):
+            dF = np.broadcast_to(dG, (n, 3, 3)) if M is None else dG[None] @ RN @ M
+            K = np.swapaxes(U, 1, 2) @ dF
+            K = K - np.swapaxes(K, 1, 2)
+            w = np.einsum("nij,nj->ni", Kinv, np.stack([K[:, 2, 1], K[:, 0, 2], K[:, 1, 0]],
+                                                        axis=1))
+            if M is None:
+                w = np.einsum("nji,nj->ni", RN, w)  # R_Nᵀ ω
+            out[:, :3, i] = w + np.einsum("nij,nj->ni", half, w)
+        return out
 
     def recentred(self, th: np.ndarray) -> Problem:
         """The same problem started at the parameters ``th`` (θ = 0 there)."""

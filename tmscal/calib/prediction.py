@@ -50,10 +50,15 @@ from .ml_model import (
 __all__ = ["AdaptiveSettings", "SettingError", "MAX_TARGET_MM", "MAX_POOL", "Prediction",
            "minimum_poses", "bootstrap_indices", "predict", "placement_jacobians",
            "residual_jacobians", "candidate_information", "choose_next", "stop_reason",
-           "candidate_cost_s", "true_coil_error", "MC_DRAWS"]
+           "candidate_cost_s", "true_coil_error", "MC_DRAWS",
+           "PREDICTION_DISTORTION"]
 
 #: Monte Carlo draws of the parameter error behind the predicted quantile (fixed seed 0)
 MC_DRAWS = 4000
+#: the tracker distortion the prediction's ml fits: an isotropic scale, always, so that a
+#: tracker whose length scale differs from the robot's by an amount the poses so far cannot
+#: yet tell from noise is counted in the prediction's uncertainty, not ignored (issue 21)
+PREDICTION_DISTORTION = "scale"
 
 
 def minimum_poses(bodies: int) -> int:
@@ -310,9 +315,13 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     over ``region`` (flange poses (R, 4, 4) mm where the rig will place coils).
 
     ``ml_options`` go to ``ml`` (e.g. ``spreads`` from the session); ``distortion`` defaults
-    to "none" here (a dozen poses inside the plan's envelope do not separate a tracker
-    distortion from Z and the noise, and a model switching between steps would make the
-    predictions jump; pass ``distortion`` to override). ml estimates the robot's rotation and
+    to :data:`PREDICTION_DISTORTION` ("scale") here: the model is fixed (not chosen by ml's
+    test, which at a dozen poses inside the plan's envelope cannot yet separate a 0.1 %
+    scale from Z and the noise, and a model switching between steps would make the
+    predictions jump), and it includes the scale, so that an unmodelled tracker scale
+    cannot make the prediction optimistic: its uncertainty is part of ml's covariance and
+    of the prediction (without a scale, about 0.1 % of the envelope's extent went unseen,
+    docs/methods.md); pass ``distortion`` to override. ml estimates the robot's rotation and
     translation noise from the residuals (its default ``noise="estimate"``). The parameter
     error is δθ = Σ_k f_k δθ_k, δθ_k ~ N(0, P_k) the part of ml's covariance of each noise
     component and f_k its factor drawn as in :func:`_factor_draws`; e_r = J_r δθ
@@ -323,7 +332,7 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     ``coil_mm`` is the ``settings.confidence`` quantile of mean_r ‖e_r‖ over
     :data:`MC_DRAWS` draws with a fixed seed, ``sigma_mm`` the RMS of e_r. CalibrationError
     when the poses do not determine the calibration."""
-    opts = {"distortion": "none", **ml_options}
+    opts = {"distortion": PREDICTION_DISTORTION, **ml_options}
     cal = solve(A, B, C, method="ml", **opts)
     bodies = [np.asarray(B, dtype=float)] + ([] if C is None else [np.asarray(C, dtype=float)])
     A = np.asarray(A, dtype=float)
@@ -378,7 +387,7 @@ def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:
     ``poses`` (n, 4, 4) mm, measured where the estimate puts the bodies, Ñ = Ẑ⁻¹ P Ŵ (so
     E = (P W)⁻¹ Z Ñ = I). Without a distortion, analytically: for body j, ∂r/∂ω_W = [−I; 0],
     ∂r/∂t_W = [0; −R̂_Wᵀ], ∂r/∂ω_Z = [R_Ñᵀ; −R_Ñᵀ [t_Ñ]×], ∂r/∂t_Z = [0; R_Ñᵀ R̂_Zᵀ]. With a
-    distortion, by ml's own central differences (:meth:`Problem.jacobian`), the positions of
+    distortion, by ml's analytic Jacobian (:meth:`Problem.raw_jacobian`), the positions of
     Ñ distorted to first order by Ĝ⁻¹."""
     k, m = prob.n_params, len(prob.Ws)
     Ws, Z, G = prob.unpack(np.zeros(k))
@@ -387,7 +396,7 @@ def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:
         for Nj in N:
             Nj[:, :3, 3] = Nj[:, :3, 3] @ np.linalg.inv(G).T
         cand = Problem(poses, N, prob.Ws, prob.Z0, prob.model, prob.g0, prob.moments)
-        return cand.jacobian(np.zeros(k), np.eye(6 * m)).reshape(len(poses), 6 * m, k)
+        return cand.raw_jacobian()
     J = np.zeros((len(poses), 6 * m, k))
     for j, (W, Nj) in enumerate(zip(Ws, N, strict=True)):
         r = 6 * j

@@ -61,6 +61,14 @@ def _trace_sum(Q: np.ndarray, n: int) -> float:
     return float(n * np.trace(Q) if Q.ndim == 2 else np.trace(Q, axis1=1, axis2=2).sum())
 
 
+def _left(L: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """L_i X_i (n, q, k) for one L (q, q), as a single product, or per pose L (n, q, q)."""
+    if L.ndim == 3:
+        return L @ X
+    n, q, k = X.shape
+    return (L @ np.swapaxes(X, 0, 1).reshape(q, n * k)).reshape(q, n, k).swapaxes(0, 1)
+
+
 def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
                         theta0: np.ndarray, estimate: np.ndarray, max_iter: int = 60,
                         tol: float = 1e-3) -> Components:
@@ -79,14 +87,14 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
     while True:
         S = sum(t * Q for t, Q in zip(theta, Qn, strict=True))
         Li = np.linalg.inv(np.linalg.cholesky(S))
-        Jw = Li @ J
+        Jw = _left(Li, J)
         rw = r @ Li.T if shared else (Li @ r[..., None])[..., 0]
         Jf = Jw.reshape(-1, k)
         d = np.linalg.norm(Jf, axis=0)
         d[d == 0] = 1.0
         H = np.linalg.inv((Jf / d).T @ (Jf / d)) / np.outer(d, d)
-        v = rw - Jw @ (H @ (Jf.T @ rw.ravel()))
-        JH = Jw @ H
+        v = rw - (Jf @ (H @ (Jf.T @ rw.ravel()))).reshape(rw.shape)
+        JH = (Jf @ H).reshape(Jw.shape)
         # the hat matrix's diagonal blocks (n, q, q), or only their sum with one shared S
         M = (np.swapaxes(JH, 0, 1).reshape(q, -1) @ np.swapaxes(Jw, 0, 1).reshape(q, -1).T
              if shared else JH @ np.swapaxes(Jw, 1, 2))
@@ -107,8 +115,7 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
         theta = new
         if done:
             max_iter = it  # one more pass evaluates everything at the converged θ
-    JwT = np.swapaxes(Jw, 1, 2)
-    A = [(JwT @ Qk @ Jw).sum(axis=0) for Qk in Qw]
+    A = [Jf.T @ _left(Qk, Jw).reshape(-1, k) for Qk in Qw]
     parts = {name: theta[j] * H @ A[j] @ H for j, name in enumerate(COMPONENTS[:len(Qs)])}
     dof = np.full(len(Qs), np.inf)
     idx = np.flatnonzero(est)

@@ -136,7 +136,7 @@ def summary(res: Any, config: Path | None, output: Path, tracker_port: str | Non
     click.echo("  " + format_robot_time(res.robot_time_s))
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
-    click.echo(f"next: tmscal solve {output} --method ml --option distortion=none -o "
+    click.echo(f"next: tmscal solve {output} --method ml --option distortion=scale -o "
                f"{output.with_suffix('.yaml')}   (the calibration the prediction is about)")
 
 
