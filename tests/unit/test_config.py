@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.rigs import unique_addresses
+from tests.rigs import unique_addresses, write_config
 from tmscal.config import load_config
 from tmscal.errors import ConfigError
 from tmscal.mocks.launch import build_sim_rig
@@ -172,3 +172,12 @@ def test_a_wire_log_path_the_file_system_refuses_is_a_config_error(tmp_path):
     data["tracker"]["log_wire"] = str(tmp_path / "w.log")
     cfg = load_config(_write(tmp_path, data), check_files=False)
     assert cfg.tracker.settings.log_wire == str(tmp_path / "w.log")
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_a_plan_of_fewer_than_three_poses_is_refused(tmp_path, n):
+    """A solve needs at least 3 poses, so a config's plan.poses below 3 is refused, naming the
+    key, as `acquire --poses` is (issue 24 item 6)."""
+    cfg = write_config(tmp_path, "mock-denso-polaris.yaml", plan={"poses": n})
+    with pytest.raises(ConfigError, match=r"key 'plan\.poses': must be at least 3"):
+        load_config(cfg)

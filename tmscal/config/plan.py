@@ -47,7 +47,10 @@ def parse_plan(data: Any, src: str) -> PlanConfig:
         known = " or ".join(repr(k) for k in ALL_PLAN_KINDS)
         raise err(src, "plan.kind", f"expected {known}, got {plan.kind!r}")
     _check_joints(plan, src)
-    in_range(src, "plan.poses", plan.poses, 1, 100_000)
+    if plan.poses < 3:  # the fewest poses a solve takes (as acquire --poses)
+        raise err(src, "plan.poses", f"must be at least 3, the fewest poses a solve takes; "
+                  f"got {plan.poses}")
+    in_range(src, "plan.poses", plan.poses, 3, 100_000)
     positive(src, "plan.radius_mm", plan.radius_mm, allow_zero=True, at_most=COORD_BOUND_MM)
     positive(src, "plan.rotation_deg", plan.rotation_deg, allow_zero=True, at_most=180.0)
     in_range(src, "plan.seed", plan.seed, 0, INT_BOUND - 1)
