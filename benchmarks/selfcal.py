@@ -64,7 +64,11 @@ def _print(arm: str, runs: dict[str, list]) -> None:
             f"{arm}_{errors}_before_max_mm": _mean(res, "before_absorbed", "max_mm"),
             f"{arm}_{errors}_after_mean_mm": a,
             f"{arm}_{errors}_after_max_mm": _mean(res, "after_absorbed", "max_mm"),
-            f"{arm}_{errors}_gain": b / a})
+            f"{arm}_{errors}_gain": b / a,
+            f"{arm}_{errors}_raw_before_mean_mm": _mean(res, "before", "mean_mm"),
+            f"{arm}_{errors}_raw_before_max_mm": _mean(res, "before", "max_mm"),
+            f"{arm}_{errors}_raw_after_mean_mm": _mean(res, "after", "mean_mm"),
+            f"{arm}_{errors}_raw_after_max_mm": _mean(res, "after", "max_mm")})
 
 
 def _print_comparison(arm: str, seeds: int, pool: int) -> None:
