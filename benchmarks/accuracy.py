@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from figures import record
 
 from tmscal.calib import noise_floor
 from tmscal.calib.study import convergence, summarize, threshold_n
@@ -71,6 +72,9 @@ def report(plan: str, seeds: int) -> None:
             if PAPER[m][key] is None and key == "e_z_min":
                 continue
             vals = [r[m][key] for r in runs]
+            record("accuracy", {f"{plan}_{m}_{key}_median": float(np.median(vals)),
+                                f"{plan}_{m}_{key}_lo": min(vals),
+                                f"{plan}_{m}_{key}_hi": max(vals)})
             print(f"  {m} {label:<23}{fmt(PAPER[m][key]):>10}{fmt(vals[0]):>14}"
                   f"{fmt(float(np.median(vals))):>14}{fmt(min(vals)):>11}–{fmt(max(vals)):<10}")
         for key, label in (("n_0.4", "n: e_t < 0.4 mm from"), ("n_0.3", "n: e_t < 0.3 mm from")):
@@ -78,6 +82,12 @@ def report(plan: str, seeds: int) -> None:
             never = sum(v is None for v in vals)
             finite = [v for v in vals if v is not None]
             med = fmt(int(np.median(finite))) if finite and never <= seeds // 2 else "never"
+            record("accuracy", {
+                f"{plan}_{m}_{key}_median".replace(".", ""):
+                    int(np.median(finite)) if finite and never <= seeds // 2 else None,
+                f"{plan}_{m}_{key}_lo".replace(".", ""): min(finite) if finite else None,
+                f"{plan}_{m}_{key}_hi".replace(".", ""): max(finite) if finite else None,
+                f"{plan}_{m}_{key}_never".replace(".", ""): never})
             rng = (f"{min(finite)}–{max(finite)}" if finite else "") + \
                   (f" ({never}× never)" if never else "")
             print(f"  {m} {label:<23}{fmt(PAPER[m][key]):>10}{fmt(vals[0]):>14}{med:>14}"
@@ -91,6 +101,8 @@ def report(plan: str, seeds: int) -> None:
     ratio = [r["qr36"]["e_t_250"] / r["floor"] for r in runs]
     print(f"  qr36 e_t at n=250 / noise floor (true X,Y,Z on the same test poses): "
           f"median {np.median(ratio):.4f}, max {max(ratio):.4f} (target ≤ 1.10)")
+    record("accuracy", {f"{plan}_qr36_e_t_250_over_floor_median": np.median(ratio),
+                        f"{plan}_qr36_e_t_250_over_floor_max": max(ratio)})
     print(f"  noise floor e_t (mm): median {np.median([r['floor'] for r in runs]):.4f}")
 
 

@@ -41,6 +41,7 @@ import sys
 import time
 
 import numpy as np
+from figures import record
 
 from tmscal.acquisition.sample import spread_of
 from tmscal.calib import prediction as ad
@@ -194,7 +195,13 @@ def coverage(a: argparse.Namespace, cfg, pool: np.ndarray, settings: ad.Adaptive
           f"(95 % interval {lo:.1%}–{hi:.1%}) at confidence {settings.confidence:.0%}; "
           f"mean {m[0]:.1f} poses, predicted {m[1]:.4f} mm, true {m[2]:.4f} mm, "
           f"robot time {m[3]:.1f} s")
+    record("adaptive_coverage", {f"covered_{slug(name)}": covered, f"runs_{slug(name)}": a.runs})
     return covered, a.runs
+
+
+def slug(name: str) -> str:
+    """A condition's name as a figure name: "robot translation 1/3x" → robot_translation_1_3x."""
+    return "_".join("".join(c if c.isalnum() else " " for c in name).split())
 
 
 TABLE = (("qr36", "random pool poses, QR36"), ("ml", "random pool poses, ml"),
@@ -241,6 +248,8 @@ def table(a: argparse.Namespace, cfg, pool: np.ndarray, noise: Noise) -> None:
     for m, label in TABLE:
         print(f"{label:<28}" + "".join(f"{np.mean(err[m][k]):>8.3f} ({np.mean(secs[m][k]):>4.0f})"
                                        for k in KS))
+    record("adaptive_coverage", {f"table_{m}_mm_k{k}": np.mean(err[m][k]) for m, _ in TABLE
+                                 for k in KS})
 
 
 def main() -> None:

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from figures import record
 
 from tmscal.acquisition.run import acquire
 from tmscal.calib.kinematics import ARMS, forward
@@ -196,6 +197,8 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
                 e, tr = mean[f"{m} estimated"], mean[f"{m} true"]
                 print(f"  {m:6}{mean[f'{m} nominal']:>14.4f}{e:>16.4f}{tr:>12.4f}"
                       f"{e / tr:>19.2f}")
+                record("kinematics", {f"{arm}_{kind}_{m}_{k}_mm": mean[f"{m} {k}"]
+                                      for k in ("nominal", "estimated", "true")})
         print()
     print(f"## Poses needed: the estimated arm's (ml) coil placement after the first n poses "
           f"(mm, mean over {args.seeds} seeds), robot time (s)\n")
@@ -211,6 +214,9 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
         all_ = f"{args.ladder[every[0]]}" if every else "not reached"
         print(f"  {arm:6}{kind:8}" + "".join(f"{x:>9.4f}" for x in m) + f"   {first}, {all_}")
         print(f"  {'':6}{'time s':8}" + "".join(f"{x:>9.0f}" for x in tm))
+        if ok:
+            record("kinematics", {f"{arm}_{kind}_goal_poses": args.ladder[ok[0]],
+                                  f"{arm}_{kind}_goal_s": tm[ok[0]]})
     print()
 
 
@@ -239,6 +245,8 @@ def sim(args: argparse.Namespace, tmp: Path) -> None:
                 e[m].append(solve_session(s, m, **kw)[1].errors["e_t_mm"])
         print(f"  {f'{sigma:g} / {sigma:g} / {sigma:g}':32}{np.mean(e['qr24']):>10.4f}"
               f"{np.mean(e['qr36']):>12.4f}{np.mean(e['ml']):>20.4f}")
+        record("kinematics", {f"sim_{m}_e_t_mm_sigma{sigma:g}".replace(".", "_"): np.mean(v)
+                              for m, v in e.items()})
     print()
 
 

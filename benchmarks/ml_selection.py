@@ -29,6 +29,7 @@ import os
 import time
 
 import numpy as np
+from figures import record
 
 from tmscal.calib import coil_placement_errors, solve
 from tmscal.calib.ml_model import undistort
@@ -93,6 +94,7 @@ def main() -> None:
     a = ap.parse_args()
     t0 = time.perf_counter()
     if not a.speed_only:
+        record("ml_selection", {"sessions": a.sessions})
         selection(a)
     speed(a)
     print(f"({time.perf_counter() - t0:.0f} s)")
@@ -112,6 +114,11 @@ def selection(a: argparse.Namespace) -> None:
         print(f"{n:>4} {chosen:>10}/{a.sessions:<7} {np.mean(r['ml']):>8.4f} "
               f"{np.mean(r['ml none']):>8.4f} {np.mean(r['qr36 ortho']):>10.4f} "
               f"{np.mean(r['qr36 raw']):>9.4f} {worse:>17}/{a.sessions}")
+        record("ml_selection", {
+            f"chosen_n{n}": chosen, f"ml_mm_n{n}": np.mean(r["ml"]),
+            f"ml_none_mm_n{n}": np.mean(r["ml none"]),
+            f"qr36_ortho_mm_n{n}": np.mean(r["qr36 ortho"]),
+            f"qr36_raw_mm_n{n}": np.mean(r["qr36 raw"]), f"ml_worse_n{n}": worse})
     print("\ntracker scale +0.1 %:")
     print(f"{'n':>4} {'distortion chosen':>18} {'median scale %':>15} {'ml':>8} "
           f"{'qr36 raw':>9}")
@@ -120,6 +127,10 @@ def selection(a: argparse.Namespace) -> None:
         chosen = sum(m != "none" for m in r["model"])
         print(f"{n:>4} {chosen:>10}/{a.sessions:<7} {np.median(r['scale']):>15.3f} "
               f"{np.mean(r['ml']):>8.4f} {np.mean(r['qr36 raw']):>9.4f}")
+        record("ml_selection", {
+            f"scale_chosen_n{n}": chosen, f"scale_median_pct_n{n}": np.median(r["scale"]),
+            f"scale_ml_mm_n{n}": np.mean(r["ml"]),
+            f"scale_qr36_raw_mm_n{n}": np.mean(r["qr36 raw"])})
 
 
 def speed(a: argparse.Namespace) -> None:
@@ -133,6 +144,8 @@ def speed(a: argparse.Namespace) -> None:
     print(f"\nsolve time at n = 500 (median of {a.repeats}; load average {load}): QR36 "
           f"{qr:.1f} ms; ml without distortion {none:.1f} ms = {none / qr:.0f} × QR36; default "
           f"ml (auto) {auto:.1f} ms = {auto / qr:.0f} × QR36")
+    record("ml_selection", {"qr36_ms_n500": qr, "ml_none_ms_n500": none, "ml_auto_ms_n500": auto,
+                            "ml_none_over_qr36": none / qr, "ml_auto_over_qr36": auto / qr})
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ import sys
 import time
 
 import numpy as np
+from figures import record
 
 from tmscal.calib.selfcal.simulate import ERRORS, PAPER, SELECTIONS, simulate
 
@@ -57,6 +58,17 @@ def _print(arm: str, runs: dict[str, list]) -> None:
               f"{_mean(res, 'after', 'max_mm'):6.2f} {b:8.3f} /"
               f"{_mean(res, 'before_absorbed', 'max_mm'):6.2f} {a:6.3f} /"
               f"{_mean(res, 'after_absorbed', 'max_mm'):6.2f} {b / a:5.1f}×")
+        record("selfcal", {
+            f"{arm}_identifiable": len(r0.identifiable), f"{arm}_parameters": r0.parameters,
+            f"{arm}_{errors}_before_mean_mm": b,
+            f"{arm}_{errors}_before_max_mm": _mean(res, "before_absorbed", "max_mm"),
+            f"{arm}_{errors}_after_mean_mm": a,
+            f"{arm}_{errors}_after_max_mm": _mean(res, "after_absorbed", "max_mm"),
+            f"{arm}_{errors}_gain": b / a,
+            f"{arm}_{errors}_raw_before_mean_mm": _mean(res, "before", "mean_mm"),
+            f"{arm}_{errors}_raw_before_max_mm": _mean(res, "before", "max_mm"),
+            f"{arm}_{errors}_raw_after_mean_mm": _mean(res, "after", "mean_mm"),
+            f"{arm}_{errors}_raw_after_max_mm": _mean(res, "after", "max_mm")})
 
 
 def _print_comparison(arm: str, seeds: int, pool: int) -> None:

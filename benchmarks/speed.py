@@ -13,6 +13,7 @@ import argparse
 import time
 
 import numpy as np
+from figures import record
 
 from tmscal.calib import solve
 from tmscal.sim import Noise, simulate
@@ -50,6 +51,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=30)
     args = ap.parse_args()
     _, d = simulate(500, np.random.default_rng(0), plan="eq14", noise=Noise())
+    figures: dict[str, float] = {}
     shah, li = opencv_solver("SHAH"), opencv_solver("LI")
     print(f"{'n':>5} {'QR24 ms':>9} {'QR36 ms':>9} {'SHAH ms':>9} {'LI ms':>9} "
           f"{'LI/QR36':>8} {'LI/QR24':>8} {'SHAH/QR36':>10}")
@@ -61,6 +63,9 @@ def main() -> None:
         tl = median_ms(li, args.repeats, A, B) if li else float("nan")
         print(f"{n:>5} {t24:>9.3f} {t36:>9.3f} {ts:>9.3f} {tl:>9.3f} {tl / t36:>8.1f} "
               f"{tl / t24:>8.1f} {ts / t36:>10.1f}")
+        figures.update({f"qr24_ms_n{n}": t24, f"qr36_ms_n{n}": t36, f"shah_ms_n{n}": ts,
+                        f"li_ms_n{n}": tl, f"li_over_qr36_n{n}": tl / t36})
+    record("speed", figures)
     if shah is None:
         print("(cv2.calibrateRobotWorldHandEye not available: install opencv-python-headless<5)")
 

@@ -28,9 +28,9 @@ with the same noise weights, and a distortion is kept only when an F test says i
 more than noise would (:func:`select_model`: forward none → scale → axis → affine, each step
 at level ``ALPHA`` = 1 %; F = (Δχ²/Δk) / (χ²/(m − k)) against F(Δk, m − k), the
 likelihood-ratio test with the noise level profiled out in its exact small-sample form for
-a linear Gaussian model). Under no distortion the three tests together choose one in at most
-about 3 % of sessions; AIC (``criterion="aic"``: m ln(χ²/m) + 2k), whose penalty amounts to a
-test at about 16 % per parameter, chose one in a third of small sessions (issue 21), and BIC
+a linear Gaussian model). Under no distortion the three tests together rarely choose one;
+AIC (``criterion="aic"``: m ln(χ²/m) + 2k), whose penalty amounts to a test at about 16 % per
+parameter (P(χ²₁ > 2)), chose one far more often on small sessions (issue 21), and BIC
 (``"bic"``, + k ln m) is kept for comparison. ``benchmarks/ml_selection.py`` prints how often
 each is chosen with and without a 0.1 % tracker scale, the coil placement against QR36 and
 the solve time (docs/methods.md).
