@@ -283,7 +283,7 @@ def test_persistent_crc_errors_raise_protocol_error(rig: SimRig) -> None:
 
 def test_dropped_replies_time_out_and_are_retried(rig: SimRig) -> None:
     with fault_mock(rig, drop_reply_prob=0.3) as m:
-        with NDITracker(m.start_tcp(), ROMS, reply="bx", retries=8, timeout_s=0.05,
+        with NDITracker(m.start_tcp(), ROMS, reply="bx", retries=8, timeout_s=0.3,
                         reset=False) as tr:
             frames = [tr.read() for _ in range(20)]
         sent = sum(c.startswith("BX:") for c in m.commands)
@@ -292,8 +292,10 @@ def test_dropped_replies_time_out_and_are_retried(rig: SimRig) -> None:
 
 
 def test_persistent_drops_raise_device_timeout_naming_the_command(rig: SimRig) -> None:
+    # the setup's replies come (only tracking replies are dropped), however slowly a loaded
+    # machine runs the mock: a timeout of a second, not 0.05 s, waits for them
     with fault_mock(rig, drop_reply_prob=1.0) as m:
-        with NDITracker(m.start_pty(), ROMS, retries=1, timeout_s=0.05, reset=False) as tr:
+        with NDITracker(m.start_pty(), ROMS, retries=1, timeout_s=1.0, reset=False) as tr:
             with pytest.raises(DeviceTimeout, match="no reply to BX"):
                 tr.read()
     with fault_mock(rig, drop_reply_prob=1.0, tracking_only=False) as m:
