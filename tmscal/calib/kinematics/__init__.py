@@ -1,6 +1,7 @@
 """Serial-arm kinematics: the arm model (standard or modified DH, base, flange, joint limits)
 and its batched forward kinematics (:mod:`.model`), the pose Jacobian with respect to the
-geometric parameters (:mod:`.jacobian`) and the one registry of nominal arms (:mod:`.arms`).
+geometric parameters (:mod:`.jacobian`) and the one registry of nominal arms (:mod:`.arms`);
+the estimator with hand/eye (:mod:`.estimate`, its identifiability in :mod:`.identifiability`).
 Pure numerics, no I/O; docs/kinematics.md."""
 
 from .arms import ARM_NAMES, ARMS, ArmSpec, arm_by_name, find_arm, spec_by_name

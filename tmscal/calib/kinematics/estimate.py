@@ -25,12 +25,13 @@ that Z absorbs, or d_2 − d_3 on parallel axes) costs prior and buys nothing, s
 zero — the estimate lives in the identifiable subspace and has minimum norm (in tolerance
 units) elsewhere, and it does not depend on the order or choice of equivalent parameters.
 
-Identifiability (:func:`identifiability`): the data Jacobian of δ with X, Y, Z projected out
-(the information about the arm that hand/eye and robot/world cannot absorb), columns in
-tolerance units, by its singular value decomposition. A singular value σ_k ≥ 1 means the
-poses know that combination better than the tolerance does (identified: its estimate and
-posterior σ are reported); 0 < σ_k < 1 weakly identified (the prior decides); σ_k ≈ 0 not
-identifiable, with the reason: the combination moves no flange, or X/Y and/or Z absorb it.
+Identifiability (:mod:`tmscal.calib.kinematics.identifiability`): the data Jacobian of δ
+with X, Y, Z projected out (the information about the arm that hand/eye and robot/world
+cannot absorb), columns in tolerance units, by its singular value decomposition. A
+singular value σ_k ≥ 1 means the poses know that combination better than the tolerance
+does (identified: its estimate and posterior σ are reported); 0 < σ_k < 1 weakly identified
+(the prior decides); σ_k ≈ 0 not identifiable, with the reason: the combination moves no
+flange, or X/Y and/or Z absorb it.
 
 Levels (:data:`LEVELS`): "none" (X, Y, Z on the nominal arm), "offsets" (joint zero
 offsets θ0_i) and "full" (every θ0, d, a, α, and β where consecutive axes are parallel);
@@ -56,6 +57,7 @@ from ..ml_model import (
     undistortion,
     whitener,
 )
+from .identifiability import Combination, identifiability
 from .jacobian import deviation_twists, parallel_joints
 from .model import Arm, base_from_flange, deviation_units
 
@@ -294,29 +296,6 @@ def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int
 
 # --- one level --------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class Combination:
-    """One direction of the deviations in tolerance units (Σ_j v_j δ_j / τ_j): ``terms``
-    {parameter: v_j} (|v_j| ≥ 0.05, largest first), the data's singular value ``sigma_data``
-    (≥ 1: identified), the estimate and its posterior standard deviation (tolerance units),
-    and for an unidentified one the ``reason``."""
-
-    terms: dict[str, float]
-    sigma_data: float
-    estimate: float
-    sd: float
-    reason: str | None = None
-    #: the whole unit vector v over the fit's ``names`` (terms shows its main part)
-    vector: np.ndarray | None = None
-
-    def describe(self) -> str:
-        """One line, e.g. "+0.71 a_2 +0.70 a_3 = +2.31 ± 0.04 (tolerance units)"."""
-        lhs = " ".join(f"{v:+.2f} {k}" for k, v in self.terms.items())
-        if self.reason:
-            return f"{lhs}: {self.reason}"
-        return f"{lhs} = {self.estimate:+.3g} ± {self.sd:.2g}"
-
-
 @dataclass
 class KinematicFit:
     """One fitted level: ``chain`` (the identified arm, an :class:`Arm`), ``names``/``delta``/``sd``
@@ -407,101 +386,9 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                        G=undistortion(distortion, s.g))
     fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
     if k:
-        fit.identified, fit.weak, fit.unidentified = identifiability(prob, s, Jd, vf)
+        fit.identified, fit.weak, fit.unidentified = identifiability(
+            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf)
     return fit
-
-
-def identifiability(prob: _Problem, s: _State, Jd: np.ndarray, vf: float = 1.0
-                    ) -> tuple[list[Combination], list[Combination], list[Combination]]:
-    """(identified, weak, unidentified) combinations of the deviations (module docstring),
-    from the whitened data Jacobian ``Jd`` (m, P) at the estimate. The unidentified ones
-    are sorted by reason — combinations that move no flange pose, those Z absorbs, those
-    X (and Y) absorb, those only all three together absorb — each set in reduced echelon
-    form (one leading parameter per combination), so that they read as parameters."""
-    nx, nb = prob.n_xyz, prob.nb
-    Jk = Jd[:, nx:] * prob.tau                          # δ in tolerance units
-    tol = 1e-7 * max(float(np.linalg.norm(Jk, 2)), 1e-300)
-    Jp = _residual_of(Jd[:, :nx], Jk)
-    U, sig, Vt = np.linalg.svd(Jp, full_matrices=False)
-    delta_s = s.delta / prob.tau
-    ident: list[Combination] = []
-    weak: list[Combination] = []
-    for k, v in enumerate(Vt):
-        if sig[k] <= tol:
-            continue
-        c = _combination(prob.names, v, float(sig[k]), delta_s, vf)
-        if sig[k] < 1.0:
-            weak.append(Combination(c.terms, c.sigma_data, c.estimate, c.sd,
-                                    "weakly identified: these poses see it less well than the "
-                                    "tolerance says; spread the joints further", c.vector))
-        else:
-            ident.append(c)
-    reasons = [("moves no flange pose (equivalent parameters of the chain)", None),
-               ("absorbed by Z (robot/world): it moves the whole arm in the robot's frame",
-                slice(6 * nb, 6 * nb + 6)),
-               ("absorbed by X" + (" and Y" if nb > 1 else "") + " (hand/eye): it moves only "
-                "what the flange carries", slice(0, 6 * nb)),
-               ("absorbed by X, Y and Z together" if not prob.n_g else
-                "absorbed by X, Y, Z and the tracker distortion together (e.g. a tracker scale "
-                "and the arm's overall size)", slice(0, nx))]
-    taken = np.zeros((len(prob.names), 0))
-    unident: list[Combination] = []
-    for why, cols in reasons:
-        M = Jk if cols is None else _residual_of(Jd[:, cols], Jk)
-        basis = _complement(_null_basis(M, tol), taken)
-        taken = np.concatenate([taken, basis], axis=1)
-        for v in _echelon(basis).T:
-            c = _combination(prob.names, v / np.linalg.norm(v), 0.0, delta_s, vf)
-            unident.append(Combination(c.terms, 0.0, c.estimate, float(np.sqrt(vf)), why,
-                                       c.vector))
-    return ident, weak, unident
-
-
-def _residual_of(M: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """J with its projection onto the column space of M removed."""
-    Q, _ = np.linalg.qr(M)
-    return J - Q @ (Q.T @ J)
-
-
-def _null_basis(M: np.ndarray, tol: float) -> np.ndarray:
-    """Orthonormal basis (k, r) of the null space of M (·, k), singular values ≤ tol."""
-    _, sig, Vt = np.linalg.svd(M, full_matrices=True)
-    rank = int(np.sum(sig > tol))
-    return Vt[rank:].T
-
-
-def _complement(basis: np.ndarray, taken: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of span(basis) with span(taken) (orthonormal) removed."""
-    if basis.shape[1] == 0 or taken.shape[1] == 0:
-        return basis
-    rest = basis - taken @ (taken.T @ basis)
-    U, sig, _ = np.linalg.svd(rest, full_matrices=False)
-    return U[:, sig > 1e-6]
-
-
-def _echelon(basis: np.ndarray) -> np.ndarray:
-    """The same span in reduced column echelon form (each vector one leading parameter with
-    coefficient 1, zero in the others' leading rows; pivots by magnitude)."""
-    B = basis.copy()
-    rows: list[int] = []
-    for j in range(B.shape[1]):
-        free = [i for i in range(B.shape[0]) if i not in rows]
-        i = free[int(np.argmax(np.abs(B[free, j])))]
-        B[:, j] /= B[i, j]
-        for k in range(B.shape[1]):
-            if k != j:
-                B[:, k] -= B[i, k] * B[:, j]
-        rows.append(i)
-    return B
-
-
-def _combination(names: list[str], v: np.ndarray, sigma: float, delta_s: np.ndarray,
-                 vf: float) -> Combination:
-    v = v if v[np.argmax(np.abs(v))] > 0 else -v
-    order = np.argsort(-np.abs(v))
-    terms = {names[j]: float(v[j]) for j in order if abs(v[j]) >= 0.05}
-    return Combination(terms, sigma, float(v @ delta_s),
-                       float(np.sqrt(vf / (sigma ** 2 + 1.0))), vector=v)
 
 
 # --- level selection --------------------------------------------------------------------------
