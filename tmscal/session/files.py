@@ -115,10 +115,12 @@ class Session:
         C = np.stack([p.C for p in use]) if has_c else None
         return A, B, C, [p.index for p in use]
 
-    def joints(self, indices: list[int]) -> np.ndarray:
+    def joints(self, indices: list[int], missing: str = "the robot's driver did not report "
+               "them when it was recorded") -> np.ndarray:
         """The recorded joint angles (m, n) rad of the poses ``indices`` (e.g. from
-        ``arrays``), in that order. Raises SessionError naming the first pose that has none,
-        or whose joint count differs from the first pose's."""
+        ``arrays``), in that order. Raises SessionError naming the first pose that has none
+        (then ``missing``: why it matters or how it came about), or whose joint count differs
+        from the first pose's."""
         by_index = {p.index: p for p in self.poses}
         rows: list[list[float]] = []
         where = self.path or "session"
@@ -126,8 +128,7 @@ class Session:
             q = by_index[i].joints_rad if i in by_index else None
             if q is None:
                 raise SessionError(f"{where}: pose {i} has no joint angles ('joints_rad'); "
-                                   "the robot's driver did not report them when it was "
-                                   "recorded")
+                                   + missing)
             if rows and len(q) != len(rows[0]):
                 raise SessionError(f"{where}: pose {i} has {len(q)} joint angles, pose "
                                    f"{indices[0]} has {len(rows[0])}")

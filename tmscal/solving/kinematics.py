@@ -23,7 +23,7 @@ from ..calib.kinematics.calibrated import ArmCalibration, controller_frame, spre
 from ..calib.kinematics.ik import inverse
 from ..calib.kinematics.model import Arm, base_from_flange, forward
 from ..calib.metrics import placement_errors
-from ..errors import CalibrationError, ConfigError
+from ..errors import CalibrationError, ConfigError, SessionError
 from ..session import Session
 
 __all__ = ["JOINTS_HINT", "recorded_arm", "choose_arm", "session_joints", "usable_joints",
@@ -65,20 +65,11 @@ def session_joints(session: Session, indices: list[int], purpose: str) -> np.nda
     """The recorded joints (m, dof) rad of poses ``indices``, in that order. CalibrationError
     naming the first pose without joints (or with another number of them) and ``purpose``,
     what needs them."""
-    by_index = {p.index: p for p in session.poses}
-    rows: list[list[float]] = []
-    where = session.path or "session"
-    for i in indices:
-        q = by_index[i].joints_rad if i in by_index else None
-        if q is None:
-            raise CalibrationError(f"{where}: pose {i} has no joint angles ('joints_rad'); "
-                                   f"{purpose} needs the joints of every pose used: "
-                                   + JOINTS_HINT)
-        if rows and len(q) != len(rows[0]):
-            raise CalibrationError(f"{where}: pose {i} has {len(q)} joint angles, pose "
-                                   f"{indices[0]} has {len(rows[0])}")
-        rows.append(list(q))
-    return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+    try:
+        return session.joints(indices, f"{purpose} needs the joints of every pose used: "
+                              + JOINTS_HINT)
+    except SessionError as e:
+        raise CalibrationError(str(e)) from None
 
 
 def usable_joints(session: Session, indices: list[int]) -> np.ndarray | None:
