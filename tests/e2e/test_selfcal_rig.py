@@ -75,7 +75,7 @@ def test_acquire_identify_recovers_the_hidden_errors(tmp_path, mock_config):
         assert p.joints_rad is not None and p.wrench is not None and p.samples["wrench"] == 20
         np.testing.assert_array_equal(p.commanded, plan.poses[p.index])
 
-    r = _tmscal("selfcal", "identify", out, "-o", kin)
+    r = _tmscal("selfcal", "identify", out, "-o", kin, "--form", "kept")   # the paper's protocol
     assert r.returncode == 0, r.stderr[-3000:]
     assert "converged" in r.stdout and "not identified: base_yaw" in r.stdout
     kf = read_kinematics(kin)

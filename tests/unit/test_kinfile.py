@@ -226,9 +226,10 @@ def selfcal_session(path, pair, n=50, sigma=(0.05, 0.01), samples=25, seed=4, sp
 
 
 def test_identify_writes_a_kinematics_file_closer_to_the_truth(tmp_path):
-    """`tmscal selfcal identify` on a session of the true arm's wrenches (seeded noise): the
-    file reads back; every hidden error shrinks in aggregate; its σ are those of the noise
-    (the reduced χ² near 1); the outputs are refused when they exist (no --force)."""
+    """`tmscal selfcal identify --form kept` on a session of the true arm's wrenches (seeded
+    noise; the paper's protocol: errors on the columns the fit keeps): the file reads back;
+    every hidden error shrinks in aggregate; its σ are those of the noise (the reduced χ² near
+    1); the outputs are refused when they exist (no --force)."""
     from click.testing import CliRunner
 
     from tmscal.calib.selfcal.identify import position_errors
@@ -238,7 +239,8 @@ def test_identify_writes_a_kinematics_file_closer_to_the_truth(tmp_path):
     pair = make_arm("ur5e", "paper", 11)
     s_path, k_path = tmp_path / "sc.jsonl", tmp_path / "kin.yaml"
     q = selfcal_session(s_path, pair)
-    r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o", str(k_path)])
+    args = ["selfcal", "identify", str(s_path), "-o", str(k_path), "--form", "kept"]
+    r = CliRunner().invoke(main, args)
     assert r.exit_code == 0, r.output
     assert "converged" in r.output and "not identified: base_yaw: zero column" in r.output
     kf = read_kinematics(k_path)
@@ -252,8 +254,48 @@ def test_identify_writes_a_kinematics_file_closer_to_the_truth(tmp_path):
     ident = kf.doc["identification"]
     assert 0.5 < ident["reduced_chi2"] < 2.0   # 300 residuals, 22 parameters
     assert kf.session["sha256"] and kf.identified == ident["parameters"]
-    again = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o", str(k_path)])
+    assert ident["form"] == "kept"
+    again = CliRunner().invoke(main, args)
     assert again.exit_code == 2 and "--force" in again.output
+
+
+@pytest.mark.parametrize("seed", [11, 2])
+def test_identify_default_writes_the_map_arm_that_does_not_depend_on_the_kept_columns(
+        tmp_path, seed):
+    """The default form: errors on every length and angle (``all``), so the wrench sees part
+    of them only in combinations. The written arm fits the wrenches as well as the kept
+    columns' fit; it is the MAP model whatever equivalent columns were kept (the same arm
+    from a fit that kept θ0_3 in place of θ0_2); after a hand/eye calibration absorbs what no
+    wrench sees, its TCP error is below the nominal arm's."""
+    from click.testing import CliRunner
+
+    from tmscal.calib.selfcal.identify import absorbed_errors, canonical, identify
+    from tmscal.calib.selfcal.model import forward, wrench
+    from tmscal.cli import main
+    from tmscal.session import read_session
+    from tmscal.sim.arm import make_arm
+    from tmscal.solving.selfcal import identify_session
+
+    pair = make_arm("ur5e", "all", seed)
+    s_path, k_path = tmp_path / "sc.jsonl", tmp_path / "kin.yaml"
+    q = selfcal_session(s_path, pair)
+    r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o", str(k_path)])
+    assert r.exit_code == 0, r.output
+    assert "the MAP model of every parameter" in r.output
+    kf = read_kinematics(k_path)
+    assert kf.doc["identification"]["form"] == "map"
+    res = identify_session(read_session(s_path), "ur5e")
+    w = np.array([p.wrench for p in read_session(s_path).poses])
+    rms_map = np.sqrt(np.mean((wrench(kf.model, q) - w) ** 2, axis=0))
+    assert np.all(rms_map <= 1.05 * res.fit.rms + 1e-9)
+    other = [("theta0_3" if n == "theta0_2" else n) for n in res.ident.kept]
+    assert other != res.ident.kept
+    fit2 = identify(pair.nominal, q, w, res.sigma, other)
+    again = canonical(pair.nominal, q, w, res.sigma, start=fit2.model)
+    np.testing.assert_allclose(forward(again, q)[:, :3, 3], forward(kf.model, q)[:, :3, 3],
+                               atol=1e-4)
+    assert (absorbed_errors(pair.true, kf.model, q).mean()
+            < 0.9 * absorbed_errors(pair.true, pair.nominal, q).mean())
 
 
 def test_identify_without_spreads_needs_sigma(tmp_path):
@@ -266,7 +308,7 @@ def test_identify_without_spreads_needs_sigma(tmp_path):
     selfcal_session(s_path, make_arm("ur5e", "none", 0), n=20, spreads=False)
     r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o",
                                   str(tmp_path / "k.yaml")])
-    assert r.exit_code == 2 and "--sigma" in r.output
+    assert r.exit_code == 1 and "--sigma" in r.output and "no wrench spreads" in r.output
     r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o",
                                   str(tmp_path / "k.yaml"), "--sigma", "0.05", "0.01"])
     assert r.exit_code == 0, r.output

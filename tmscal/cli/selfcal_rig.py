@@ -30,12 +30,6 @@ from .app import (
 )
 from .selfcal import selfcal
 
-CHANNELS = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
-CHANNEL_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
-#: the smallest channel σ identify uses (N, N·m): a noise-free sensor (a mock without noise)
-#: would otherwise give infinite weights
-MIN_SIGMA = 1e-6
-
 
 def _arm_name(arm: str | None, cfg: Any) -> str | None:
     """--arm, else the arm of the config's mock kinematics (a mock rig), else None."""
@@ -183,58 +177,38 @@ def _dry_run(cfg: Any, arm: str | None, k: int, pool: int, seed: int, span_deg: 
 
 # --- identify ---------------------------------------------------------------------------------
 
-def _session_data(session: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
-    """(q (m, n) rad, wrench (m, 6), σ of each averaged wrench (m, 6), indices) of the poses
-    with joints and a wrench, ordered by index; the σ of a mean is its spread / √samples."""
-    from ..errors import SessionError
-
-    use = sorted((p for p in session.poses if p.skipped is None and p.wrench is not None
-                  and p.joints_rad is not None), key=lambda p: p.index)
-    if not use:
-        raise SessionError(f"{session.path}: no pose has both joint angles and a wrench "
-                           "(record one with tmscal selfcal acquire)")
-    idx = [p.index for p in use]
-    q = session.joints(idx)
-    w = np.array([p.wrench for p in use], dtype=float)
-    sem = np.array([np.asarray(p.wrench_spread if p.wrench_spread is not None else [np.nan] * 6)
-                    / math.sqrt(max(int(p.samples.get("wrench", 1)), 1)) for p in use])
-    return q, w, sem, idx
-
-
-def _sigma(option: tuple[float, float] | None, sem: np.ndarray) -> tuple[np.ndarray, str]:
-    """The channel noise (6,) N, N·m of the averaged wrenches and where it came from."""
-    if option is not None:
-        return np.array([option[0]] * 3 + [option[1]] * 3), "--sigma"
-    if np.isnan(sem).all():
-        raise click.BadParameter("the session records no wrench spreads; give the channel "
-                                 "noise", param_hint="--sigma")
-    s = np.sqrt(np.nanmean(sem ** 2, axis=0))
-    return np.maximum(s, MIN_SIGMA), "the recorded spreads (SD / √samples, RMS over poses)"
-
-
 def _shown(value: float, unit: str) -> tuple[float, str]:
     """A parameter value in edge units: rad → deg."""
     return (math.degrees(value), "deg") if unit == "rad" else (value, unit)
 
 
-def _print_fit(model0: Any, fit: Any, ident: Any, sigma: np.ndarray, scale: float) -> None:
+def _print_fit(res: Any) -> None:
+    from ..solving.selfcal import CHANNEL_UNITS, CHANNELS
+
+    model0, fit, ident = res.model0, res.fit, res.ident
     names, units = model0.parameter_names(), model0.parameter_units()
-    p0, p1 = model0.vector(), fit.model.vector()
+    p0, p1 = model0.vector(), res.model.vector()
     click.echo(f"identifiable: {len(ident.kept)} of {len(names)} parameters (condition "
                f"number {ident.cond:.3g}; QR pivoting rank {ident.qr_rank})")
     for n, why in ident.removed:
         click.echo(f"  not identified: {n}: {why}")
+    if res.form == "map":
+        click.echo(f"written: the MAP model of every parameter (prior ±{res.prior['length_mm']:g}"
+                   f" mm, ±{res.prior['angle_deg']:g}°), independent of the kept columns; "
+                   "σ of the kept columns' fit")
+    else:
+        click.echo("written: the fit of the kept columns (the others nominal)")
     click.echo(f"  {'parameter':<14}{'nominal':>12}{'estimate':>12}{'± σ':>11}  unit")
     for n, s in zip(fit.parameters, fit.std, strict=True):
         i = names.index(n)
         a, u = _shown(p0[i], units[i])
         b, _ = _shown(p1[i], units[i])
-        e, _ = _shown(s * math.sqrt(scale), units[i])
+        e, _ = _shown(s * math.sqrt(res.scale), units[i])
         click.echo(f"  {n:<14}{a:>12.5g}{b:>12.5g}{e:>11.2g}  {u}")
     state = "converged" if fit.converged else "NOT converged (the iteration cap)"
     click.echo(f"{fit.iterations} iterations, {state}; reduced χ² {fit.reduced_chi2:.3g}")
     click.echo("residual RMS per channel (σ used): " + ", ".join(
-        f"{c} {r:.3g} ({s:.2g}) {u}" for c, r, s, u in zip(CHANNELS, fit.rms, sigma,
+        f"{c} {r:.3g} ({s:.2g}) {u}" for c, r, s, u in zip(CHANNELS, fit.rms, res.sigma,
                                                             CHANNEL_UNITS, strict=True)))
 
 
@@ -251,30 +225,36 @@ def _print_fit(model0: Any, fit: Any, ident: Any, sigma: np.ndarray, scale: floa
               default=None, metavar="FORCE_N TORQUE_NM",
               help="Noise of the averaged wrench per force and torque channel (default: from "
                    "the session's recorded spreads).")
+@click.option("--form", type=click.Choice(["map", "kept"]), default="map", show_default=True,
+              help="The arm written: 'map' the maximum a posteriori model of every parameter "
+                   "(what the wrench sees only in a combination shared out as the prior says; "
+                   "independent of which equivalent columns are kept), 'kept' the fit of the "
+                   "identifiable columns with the others nominal (Joubair et al. 2016).")
+@click.option("--prior", type=(Finite(0, lo_open=True), Finite(0, lo_open=True)),
+              default=(2.0, 1.0), show_default=True, metavar="LENGTH_MM ANGLE_DEG",
+              help="The MAP form's prior: each length's and angle's deviation from nominal.")
 @click.option("--max-iter", type=click.IntRange(1, 1000), default=50, show_default=True,
               help="Iteration cap of the Gauss–Newton / Levenberg–Marquardt fit.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def identify(session_file: Path, output: Path, arm: str | None,
-             sigma: tuple[float, float] | None, max_iter: int, force: bool,
-             strict: bool) -> None:
+             sigma: tuple[float, float] | None, form: str, prior: tuple[float, float],
+             max_iter: int, force: bool, strict: bool) -> None:
     """Identify the arm's kinematic parameters from a self-calibration session (Joubair et
     al. 2016): the parameters the gravity wrench identifies are fitted to the recorded
     wrenches at the recorded joints, rows weighted by each channel's noise, columns scaled
     (Hollerbach & Wampler 1996). Prints which parameters are identifiable (and why the others
     are not), the estimates ± σ against the nominal values (angles in deg), the iterations and
-    the residual RMS per channel; writes the calibrated model to the kinematics file. The σ
-    are scaled by √(reduced χ²) when it exceeds 1 (the residuals are larger than the
-    stated noise)."""
-    from ..acquisition.selfcal import nominal_arm
-    from ..calib.selfcal.identify import identifiable
-    from ..calib.selfcal.identify import identify as fit_model
-    from ..calib.selfcal.model import jacobian
-    from ..errors import CalibrationError, SessionError
+    the residual RMS per channel; writes the calibrated model to the kinematics file — by
+    default the maximum a posteriori model of every parameter, which does not depend on which
+    of several equivalent columns the fit kept (docs/selfcal.md, "Running it"). The σ are
+    scaled by √(reduced χ²) when it exceeds 1 (the residuals are larger than the stated
+    noise)."""
     from ..exports.calibfile import provenance
     from ..exports.kinfile import kinematics_yaml
     from ..session import sha256_of
+    from ..solving.selfcal import CHANNEL_UNITS, CHANNELS, identify_session
 
     check_outputs({"--output": output}, [session_file], force)
     session = read_session_file(session_file, strict)
@@ -284,38 +264,14 @@ def identify(session_file: Path, output: Path, arm: str | None,
         raise click.BadParameter(f"{session_file} does not name its arm; name the nominal "
                                  "model (a registered name such as ur5e or vs060)",
                                  param_hint="--arm")
-    model0 = nominal_arm(name, "--arm" if arm else f"{session_file}: header 'selfcal.arm'")
-    q, w, sem, idx = _session_data(session)
-    if q.shape[1] != model0.n_joints:
-        raise SessionError(f"{session_file}: the poses have {q.shape[1]} joint angles; arm "
-                           f"{name} has {model0.n_joints}")
-    sig, source = _sigma(sigma, sem)
-    names = model0.parameter_names()
-    J = jacobian(model0, q) / np.tile(sig, len(q))[:, None]
-    ident = identifiable(J, names)
-    if 6 * len(q) <= len(ident.kept):
-        raise CalibrationError(f"{session_file}: {len(q)} configurations give {6 * len(q)} "
-                               f"equations for {len(ident.kept)} parameters; record more")
-    try:
-        fit = fit_model(model0, q, w, sig, ident, max_iter=max_iter)
-    except (ValueError, np.linalg.LinAlgError) as e:
-        raise CalibrationError(f"{session_file}: the identification failed ({e})") from None
-    scale = max(1.0, float(fit.reduced_chi2))
-    click.echo(f"{session_file}: {len(q)} configurations of arm {name}; channel σ from "
-               f"{source}: " + ", ".join(f"{c} {s:.2g} {u}" for c, s, u in
-                                         zip(CHANNELS, sig, CHANNEL_UNITS, strict=True)))
-    _print_fit(model0, fit, ident, sig, scale)
-    p0, p1 = model0.vector(), fit.model.vector()
-    pos = [names.index(n) for n in fit.parameters]
-    record = {"nominal_arm": name, "parameters": fit.parameters,
-              "estimate": p1[pos], "std": fit.std * math.sqrt(scale), "nominal": p0[pos],
-              "covariance": fit.covariance * scale, "covariance_scale": scale,
-              "not_identified": dict(ident.removed), "iterations": fit.iterations,
-              "converged": fit.converged, "reduced_chi2": float(fit.reduced_chi2),
-              "sigma": dict(zip(CHANNELS, sig.tolist(), strict=True)),
-              "residual_rms": dict(zip(CHANNELS, fit.rms.tolist(), strict=True)),
-              "configurations": len(q), "poses": idx}
-    text = kinematics_yaml(fit.model, identification=record,
+    res = identify_session(session, name, sigma, form, prior[0], prior[1], max_iter,
+                           "--arm" if arm else f"{session_file}: header 'selfcal.arm'")
+    click.echo(f"{session_file}: {len(res.q)} configurations of arm {name}; channel σ from "
+               f"{res.sigma_source}: " + ", ".join(
+                   f"{c} {s:.2g} {u}" for c, s, u in zip(CHANNELS, res.sigma, CHANNEL_UNITS,
+                                                        strict=True)))
+    _print_fit(res)
+    text = kinematics_yaml(res.model, identification=res.record(),
                            session={"path": str(session_file),
                                     "sha256": sha256_of(session_file)},
                            provenance=provenance(session.header))

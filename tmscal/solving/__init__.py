@@ -20,6 +20,9 @@ it imports none of them (docs/architecture.md). No I/O: sessions come in as
   ``tmscal compare``.
 - :mod:`.predict`: the adaptive header entry (``adaptive_header``, ``settings_from_header``),
   the prediction's inputs, robot time by phase, and ``predict_session``.
+- :mod:`.selfcal`: ``identify_session``, the self-calibration of a recorded force-torque
+  session (Joubair et al. 2016; the arm written in a form that does not depend on the kept
+  columns; docs/selfcal.md, "Running it").
 - :mod:`.outliers`: the robust rule that names outlier poses (Leys et al. 2013).
 
 Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
