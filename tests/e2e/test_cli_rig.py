@@ -134,3 +134,35 @@ def test_robot_needs_only_the_robot_section(tmp_path, mock_config):
         r = CliRunner().invoke(main, ["track", str(cfg), "--frames", "1", "--plain"])
         assert r.exit_code == 1
         assert "tracker.tools.marker" in r.output and "ROM file not found" in r.output
+
+
+def test_acquire_force_keeps_the_old_session_when_the_run_cannot_start(tmp_path, mock_config):
+    """--force replaces an existing session only when the new run's header is written: with
+    the robot unreachable the run fails and the old session is as it was; with the rig there
+    it is replaced by the new run."""
+    from tmscal.session import read_session
+
+    from ..rigs import free_port, unique_host
+
+    base_cfg = mock_config("mock-denso-polaris.yaml", robot={"port": 0},
+                           mock={"noise": NOISE_FREE_MOCK})
+    out = tmp_path / "s.jsonl"
+    old = tmp_path / "old.jsonl"
+    r = CliRunner().invoke(main, ["simulate", "-o", str(old), "--poses", "12", "--seed", 3])
+    assert r.exit_code == 0, r.output
+    out.write_bytes(old.read_bytes())
+    with start_mock_rig(load_config(base_cfg), tracker_transport="pty") as mr:
+        cfg = point_config(base_cfg, mr.endpoints, "pointed.yaml")
+        host = unique_host()
+        nobody = f"{host}:{free_port(host)}"      # a loopback address nothing listens on
+        r = CliRunner().invoke(main, ["acquire", str(cfg), "-o", str(out), "--poses", "6",
+                                      "--samples", "5", "--force", "--robot-host", nobody])
+        assert r.exit_code == 1, r.output
+        assert out.read_bytes() == old.read_bytes()
+        assert mr.devices[-1].stats["moves"] == 0
+        r = CliRunner().invoke(main, ["acquire", str(cfg), "-o", str(out), "--poses", "6",
+                                      "--samples", "5", "--force"])
+        assert r.exit_code == 0, r.output
+    s = read_session(out)
+    assert len(s.poses) == 6 and s.header.get("plan", {}).get("poses") == 6
+    assert not [f for f in tmp_path.iterdir() if f.name.startswith(".tmscal-")]

@@ -326,6 +326,7 @@ class AdaptiveStrategy(PlanStrategy):
 
 def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
                      settings: AdaptiveSettings | None = None, resume: bool = False,
+                     replace: bool = False,
                      overrides: dict[str, Any] | None = None, samples: int | None = None,
                      tracker_port: str | None = None, robot_host: str | None = None,
                      robot_port: int | None = None, progress: Progress | None = None,
@@ -340,7 +341,7 @@ def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
     result's adaptive fields (stop, message, prediction, robot_time_s, settings) are set.
     Raises SafetyError (nothing moved), ConfigError, SessionError, or AcquisitionStopped
     (session intact, resumable; the message says how)."""
-    engine = Engine(cfg, output, resume=resume,
+    engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
     return engine.run(AdaptiveStrategy(cfg, settings, overrides, samples), progress)

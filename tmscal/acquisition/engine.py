@@ -44,6 +44,7 @@ from ..config import RigConfig
 from ..drivers.base import DeviceError, Envelope, RobotFault, SafetyError
 from ..errors import SessionError, TmscalError
 from ..session import PoseRecord, Session, SessionWriter, make_header, validate_record
+from ..session.outputs import check_not_locked
 from ..solving.predict import PHASES
 from .devices import Devices, Endpoints, envelope_for
 from .plan import check_plan, check_plan_moves
@@ -148,16 +149,19 @@ class PhaseClock:
 
 class Engine:
     """Runs a strategy on the rig of ``cfg`` into the session file ``output`` (``resume``:
-    continue it). ``endpoints`` override the config's device addresses; ``should_stop`` is
-    polled before each pose; ``sleep`` waits (s)."""
+    continue it; ``replace``: a new run over an existing session, which is replaced only when
+    the new header is written, after the devices answered and the plan was checked, so a run
+    that cannot start leaves it as it was). ``endpoints`` override the config's device
+    addresses; ``should_stop`` is polled before each pose; ``sleep`` waits (s)."""
 
     def __init__(self, cfg: RigConfig, output: str | Path, *, resume: bool = False,
-                 endpoints: Endpoints | None = None,
+                 replace: bool = False, endpoints: Endpoints | None = None,
                  should_stop: Callable[[], bool] = lambda: False,
                  sleep: Callable[[float], None] = time.sleep) -> None:
         self.cfg = cfg
         self.out = Path(output)
         self.resume = resume
+        self.replace = replace and not resume
         self.endpoints = endpoints or Endpoints()
         self.should_stop = should_stop
         self.sleep = sleep
@@ -189,7 +193,7 @@ class Engine:
             if writer is None:
                 header = make_header(dev.bodies, config=self.cfg.raw,
                                      devices=dev.identities(), **strategy.header())
-                writer = SessionWriter.create(self.out, header)
+                writer = SessionWriter.create(self.out, header, overwrite=self.replace)
             result = self._loop(strategy, progress, dev, envelope, writer, notes)
             clean = True
         finally:
@@ -202,10 +206,12 @@ class Engine:
     # --- start ----------------------------------------------------------------------------
 
     def _new(self, strategy: Strategy, dev: Devices) -> tuple[Envelope, list[str]]:
-        """A new run (SessionError if the file exists): open the devices with the config's
-        caps and box, take P0, plan, check every pose against the envelope around P0 before
-        anything moves; the robot then carries that envelope."""
-        if self.out.exists():
+        """A new run (SessionError if the file exists, unless ``replace``): open the devices
+        with the config's caps and box, take P0, plan, check every pose against the envelope
+        around P0 before anything moves; the robot then carries that envelope."""
+        if self.replace:
+            check_not_locked(self.out)
+        elif self.out.exists():
             raise SessionError(f"{self.out}: already exists; use --resume to continue it, or "
                                "choose another file")
         strategy.prepare()

@@ -196,7 +196,7 @@ class PlanStrategy(Strategy):
         return measure_tracked(dev, step.index, step.target, self.st, t, phase, sleep)
 
 
-def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
+def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False, replace: bool = False,
             poses: int | None = None, samples: int | None = None,
             tracker_port: str | None = None, robot_host: str | None = None,
             robot_port: int | None = None, progress: Progress | None = None,
@@ -210,7 +210,7 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False,
     the reconnects for one fault: the count starts again after a pose succeeds. Raises
     SafetyError (nothing moved), ConfigError, SessionError, or AcquisitionStopped (session
     intact, resumable; the message says how)."""
-    engine = Engine(cfg, output, resume=resume,
+    engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
     return engine.run(PlanStrategy(cfg, poses, samples), progress)

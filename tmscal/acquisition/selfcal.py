@@ -448,7 +448,7 @@ class SelfcalStrategy(Strategy):
 
 def acquire_selfcal(cfg: RigConfig, output: str | Path, *, arm: str | None = None,
                     k: int = 60, pool: int = 5000, seed: int = 0, span_deg: float = 90.0,
-                    resume: bool = False, samples: int | None = None,
+                    resume: bool = False, replace: bool = False, samples: int | None = None,
                     robot_host: str | None = None, robot_port: int | None = None,
                     ft_host: str | None = None, ft_port: int | None = None,
                     progress: Progress | None = None,
@@ -463,7 +463,7 @@ def acquire_selfcal(cfg: RigConfig, output: str | Path, *, arm: str | None = Non
     and the run, as in :func:`tmscal.acquisition.run.acquire`. Raises SafetyError (nothing
     moved), ConfigError, SessionError, or AcquisitionStopped (session intact, resumable; the
     message says how)."""
-    engine = Engine(cfg, output, resume=resume,
+    engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(robot_host=robot_host, robot_port=robot_port,
                                         ft_host=ft_host, ft_port=ft_port),
                     should_stop=should_stop, sleep=sleep)

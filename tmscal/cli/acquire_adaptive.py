@@ -102,7 +102,7 @@ class PredictionLines(Progress):
 def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         samples: int | None, tracker_port: str | None, robot_host: str | None,
         robot_port: int | None = None, should_stop: Any = lambda: False,
-        quiet: bool = False) -> Any:
+        quiet: bool = False, replace: bool = False) -> Any:
     """``acquire_adaptive`` with the progress display (the bars and a line per prediction on
     stderr unless ``quiet``); returns its AcquireResult."""
     from ..acquisition.adaptive_run import acquire_adaptive, settings_for
@@ -112,7 +112,7 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
     settings = None if resume else settings_for(cfg, **overrides)
     with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
         return acquire_adaptive(
-            cfg, output, settings=settings, resume=resume, overrides=overrides,
+            cfg, output, settings=settings, resume=resume, replace=replace, overrides=overrides,
             samples=samples, tracker_port=tracker_port, robot_host=robot_host,
             robot_port=robot_port, should_stop=should_stop,
             progress=bar if quiet else ProgressGroup(bar, PredictionLines()))
@@ -145,7 +145,7 @@ def _region(settings: Any) -> str:
 
 
 def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | None,
-         overrides: dict[str, Any], as_json: bool) -> None:
+         overrides: dict[str, Any], as_json: bool, replace: bool = False) -> None:
     """``tmscal demo --adaptive``: the adaptive run on the mock rig (mocks in a child), then
     the prediction beside the true coil-placement error against the rig's truth (over the
     same region), and QR36 on the session as ``demo`` prints it."""
@@ -169,7 +169,7 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
         host, port = split_endpoint(ep["robot"])
         res = run(cfg, output, resume=False, overrides=overrides, samples=samples,
                   tracker_port=ep["tracker"], robot_host=host, robot_port=port,
-                  quiet=as_json)
+                  quiet=as_json, replace=replace)
     session = read_session(output)
     session.header["truth"] = truth.as_dict()
     region = PlanSpec.from_header(session.header).with_n(res.settings.region).poses()

@@ -103,9 +103,9 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     cfg_path = config or _default_demo_config(demo_config_name(kinematics is not None))
     check_adaptive_flags(adaptive, False, Path(), poses, overrides)
     check_outputs({"--output": output}, [cfg_path], force)
-    if output is not None and force:
-        from ..session.outputs import remove_output
-        remove_output(output)  # refused if another tmscal holds it (a session being recorded)
+    # --force: the run replaces an existing session when its header is written (after the
+    # mock rig answered); one another tmscal holds locked is refused (check_outputs)
+    replace = output is not None and force
     cfg = load_config(cfg_path)
     truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
     tmp = None
@@ -115,7 +115,8 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     try:
         if adaptive:
             from . import acquire_adaptive
-            acquire_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json)
+            acquire_adaptive.demo(cfg, cfg_path, output, transport, samples, overrides, as_json,
+                                  replace)
             return
         # the mocks run in a child process: ur_rtde holds the GIL while it waits for them
         with spawn_mock_rig(cfg_path, transport=transport) as mp:
@@ -124,7 +125,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
                 click.echo("mock rig: " + ", ".join(f"{k} {v}" for k, v in ep.items()))
             host, port = split_endpoint(ep["robot"])
             with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
-                res = run_acquire(cfg, output, poses=poses, samples=samples,
+                res = run_acquire(cfg, output, poses=poses, samples=samples, replace=replace,
                                   tracker_port=ep["tracker"], robot_host=host,
                                   robot_port=port, progress=bar)
         session = read_session(output)

@@ -306,7 +306,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     cfg = load_config(config)
     if force and not dry_run:
-        replace_session(output, config)
+        check_replaceable(output, config)
     if dry_run:
         if adaptive:  # the candidates: the plan with adaptive.pool poses
             from ..acquisition.adaptive_run import settings_for
@@ -317,11 +317,12 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     stop.install()
     if adaptive:
         _acquire_adaptive(cfg, config, output, resume, overrides, samples, tracker_port,
-                          robot_host, stop)
+                          robot_host, stop, force)
         return
     try:
         with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
-            res = run_acquire(cfg, output, resume=resume, poses=poses, samples=samples,
+            res = run_acquire(cfg, output, resume=resume, replace=force, poses=poses,
+                              samples=samples,
                               tracker_port=tracker_port, robot_host=robot_host,
                               progress=bar, should_stop=stop)
     except AcquisitionStopped as e:
@@ -332,26 +333,25 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         sys.exit(EXIT_INTERRUPTED)
 
 
-def replace_session(output: Path, config: Path) -> None:
-    """``--force`` of the acquiring commands: remove the session at ``output`` so that the run
-    records it anew, by the one output rule (never an input, never a file another tmscal
-    holds locked)."""
-    from ..session.outputs import remove_output
-
+def check_replaceable(output: Path, config: Path) -> None:
+    """``--force`` of the acquiring commands, checked before anything connects: the session at
+    ``output`` may be replaced by the one output rule (never an input, never a file another
+    tmscal holds locked). The run replaces it only when its new header is written, after the
+    devices answered and the plan was checked: a run that cannot start leaves it as it was."""
     check_outputs({"--output": output}, [config], True)
-    remove_output(output)
 
 
 def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
                       overrides: dict[str, Any], samples: int | None,
-                      tracker_port: str | None, robot_host: str | None, stop: Any) -> None:
+                      tracker_port: str | None, robot_host: str | None, stop: Any,
+                      replace: bool = False) -> None:
     from ..acquisition.engine import AcquisitionStopped
     from . import acquire_adaptive
 
     try:
         res = acquire_adaptive.run(cfg, output, resume=resume, overrides=overrides,
                                samples=samples, tracker_port=tracker_port,
-                               robot_host=robot_host, should_stop=stop)
+                               robot_host=robot_host, should_stop=stop, replace=replace)
     except AcquisitionStopped as e:
         fail(f"acquisition stopped: {e}")
         return

@@ -92,7 +92,7 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     from ..config import load_config
     from ..net import split_endpoint
     from .live import AcquireProgress, stderr_to_log
-    from .rig_commands import StopFlag, replace_session
+    from .rig_commands import StopFlag, check_replaceable
 
     if same_file(output, config):
         raise click.BadParameter(f"{output} is the config file; it is never written over",
@@ -109,7 +109,7 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
         _dry_run(cfg, name, k, pool, seed, span_deg, robot_host)
         return
     if force:
-        replace_session(output, config)
+        check_replaceable(output, config)
     try:
         ft_addr = split_endpoint(ft_host) if ft_host else (None, None)
     except ValueError:
@@ -120,7 +120,8 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     try:
         with stderr_to_log(), AcquireProgress(sys.stderr, label="configuration") as bar:
             res = acquire_selfcal(cfg, output, arm=name, k=k, pool=pool, seed=seed,
-                                  span_deg=span_deg, resume=resume, samples=samples,
+                                  span_deg=span_deg, resume=resume, replace=force,
+                                  samples=samples,
                                   robot_host=robot_host, ft_host=ft_addr[0],
                                   ft_port=ft_addr[1], progress=ProgressGroup(PlanLine(), bar),
                                   should_stop=stop)

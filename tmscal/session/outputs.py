@@ -30,7 +30,7 @@ from pathlib import Path
 
 from ..errors import SessionError
 
-__all__ = ["check_not_locked", "output_path", "remove_output", "write_output"]
+__all__ = ["check_not_locked", "output_path", "write_output"]
 
 #: the mode new files are created with, before the umask
 MODE = 0o666
@@ -209,17 +209,3 @@ def write_output(path: str | os.PathLike[str], data: str | bytes,
         finally:
             os.close(fd)
     return Path(path)
-
-
-def remove_output(path: str | os.PathLike[str]) -> None:
-    """Remove the file at ``path`` for a command that will create it anew (``--force``),
-    while holding its lock: a file another tmscal process holds locked is refused with
-    SessionError and left as it is. Nothing if there is no file."""
-    p = Path(path)
-    with _held(p):
-        try:
-            p.unlink()
-        except FileNotFoundError:
-            pass
-        except OSError as e:
-            raise SessionError(f"{p}: cannot remove it ({_why(e)})") from None
