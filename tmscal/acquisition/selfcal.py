@@ -383,6 +383,7 @@ class SelfcalStrategy(Strategy):
     sensor = "ft"
     unit = "configuration"
     command = "selfcal acquire"
+    moves_in_order = True   # P0, then the configurations in order, by Cartesian flange moves
 
     def __init__(self, cfg: RigConfig, arm: str | None = None, k: int = 60, pool: int = 5000,
                  seed: int = 0, span_deg: float = 90.0, samples: int | None = None) -> None:
