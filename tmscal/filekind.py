@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
-__all__ = ["KINDS", "THIS_COMMAND", "sniff", "wrong_kind"]
+__all__ = ["KINDS", "THIS_COMMAND", "sniff", "wrong_kind", "read_kind"]
 
 #: kind → (what such a file is, how to recognise it or where it comes from)
 KINDS: dict[str, tuple[str, str]] = {
@@ -112,3 +113,27 @@ def wrong_kind(src: str, text: str, expected: str) -> str | None:
     name, how = KINDS[kind]
     want, want_how = KINDS[expected]
     return f"{src} is {name} ({how}); {THIS_COMMAND} expects {want} ({want_how})"
+
+
+def read_kind(p: Path, kind: str, noun: str, max_bytes: int,
+              error: type[Exception]) -> str:
+    """The UTF-8 text of the regular file ``p`` that should be of ``kind`` (:data:`KINDS`; a
+    ``noun`` in messages, e.g. "config", "calibration file"), at most ``max_bytes`` long.
+    Every problem is one ``error`` naming the file: not a regular file, too large, unreadable
+    (the OS's reason), not UTF-8, or another kind of tmscal file (:func:`wrong_kind`: a
+    session given as a config, …)."""
+    src = str(p)
+    try:
+        if p.exists() and not p.is_file():
+            raise error(f"{src}: not a regular file")
+        if p.stat().st_size > max_bytes:
+            raise error(f"{src}: larger than {max_bytes:,} bytes; not a {noun}")
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise error(f"{src}: cannot read {noun} ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise error(f"{src}: not a UTF-8 text file") from None
+    msg = wrong_kind(src, text, kind)
+    if msg is not None:
+        raise error(msg)
+    return text

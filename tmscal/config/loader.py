@@ -13,7 +13,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError
-from ..filekind import wrong_kind
+from ..filekind import read_kind
 from .devices import parse_ft, parse_robot, parse_tracker
 from .mock import parse_mock
 from .plan import parse_plan
@@ -75,17 +75,7 @@ def load_config(path: str | os.PathLike[str], *, check_files: bool = True) -> Ri
     """Load and validate a YAML rig config. Raises ConfigError naming the file, the line and
     the key; nothing is opened or written. ``check_files=False``: see ``parse_config``."""
     p = Path(path)
-    try:
-        if p.stat().st_size > MAX_CONFIG_BYTES:
-            raise ConfigError(f"{p}: the config is larger than {MAX_CONFIG_BYTES:,} bytes")
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ConfigError(f"{p}: cannot read config ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{p}: not a UTF-8 text file") from None
-    other = wrong_kind(str(p), text, "config")  # a session, calibration, … given as a config
-    if other is not None:
-        raise ConfigError(other)
+    text = read_kind(p, "config", "config", MAX_CONFIG_BYTES, ConfigError)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:

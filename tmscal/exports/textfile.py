@@ -14,7 +14,7 @@ import numpy as np
 import yaml
 
 from ..errors import CalibrationError
-from ..filekind import wrong_kind
+from ..filekind import read_kind
 from ..geometry import RIGID_TOL_DEFAULT, check_pose
 
 __all__ = ["MAX_BYTES", "RAW_LIMIT", "bad", "check_matrix", "load_text", "read_text_file"]
@@ -78,23 +78,9 @@ def load_text(text: str, src: str) -> Any:
         raise CalibrationError(f"{src}: invalid YAML ({str(e)[:120]})") from None
 
 
-def read_text_file(p: Path, what: str, kind: str | None = None) -> str:
-    """The UTF-8 text of regular file ``p`` of at most ``MAX_BYTES``; CalibrationError naming
-    the file otherwise (``what`` it should have been, e.g. "calibration file"), and saying
-    what the file is when it is of another ``kind`` of tmscal file (``tmscal.filekind``: a
-    session given as a calibration, …)."""
-    src = str(p)
-    try:
-        if not p.is_file():
-            raise CalibrationError(f"{src}: not a regular file")
-        if p.stat().st_size > MAX_BYTES:
-            raise CalibrationError(f"{src}: larger than {MAX_BYTES:,} bytes; not a {what}")
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise CalibrationError(f"{src}: cannot read ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise CalibrationError(f"{src}: not a UTF-8 text file") from None
-    msg = None if kind is None else wrong_kind(src, text, kind)
-    if msg is not None:
-        raise CalibrationError(msg)
-    return text
+def read_text_file(p: Path, what: str, kind: str) -> str:
+    """The UTF-8 text of regular file ``p`` of at most ``MAX_BYTES``, a tmscal file of
+    ``kind`` (``what`` it is called in messages, e.g. "calibration file"); CalibrationError
+    naming the file otherwise, saying what the file is when it is of another kind of tmscal
+    file (``tmscal.filekind.read_kind``: a session given as a calibration, …)."""
+    return read_kind(p, kind, what, MAX_BYTES, CalibrationError)
