@@ -172,19 +172,18 @@ def candidate_configurations(q0: np.ndarray, limits_rad: np.ndarray, n: int, spa
     wrench observes) while the flange stays near where it is; the shoulder and elbow carry
     the whole arm, and a third of the span keeps far more of the candidates inside a
     workspace box around P0 than the full span on every joint would."""
+    from ..calib.kinematics.excite import joint_window
+    from ..calib.selfcal.design import candidate_pool
+
     q0 = np.asarray(q0, dtype=float)
     lim = np.asarray(limits_rad, dtype=float)
     span = np.full(len(q0), np.radians(span_deg))
     span[:-3] /= 3.0
-    lo = np.maximum(lim[:, 0], q0 - span)
-    hi = np.minimum(lim[:, 1], q0 + span)
-    if (lo > hi).any():
-        j = int(np.argmax(lo > hi))
+    lo, hi, j = joint_window(q0, lim, span)
+    if j is not None:
         raise SafetyError(f"joint {j + 1} is at {np.degrees(q0[j]):.1f}°, outside the arm's "
                           f"nominal joint limits [{np.degrees(lim[j, 0]):.1f}, "
                           f"{np.degrees(lim[j, 1]):.1f}]°; nothing was moved")
-    from ..calib.selfcal.design import candidate_pool
-
     return candidate_pool(np.stack([lo, hi], axis=1), n, rng)
 
 

@@ -38,7 +38,7 @@ from ...geometry import angle_between
 from .ik import inverse
 from .model import Arm, base_from_flange
 
-__all__ = ["JOINTS_SPAN_DEG", "JOINTS_POOL", "JointsPlan", "candidate_joints",
+__all__ = ["JOINTS_SPAN_DEG", "JOINTS_POOL", "JointsPlan", "joint_window", "candidate_joints",
            "farthest_points", "start_joints", "joints_plan"]
 
 #: default span (deg) of the candidates around q0 on every joint
@@ -59,21 +59,31 @@ class JointsPlan:
     pool: int
 
 
+def joint_window(q0: np.ndarray, limits_rad: np.ndarray, span_rad: float | np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """The joint ranges (lo, hi) (dof,) rad within ±``span_rad`` (one value, or one per joint)
+    of ``q0`` (rad) and inside ``limits_rad`` (dof, 2) rad, and the first joint (0-based) whose
+    range is empty because ``q0`` lies outside its limits (None when every range holds).
+    Candidates for the joints plan and for self-calibration are drawn in it."""
+    q0 = np.asarray(q0, dtype=float)
+    lim = np.asarray(limits_rad, dtype=float)
+    lo = np.maximum(lim[:, 0], q0 - span_rad)
+    hi = np.minimum(lim[:, 1], q0 + span_rad)
+    bad = int(np.argmax(lo > hi)) if (lo > hi).any() else None
+    return lo, hi, bad
+
+
 def candidate_joints(q0: np.ndarray, limits_rad: np.ndarray, pool: int, span_deg: float,
                      rng: np.random.Generator) -> np.ndarray:
     """``pool`` joint configurations (pool, dof) rad uniform within ±``span_deg`` of ``q0``
-    (rad) on every joint, inside ``limits_rad`` (dof, 2) rad."""
-    q0 = np.asarray(q0, dtype=float)
-    lim = np.asarray(limits_rad, dtype=float)
-    span = np.radians(float(span_deg))
-    lo = np.maximum(lim[:, 0], q0 - span)
-    hi = np.minimum(lim[:, 1], q0 + span)
-    if (lo > hi).any():
-        j = int(np.argmax(lo > hi))
+    (rad) on every joint, inside ``limits_rad`` (dof, 2) rad (:func:`joint_window`)."""
+    lo, hi, j = joint_window(q0, limits_rad, np.radians(float(span_deg)))
+    if j is not None:
+        lim = np.asarray(limits_rad, dtype=float)
         raise ConfigError(f"plan: joint {j + 1} is at {np.degrees(q0[j]):.1f}° at P0, outside "
                           f"the arm's joint limits [{np.degrees(lim[j, 0]):.1f}, "
                           f"{np.degrees(lim[j, 1]):.1f}]°")
-    return lo + (hi - lo) * rng.uniform(0.0, 1.0, size=(int(pool), len(q0)))
+    return lo + (hi - lo) * rng.uniform(0.0, 1.0, size=(int(pool), len(lo)))
 
 
 def farthest_points(q: np.ndarray, k: int, start: np.ndarray) -> np.ndarray:
