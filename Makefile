@@ -43,11 +43,14 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/methods.py
 	$(BIN)/python benchmarks/ml_bound.py --n 20
 	$(BIN)/python benchmarks/ml_bound.py --n 250 --sessions 60
+	$(BIN)/python benchmarks/ml_bound.py --n 7
 	$(BIN)/python benchmarks/tracker.py
 	$(BIN)/python benchmarks/acquisition.py --robot ur
 	$(BIN)/python benchmarks/acquisition.py --robot denso
 	$(BIN)/python benchmarks/time_to_calibrate.py
 	$(BIN)/python benchmarks/selfcal.py
+	$(BIN)/python benchmarks/selfcal_rig.py
+	$(BIN)/python benchmarks/franka_demo.py
 	$(BIN)/python benchmarks/kinematics.py
 	$(BIN)/python benchmarks/ml_selection.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5

@@ -20,11 +20,13 @@ share of runs with true ≤ predicted beside the confidence (with its 95 % binom
 Each of ``--conditions`` (``CONDITIONS``; issue 21) runs ``--runs`` such runs: the config's
 noise ("default"); the robot's translation or rotation σ 3× or ⅓× (ml starts from its
 defaults and must find the noise in the residuals); a +0.1 % tracker scale (the prediction
-models no distortion); a UR5e under the rig with realistic kinematic errors
-(``make_arm("ur5e", "realistic", seed)``): the robot moves in joint space, the true error is
+fits an isotropic scale: docs/methods.md, "Adaptive acquisition"); a UR5e under the rig with
+realistic kinematic errors (``make_arm("ur5e", "realistic", seed)``): the robot moves in
+joint space, the true error is
 where the true arm takes the flange for each command, and the prediction counts the arm's
 error as model error, as it does for a session whose joints follow its arm. A summary of the
-coverage per condition with its 95 % Wilson interval ends the output (goal: ≥ 90 %).
+coverage per condition with its 95 % Wilson interval ends the output (goal: ≥ 90 %). What it
+prints is recorded in benchmarks/out/adaptive_coverage.json (``benchmarks/figures.py``).
 
 Then the table of the issue on the same rig, ``--table-rigs`` rig seeds: the mean true
 coil-placement error over the region for k = 6, 10, 14, 20 poses, random pool poses solved
@@ -195,7 +197,13 @@ def coverage(a: argparse.Namespace, cfg, pool: np.ndarray, settings: ad.Adaptive
           f"(95 % interval {lo:.1%}–{hi:.1%}) at confidence {settings.confidence:.0%}; "
           f"mean {m[0]:.1f} poses, predicted {m[1]:.4f} mm, true {m[2]:.4f} mm, "
           f"robot time {m[3]:.1f} s")
-    record("adaptive_coverage", {f"covered_{slug(name)}": covered, f"runs_{slug(name)}": a.runs})
+    key = slug(name)
+    record("adaptive_coverage", {
+        f"covered_{key}": covered, f"runs_{key}": a.runs,
+        f"covered_pct_{key}": round(100 * covered / a.runs, 1),
+        f"interval_lo_pct_{key}": round(100 * lo, 1), f"interval_hi_pct_{key}": round(100 * hi, 1),
+        f"mean_poses_{key}": round(float(m[0]), 1), f"predicted_mm_{key}": round(float(m[1]), 4),
+        f"true_mm_{key}": round(float(m[2]), 4), f"robot_s_{key}": round(float(m[3]), 1)})
     return covered, a.runs
 
 
@@ -250,6 +258,8 @@ def table(a: argparse.Namespace, cfg, pool: np.ndarray, noise: Noise) -> None:
                                        for k in KS))
     record("adaptive_coverage", {f"table_{m}_mm_k{k}": np.mean(err[m][k]) for m, _ in TABLE
                                  for k in KS})
+    record("adaptive_coverage", {f"table_{m}_s_k{k}": round(float(np.mean(secs[m][k])))
+                                 for m, _ in TABLE for k in KS})
 
 
 def main() -> None:

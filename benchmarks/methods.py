@@ -14,7 +14,9 @@ Per method and n (mean over the seeds; time: median):
   bound    the Cramér–Rao bound of Y's RMS translation error, mm (when tmscal.calib.bound is
            there; the same for every method)
   ms       solve time
-Runs with whatever is registered in tmscal.calib.METHODS.
+Runs with whatever is registered in tmscal.calib.METHODS. Records what it prints in
+benchmarks/out/methods.json (``benchmarks/figures.py``; with the scale, names start
+``scale0_1_``).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from figures import record
 
 from tmscal import calib
 from tmscal.calib import coil_placement_errors, solve, truth_errors
@@ -143,8 +146,11 @@ def table(methods: list[str], seeds: int, scale: float) -> None:
           f"train on poses 1…n, test on {N_POSES - N_TEST_FROM} poses after {N_TEST_FROM}")
     print(f"{'n':>4} {'method':<9}{'coil mm':>10}{'Y mm':>10}{'e_t mm':>10}{'bound mm':>10}"
           f"{'Y/bound':>9}{'ms':>10}")
+    pre = "" if scale == 1.0 else f"scale{(scale - 1) * 100:g}_".replace(".", "_")
+    figures: dict[str, float | None] = {}
     for n in NS:
         b = float(np.mean(bounds[n])) if bounds[n] else float("nan")
+        figures[f"{pre}bound_mm_n{n}"] = round(b, 4) if bounds[n] else None
         for m in methods + list(cv):
             r = rows[(m, n)]
             if "coil" not in r:
@@ -153,7 +159,12 @@ def table(methods: list[str], seeds: int, scale: float) -> None:
             y = float(np.mean(r["Y"]))
             print(f"{n:>4} {m:<9}{np.mean(r['coil']):>10.4f}{y:>10.4f}{np.mean(r['e_t']):>10.4f}"
                   f"{b:>10.4f}{y / b:>9.2f}{np.median(r['ms']):>10.2f}")
+            figures.update({f"{pre}{m}_coil_mm_n{n}": round(float(np.mean(r["coil"])), 4),
+                            f"{pre}{m}_y_mm_n{n}": round(y, 4),
+                            f"{pre}{m}_e_t_mm_n{n}": round(float(np.mean(r["e_t"])), 4),
+                            f"{pre}{m}_ms_n{n}": round(float(np.median(r["ms"])), 2)})
         print()
+    record("methods", figures)
 
 
 def main() -> None:

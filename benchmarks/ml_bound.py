@@ -17,6 +17,7 @@ import argparse
 import time
 
 import numpy as np
+from figures import record
 
 from tmscal.calib import coil_placement_errors, solve
 from tmscal.calib.bound import crb, sim_noise_options, translation_rms_bound
@@ -60,13 +61,23 @@ def main() -> None:
     b = float(np.sqrt(np.mean(bound)))
     print(f"n = {a.n}, {a.sessions} sessions, ml distortion {a.distortion!r}")
     print(f"  Cramér–Rao bound, RMS error of Y's translation: {b:.4f} mm")
+    pre = "" if a.distortion == "none" else f"{a.distortion}_"
+    fig: dict[str, float] = {f"{pre}sessions_n{a.n}": a.sessions,
+                             f"{pre}bound_mm_n{a.n}": round(b, 4)}
     for k, v in sq.items():
         rms = float(np.sqrt(np.mean(v)))
         print(f"  {k:<5} RMS error of Y's translation {rms:.4f} mm = {rms / b:.3f} × the bound")
+        fig[f"{pre}{k}_y_rms_mm_n{a.n}"] = round(rms, 4)
+        fig[f"{pre}{k}_over_bound_n{a.n}"] = round(rms / b, 3)
     print("  mean coil placement error: " + ", ".join(f"{k} {np.mean(v):.4f} mm"
                                                      for k, v in place.items()))
     print(f"  ml's 95 % coil-centre interval covers {np.mean(covered):.1%} of the sessions; "
           f"median ml solve {1e3 * np.median(times):.0f} ms")
+    for k, v in place.items():
+        fig[f"{pre}{k.replace(' ', '_')}_coil_mm_n{a.n}"] = round(float(np.mean(v)), 4)
+    fig[f"{pre}covered_pct_n{a.n}"] = round(100 * float(np.mean(covered)), 1)
+    fig[f"{pre}ml_ms_n{a.n}"] = round(1e3 * float(np.median(times)))
+    record("ml_bound", fig)
 
 
 if __name__ == "__main__":

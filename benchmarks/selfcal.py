@@ -80,8 +80,13 @@ def _print_comparison(arm: str, seeds: int, pool: int) -> None:
         res = simulate(arm=arm, pool=pool, seed=100 + seed)
         for s in SELECTIONS:
             rows[s].append(res.indices[s]["after_absorbed"]["mean_mm"])
+    fig: dict[str, float] = {}
     for s, v in sorted(rows.items(), key=lambda kv: np.mean(kv[1])):
-        print(f"  {s:8s} {np.mean(v):7.3f} ± {np.std(v, ddof=1) if len(v) > 1 else 0:.3f}")
+        sd = float(np.std(v, ddof=1)) if len(v) > 1 else 0.0
+        print(f"  {s:8s} {np.mean(v):7.3f} ± {sd:.3f}")
+        fig.update({f"{arm}_compare_{s.lower()}_mean_mm": round(float(np.mean(v)), 3),
+                    f"{arm}_compare_{s.lower()}_sd_mm": round(sd, 3)})
+    record("selfcal", fig)
 
 
 def main() -> None:

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from figures import record
 
 from tmscal.acquisition.run import acquire
 from tmscal.calib import solve
@@ -156,8 +157,13 @@ def main() -> None:
         rows = run(errors, a.poses, a.k)
         print(f"  {'kinematics of A and of the command':<36}{'method':<7}"
               f"{'coil mean mm':>13}{'max mm':>9}{'mean deg':>10}{'arm TCP mm':>12}")
+        fig: dict[str, float] = {}
         for label, method, (mean, mx, deg, tcp) in rows:
             print(f"  {label:<36}{method:<7}{mean:>13.3f}{mx:>9.3f}{deg:>10.3f}{tcp:>12.3f}")
+            key = f"{errors}_{label.split()[0].replace('-', '_')}_{method}"
+            fig.update({f"{key}_mean_mm": round(mean, 3), f"{key}_max_mm": round(mx, 3),
+                        f"{key}_mean_deg": round(deg, 3), f"{key}_arm_tcp_mm": round(tcp, 3)})
+        record("selfcal_rig", fig)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,8 @@ The fixed protocols are not waited out: their robot time is the motion model
 (``tmscal.motion``, the config's speed and acceleration caps, from P0 through every pose)
 + settle + samples / frame rate per pose, and their error is measured on a simulation of the
 same rig (``tmscal.sim.SimRig`` with the mock's truth and noise, the samples averaged), over
-the same region. Prints one row per seed and the means. Goal: adaptive ≤ 60 s robot time
+the same region. Prints one row per seed and the means, minima and maxima over the seeds (and
+records them, ``benchmarks/figures.py``). Goal: adaptive ≤ 60 s robot time
 with a true error ≤ 0.05 mm, mean over the seeds. Takes several minutes (real time).
 """
 
@@ -33,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from figures import record
 
 from tmscal.acquisition.adaptive_run import acquire_adaptive, settings_for
 from tmscal.calib import solve
@@ -161,11 +163,28 @@ def main() -> None:
             rows.append([a["poses"], r["moving"], r["settling"], r["sampling"], r["total"],
                          a["wall_s"], a["predicted_mm"], a["true_mm"]]
                         + [x for c in cols[1:] for x in f[c]])
-    m = np.mean(rows, axis=0)
-    print(f"{'mean':>4} {m[0]:>5.1f} {m[1]:>7.1f} {m[2]:>7.1f} {m[3]:>7.1f} {m[4]:>8.1f} "
-          f"{m[5]:>7.1f} {m[6]:>8.4f} {m[7]:>8.4f} | "
-          + " | ".join(f"{m[8 + 2 * i]:>10.0f} {m[9 + 2 * i]:>6.3f}"
-                       for i in range(len(cols) - 1)))
+    stats = {"mean": np.mean(rows, axis=0), "min": np.min(rows, axis=0),
+             "max": np.max(rows, axis=0)}
+    for name, m in stats.items():
+        print(f"{name:>4} {m[0]:>5.1f} {m[1]:>7.1f} {m[2]:>7.1f} {m[3]:>7.1f} {m[4]:>8.1f} "
+              f"{m[5]:>7.1f} {m[6]:>8.4f} {m[7]:>8.4f} | "
+              + " | ".join(f"{m[8 + 2 * i]:>10.0f} {m[9 + 2 * i]:>6.3f}"
+                           for i in range(len(cols) - 1)))
+    m = stats["mean"]
+    fig: dict[str, float] = {"seeds": args.seeds}
+    for name, v in stats.items():
+        fig.update({f"adaptive_poses_{name}": round(v[0], 1),
+                    f"adaptive_robot_s_{name}": round(v[4], 1),
+                    f"adaptive_true_mm_{name}": round(v[7], 4)})
+    fig.update({"adaptive_moving_s_mean": round(m[1], 1),
+                "adaptive_settling_s_mean": round(m[2], 1),
+                "adaptive_sampling_s_mean": round(m[3], 1),
+                "adaptive_wall_s_mean": round(m[5], 1),
+                "adaptive_predicted_mm_mean": round(m[6], 4)})
+    for i, c in enumerate(cols[1:]):
+        fig.update({f"{c}_robot_s_mean": round(m[8 + 2 * i]),
+                    f"{c}_true_mm_mean": round(m[9 + 2 * i], 3)})
+    record("time_to_calibrate", fig)
     print(f"goal: adaptive robot time ≤ 60 s (mean {m[4]:.1f} s) and true error ≤ 0.05 mm "
           f"(mean {m[7]:.4f} mm); Wang et al.'s protocol takes {m[8] / 60:.1f} min of robot "
           f"time for {m[9]:.3f} mm")

@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing as mp
+import os
 import time
 from pathlib import Path
 
 import numpy as np
+from figures import record
 
 from tmscal.drivers.ndi.tracker import NDITracker
 
@@ -94,6 +96,12 @@ def main() -> None:
     print(f"real time 60 Hz over {a.seconds:g} s: {reads} reads, {distinct} distinct frames of "
           f"{span} produced ({100 * distinct / span:.1f} %), {gaps} gaps in frame numbers "
           f"({distinct / a.seconds:.1f} distinct frames/s)")
+    load = os.getloadavg()
+    print(f"load average {load[0]:.2f}, {load[1]:.2f}, {load[2]:.2f} (1, 5, 15 min)")
+    record("tracker", {"load_1min": round(load[0], 2), "bx_fps": round(fps["bx"]),
+                       "tx_fps": round(fps["tx"]), "rt_seconds": a.seconds,
+                       "rt_distinct_frames": distinct, "rt_frames_produced": span, "rt_gaps": gaps,
+                       "rt_seen_pct": round(100 * distinct / span, 1)})
 
 
 if __name__ == "__main__":

@@ -217,10 +217,10 @@ def rot_z(a: ArrayLike) -> Array:
 # --- quaternions (scalar first, as NDI) -------------------------------------------------
 #
 # Hand-written rather than scipy.spatial.transform.Rotation: the NDI codec converts every tool
-# of every frame (``benchmarks/tracker.py`` reads 1,500 frames/s) and the metrics take one
-# rotation angle per test pose. On single rotations these forms take ~10 µs (quaternion →
-# matrix) and ~17 µs (matrix → quaternion) against scipy's ~19 µs and ~77 µs (its from_matrix
-# re-orthonormalises first). tests/unit/test_geometry.py checks both against scipy.
+# of every frame (``benchmarks/tracker.py`` prints how many frames/s) and the metrics take one
+# rotation angle per test pose; scipy's per-call overhead (and its from_matrix, which
+# re-orthonormalises first) costs more on single rotations. tests/unit/test_geometry.py checks
+# both against scipy.
 
 
 def _matrix_terms(w: float, x: float, y: float, z: float) -> np.ndarray:
