@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import make_pose, matrix_from_rotvec
+from ...geometry import make_pose, matrix_from_rotvec, rotvec_from_matrix
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
@@ -60,6 +60,7 @@ from ..ml_model import (
 from .identifiability import Combination, identifiability
 from .jacobian import deviation_twists, parallel_joints
 from .model import Arm, base_from_flange, deviation_units
+from .wrench import WRENCH_NAMES, WrenchData, WrenchParams, initial_wrench, wrench_rows
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
@@ -145,6 +146,8 @@ class _State:
     Z: np.ndarray
     delta: np.ndarray
     g: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: the wrench model's parameters (:mod:`.wrench`), with wrench rows
+    w: WrenchParams | None = None
 
 
 class _Problem:
@@ -152,15 +155,17 @@ class _Problem:
 
     def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                  names: list[str], tau: np.ndarray, whiten: np.ndarray,
-                 distortion: str = "none", moments: list[np.ndarray | None] | None = None
-                 ) -> None:
+                 distortion: str = "none", moments: list[np.ndarray | None] | None = None,
+                 wrench: WrenchData | None = None) -> None:
         self.q, self.bodies, self.chain0 = q, bodies, chain0
         self.names, self.tau, self.whiten = names, tau, whiten
         self.model, self.moments = distortion, moments or [None] * len(bodies)
         self.nb = len(bodies)
         self.n_g = DISTORTION_MODELS[distortion]
-        #: X, (Y,) Z and the distortion: the parameters without a prior
-        self.n_xyz = 6 * (self.nb + 1) + self.n_g
+        #: the wrench data (rows after the tracker's) and the first column of its parameters
+        self.wrench, self.c_w = wrench, 6 * (self.nb + 1) + self.n_g
+        #: X, (Y,) Z, the distortion and the wrench model: the parameters without a prior
+        self.n_xyz = self.c_w + (len(WRENCH_NAMES) if wrench is not None else 0)
 
     @property
     def n_params(self) -> int:
@@ -230,13 +235,26 @@ class _Problem:
                 J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
         rw = _apply(self.whiten, res).ravel()
         prior = s.delta / self.tau
-        r = np.concatenate([rw, prior])
+        wr, Jwr = self._wrench_rows(s, R_A, Jk, J is not None)
+        r = np.concatenate([rw, wr, prior])
         if J is None:
             return r, None
         Jw = _apply_jac(self.whiten, J).reshape(-1, self.n_params)
         Jp = np.zeros((len(self.names), self.n_params))
         Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
-        return r, np.concatenate([Jw, Jp], axis=0)
+        return r, np.concatenate([Jw, Jwr, Jp], axis=0)
+
+    def _wrench_rows(self, s: _State, R_A: np.ndarray, Jk: np.ndarray, jac: bool
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The whitened wrench rows (6n,) (none without a wrench) and their Jacobian."""
+        if self.wrench is None or s.w is None:
+            return np.zeros(0), np.zeros((0, self.n_params))
+        r, Jw, Jd = wrench_rows(s.w, self.wrench, R_A, Jk[:, :3, :] if jac else None)
+        J = np.zeros((r.size, self.n_params))
+        if Jw is not None and Jd is not None:
+            J[:, self.c_w:self.n_xyz] = Jw.reshape(r.size, -1)
+            J[:, self.n_xyz:] = Jd.reshape(r.size, -1)
+        return r.ravel(), J
 
     def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
         """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
@@ -254,7 +272,8 @@ class _Problem:
         Ws = [pose(W, d[6 * j:6 * j + 6]) for j, W in enumerate(s.Ws)]
         Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6])
         c0 = 6 * (self.nb + 1)
-        return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g])
+        w = None if s.w is None else s.w.step(d[self.c_w:self.n_xyz])
+        return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g], w)
 
 
 def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -327,6 +346,10 @@ class KinematicFit:
     #: the tracker distortion model estimated with the rest and its undistortion G (3×3)
     distortion: str = "none"
     G: np.ndarray = field(default_factory=lambda: np.eye(3))
+    #: with wrench rows: the wrench model's parameters (:data:`.wrench.WRENCH_NAMES`) —
+    #: {"estimate": {name: value}, "sd": {name: posterior SD}, "params": WrenchParams,
+    #: "rows": 6n, "chi2": of the wrench rows}; None without
+    wrench: dict[str, Any] | None = None
 
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
@@ -341,30 +364,34 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                    start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                    tol: Tolerances = Tolerances(), max_iter: int = 50,
                    distortion: str = "none",
-                   moments: list[np.ndarray | None] | None = None) -> KinematicFit:
+                   moments: list[np.ndarray | None] | None = None,
+                   wrench: WrenchData | None = None) -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
     spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
     "affine") estimated with the rest, ``moments`` the tools' second moments (``ml``'s
     ``tool_moment``; None: isotropic). The whitening is evaluated at the start and once more
-    at the estimate."""
+    at the estimate. ``wrench``: the wrench rows' data (:mod:`.wrench`), one per pose, or
+    None."""
     if distortion not in DISTORTION_MODELS:
         raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
                                f"{', '.join(DISTORTION_MODELS)}")
     names = level_parameters(chain0, level)
     tau = prior_sigmas(names, tol)
     s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
-               np.zeros(DISTORTION_MODELS[distortion]))
+               np.zeros(DISTORTION_MODELS[distortion]),
+               None if wrench is None else initial_wrench(wrench, base_from_flange(chain0, q)
+                                                          [:, :3, :3]))
     its = 0
     for _ in range(2):
         whiten = _whitener_for(s.Ws, noise, len(q))
-        prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments)
+        prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments, wrench)
         s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
         its += it
-    m = len(q) * 6 * len(bodies)
+    m = len(q) * 6 * (len(bodies) + (wrench is not None))
     data_r = r[:m]
     chi2 = float(data_r @ data_r)
-    Jx = J[:m, :prob.n_xyz]
+    Jx = J[:m, :prob.c_w]
     sx = np.linalg.svd(Jx / np.maximum(np.linalg.norm(Jx, axis=0), 1e-300), compute_uv=False)
     if sx[-1] <= 1e-7 * sx[0]:
         raise CalibrationError("kinematics: hand/eye, coil and robot/world are not "
@@ -385,10 +412,24 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                        P * vf, iterations=its, distortion=distortion,
                        G=undistortion(distortion, s.g))
     fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
+    if s.w is not None:
+        fit.wrench = _wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * vf),
+                                    r[m - 6 * len(q):m])
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(
             prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf)
     return fit
+
+
+def _wrench_report(w: WrenchParams, sd: np.ndarray, rows: np.ndarray) -> dict[str, Any]:
+    if not np.all(np.isfinite(sd)) or sd.max(initial=0.0) > 1e6:
+        raise CalibrationError("kinematics: the wrench rows do not identify the tool's weight, "
+                               "centre of gravity and the sensor's bias from these poses; "
+                               "turn the wrist more, or solve without the wrench")
+    vals = np.concatenate([w.tilt, rotvec_from_matrix(w.R_fs), [w.mg], w.cog_mm, w.bias])
+    return {"estimate": dict(zip(WRENCH_NAMES, map(float, vals), strict=True)),
+            "sd": dict(zip(WRENCH_NAMES, map(float, sd), strict=True)),
+            "params": w, "rows": int(rows.size), "chi2": float(rows @ rows)}
 
 
 # --- level selection --------------------------------------------------------------------------
@@ -438,13 +479,15 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
                         max_iter: int = 50, distortion: str = "none",
-                        moments: list[np.ndarray | None] | None = None) -> KinematicsResult:
+                        moments: list[np.ndarray | None] | None = None,
+                        wrench: WrenchData | None = None) -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
     keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
     and δ refitted on each training part); a simpler level wins when its held-out error is
     within one standard error of the best and its AIC is lower (the tie-break).
-    ``distortion`` and ``moments`` as :func:`fit_kinematics`, the same for every level."""
-    opts = {"distortion": distortion, "moments": moments}
+    ``distortion``, ``moments`` and ``wrench`` as :func:`fit_kinematics`, the same for every
+    level (the held-out error is the tracker's)."""
+    opts: dict[str, Any] = {"distortion": distortion, "moments": moments, "wrench": wrench}
     if level != "auto":
         fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts)
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
@@ -458,7 +501,8 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
             train = np.setdiff1d(np.arange(n), test)
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
-                                   _subset_noise(noise, train), tol, max_iter, **opts)
+                                   _subset_noise(noise, train), tol, max_iter,
+                                   **opts | {"wrench": wrench and wrench.subset(train)})
             except CalibrationError:
                 errs = []
                 break
