@@ -39,14 +39,17 @@ import numpy as np
 from ...errors import CalibrationError
 from ...geometry import matrix_from_rotvec
 
-__all__ = ["WRENCH_NAMES", "WRENCH_UNITS", "DEFAULT_SIGMA", "WrenchData", "WrenchParams",
-           "initial_wrench", "gravity_up", "predict_wrench", "wrench_rows"]
+__all__ = ["WRENCH_NAMES", "WRENCH_UNITS", "DEFAULT_SIGMA", "SIGMA_FLOOR", "WrenchData",
+           "WrenchParams", "initial_wrench", "gravity_up", "predict_wrench", "wrench_rows"]
 
 WRENCH_NAMES = ["base_roll", "base_pitch", "sensor_rx", "sensor_ry", "sensor_rz", "mg",
                 "cog_x", "cog_y", "cog_z", "f0_x", "f0_y", "f0_z", "t0_x", "t0_y", "t0_z"]
 WRENCH_UNITS = ["rad"] * 5 + ["N"] + ["mm"] * 3 + ["N"] * 3 + ["N·m"] * 3
 #: σ of an averaged wrench when the session gives none: [N]*3 + [N·m]*3
 DEFAULT_SIGMA = np.array([0.1] * 3 + [0.005] * 3)
+#: the smallest σ of an averaged wrench taken from recorded spreads (a noise-free reading
+#: would otherwise weigh infinitely): [N]*3 + [N·m]*3
+SIGMA_FLOOR = np.array([1e-3] * 3 + [1e-4] * 3)
 
 
 @dataclass(frozen=True)
