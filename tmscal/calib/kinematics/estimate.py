@@ -417,7 +417,8 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                                     r[m - 6 * len(q):m])
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(
-            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf)
+            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf,
+            None if wrench is None else prob.c_w)
     return fit
 
 
