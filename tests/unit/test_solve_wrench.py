@@ -55,7 +55,8 @@ def test_the_wrench_rows_identify_the_tool_and_the_tilt(tmp_path) -> None:
     s = tmp_path / "s.jsonl"
     rig = _session(s)
     true = rig.arm_true
-    code, out = _solve(str(s), "--kinematics", "estimate", "--arm", "ur5e", "--level", "full", "--json")
+    code, out = _solve(str(s), "--kinematics", "estimate", "--arm", "ur5e", "--level", "full",
+                       "--json")
     assert code == 0, out
     got = json.loads(out)
     w = got["arm"]["wrench"]
@@ -81,6 +82,7 @@ def test_the_wrench_rows_identify_the_tool_and_the_tilt(tmp_path) -> None:
 def test_a_pose_without_a_wrench_leaves_the_rows_out(tmp_path) -> None:
     s = tmp_path / "s.jsonl"
     _session(s, n=20, wrench_on=19)
-    code, out = _solve(str(s), "--kinematics", "estimate", "--arm", "ur5e", "--level", "offsets", "--json")
+    code, out = _solve(str(s), "--kinematics", "estimate", "--arm", "ur5e", "--level", "offsets",
+                       "--json")
     assert code == 0, out
     assert json.loads(out)["arm"].get("wrench") is None
