@@ -70,7 +70,7 @@ def _wrench_report(fit: KinematicFit) -> dict[str, Any] | None:
                                                                          WRENCH_UNITS,
                                                                          strict=True)),
             "tool_mass_kg": w["estimate"]["mg"] / G_STANDARD,
-            "flange_from_sensor_R": w["params"].R_fs.tolist(), "rows": w["rows"],
+            "flange_R_sensor": w["params"].R_fs.tolist(), "rows": w["rows"],
             "chi2": w["chi2"]}
 
 
