@@ -37,6 +37,11 @@ Levels (:data:`LEVELS`): "none" (X, Y, Z on the nominal arm), "offsets" (joint z
 offsets θ0_i) and "full" (every θ0, d, a, α, and β where consecutive axes are parallel);
 ``level="auto"`` chooses by k-fold held-out error, with the information criterion (AIC)
 as a tie-break only when the held-out errors are within one standard error.
+
+Wrench rows (:mod:`tmscal.calib.kinematics.wrench`): where every pose has a wrist wrench, its
+gravity wrench joins the sum as 6 whitened rows per pose, with 15 parameters of its own and no
+prior (base tilt, sensor rotation, tool weight and centre of gravity, sensor bias), the
+deviations reaching them through the arm's rotation.
 """
 
 from __future__ import annotations
@@ -47,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import make_pose, matrix_from_rotvec, rotvec_from_matrix
+from ...geometry import make_pose, matrix_from_rotvec
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
@@ -57,10 +62,10 @@ from ..ml_model import (
     undistortion,
     whitener,
 )
+from . import wrench as wm
 from .identifiability import Combination, identifiability
 from .jacobian import deviation_twists, parallel_joints
 from .model import Arm, base_from_flange, deviation_units
-from .wrench import WRENCH_NAMES, WrenchData, WrenchParams, initial_wrench, wrench_rows
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
@@ -147,7 +152,7 @@ class _State:
     delta: np.ndarray
     g: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: the wrench model's parameters (:mod:`.wrench`), with wrench rows
-    w: WrenchParams | None = None
+    w: wm.WrenchParams | None = None
 
 
 class _Problem:
@@ -156,7 +161,7 @@ class _Problem:
     def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                  names: list[str], tau: np.ndarray, whiten: np.ndarray,
                  distortion: str = "none", moments: list[np.ndarray | None] | None = None,
-                 wrench: WrenchData | None = None) -> None:
+                 wrench: wm.WrenchData | None = None) -> None:
         self.q, self.bodies, self.chain0 = q, bodies, chain0
         self.names, self.tau, self.whiten = names, tau, whiten
         self.model, self.moments = distortion, moments or [None] * len(bodies)
@@ -165,7 +170,7 @@ class _Problem:
         #: the wrench data (rows after the tracker's) and the first column of its parameters
         self.wrench, self.c_w = wrench, 6 * (self.nb + 1) + self.n_g
         #: X, (Y,) Z, the distortion and the wrench model: the parameters without a prior
-        self.n_xyz = self.c_w + (len(WRENCH_NAMES) if wrench is not None else 0)
+        self.n_xyz = self.c_w + (len(wm.WRENCH_NAMES) if wrench is not None else 0)
 
     @property
     def n_params(self) -> int:
@@ -235,7 +240,9 @@ class _Problem:
                 J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
         rw = _apply(self.whiten, res).ravel()
         prior = s.delta / self.tau
-        wr, Jwr = self._wrench_rows(s, R_A, Jk, J is not None)
+        wr, Jwr = (np.zeros(0), np.zeros((0, self.n_params))) if self.wrench is None \
+            or s.w is None else wm.wrench_block(s.w, self.wrench, R_A, Jk, self.c_w,
+                                                self.n_xyz, self.n_params, J is not None)
         r = np.concatenate([rw, wr, prior])
         if J is None:
             return r, None
@@ -243,18 +250,6 @@ class _Problem:
         Jp = np.zeros((len(self.names), self.n_params))
         Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
         return r, np.concatenate([Jw, Jwr, Jp], axis=0)
-
-    def _wrench_rows(self, s: _State, R_A: np.ndarray, Jk: np.ndarray, jac: bool
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """The whitened wrench rows (6n,) (none without a wrench) and their Jacobian."""
-        if self.wrench is None or s.w is None:
-            return np.zeros(0), np.zeros((0, self.n_params))
-        r, Jw, Jd = wrench_rows(s.w, self.wrench, R_A, Jk[:, :3, :] if jac else None)
-        J = np.zeros((r.size, self.n_params))
-        if Jw is not None and Jd is not None:
-            J[:, self.c_w:self.n_xyz] = Jw.reshape(r.size, -1)
-            J[:, self.n_xyz:] = Jd.reshape(r.size, -1)
-        return r.ravel(), J
 
     def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
         """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
@@ -346,9 +341,7 @@ class KinematicFit:
     #: the tracker distortion model estimated with the rest and its undistortion G (3×3)
     distortion: str = "none"
     G: np.ndarray = field(default_factory=lambda: np.eye(3))
-    #: with wrench rows: the wrench model's parameters (:data:`.wrench.WRENCH_NAMES`) —
-    #: {"estimate": {name: value}, "sd": {name: posterior SD}, "params": WrenchParams,
-    #: "rows": 6n, "chi2": of the wrench rows}; None without
+    #: with wrench rows: :func:`.wrench.wrench_report` of the wrench model; None without
     wrench: dict[str, Any] | None = None
 
 
@@ -365,7 +358,7 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                    tol: Tolerances = Tolerances(), max_iter: int = 50,
                    distortion: str = "none",
                    moments: list[np.ndarray | None] | None = None,
-                   wrench: WrenchData | None = None) -> KinematicFit:
+                   wrench: wm.WrenchData | None = None) -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
     spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
@@ -380,8 +373,8 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     tau = prior_sigmas(names, tol)
     s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
                np.zeros(DISTORTION_MODELS[distortion]),
-               None if wrench is None else initial_wrench(wrench, base_from_flange(chain0, q)
-                                                          [:, :3, :3]))
+               None if wrench is None
+               else wm.initial_wrench(wrench, base_from_flange(chain0, q)[:, :3, :3]))
     its = 0
     for _ in range(2):
         whiten = _whitener_for(s.Ws, noise, len(q))
@@ -413,24 +406,13 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                        G=undistortion(distortion, s.g))
     fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
     if s.w is not None:
-        fit.wrench = _wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * vf),
-                                    r[m - 6 * len(q):m])
+        fit.wrench = wm.wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * vf),
+                                   r[m - 6 * len(q):m])
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(
             prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf,
             None if wrench is None else prob.c_w)
     return fit
-
-
-def _wrench_report(w: WrenchParams, sd: np.ndarray, rows: np.ndarray) -> dict[str, Any]:
-    if not np.all(np.isfinite(sd)) or sd.max(initial=0.0) > 1e6:
-        raise CalibrationError("kinematics: the wrench rows do not identify the tool's weight, "
-                               "centre of gravity and the sensor's bias from these poses; "
-                               "turn the wrist more, or solve without the wrench")
-    vals = np.concatenate([w.tilt, rotvec_from_matrix(w.R_fs), [w.mg], w.cog_mm, w.bias])
-    return {"estimate": dict(zip(WRENCH_NAMES, map(float, vals), strict=True)),
-            "sd": dict(zip(WRENCH_NAMES, map(float, sd), strict=True)),
-            "params": w, "rows": int(rows.size), "chi2": float(rows @ rows)}
 
 
 # --- level selection --------------------------------------------------------------------------
@@ -481,7 +463,7 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
                         max_iter: int = 50, distortion: str = "none",
                         moments: list[np.ndarray | None] | None = None,
-                        wrench: WrenchData | None = None) -> KinematicsResult:
+                        wrench: wm.WrenchData | None = None) -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
     keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
     and δ refitted on each training part); a simpler level wins when its held-out error is
@@ -503,7 +485,8 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
                                    _subset_noise(noise, train), tol, max_iter,
-                                   **opts | {"wrench": wrench and wrench.subset(train)})
+                                   **opts | {"wrench": None if wrench is None
+                                             else wrench.subset(train)})
             except CalibrationError:
                 errs = []
                 break

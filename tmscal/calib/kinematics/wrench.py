@@ -37,10 +37,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import matrix_from_rotvec
+from ...geometry import matrix_from_rotvec, rotvec_from_matrix
 
 __all__ = ["WRENCH_NAMES", "WRENCH_UNITS", "DEFAULT_SIGMA", "SIGMA_FLOOR", "WrenchData",
-           "WrenchParams", "initial_wrench", "gravity_up", "predict_wrench", "wrench_rows"]
+           "WrenchParams", "initial_wrench", "gravity_up", "predict_wrench", "wrench_rows",
+           "wrench_block", "wrench_report"]
 
 WRENCH_NAMES = ["base_roll", "base_pitch", "sensor_rx", "sensor_ry", "sensor_rz", "mg",
                 "cog_x", "cog_y", "cog_z", "f0_x", "f0_y", "f0_z", "t0_x", "t0_y", "t0_z"]
@@ -156,6 +157,21 @@ def wrench_rows(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk_w: np.nda
     return r, Jw / s, Jd / s
 
 
+def wrench_block(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk: np.ndarray,
+                 c_w: int, c_delta: int, n_params: int, jac: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The estimator's wrench rows: whitened residuals (6n,) and, with ``jac``, their
+    Jacobian (6n, ``n_params``) with the wrench parameters in columns ``c_w``…``c_delta`` − 1
+    and the deviations from ``c_delta`` on, whose body twists are ``Jk`` (n, 6, k) [ω; v].
+    Without ``jac`` the Jacobian is all zeros."""
+    r, Jw, Jd = wrench_rows(p, data, R_A, Jk[:, :3, :] if jac else None)
+    J = np.zeros((r.size, n_params))
+    if Jw is not None and Jd is not None:
+        J[:, c_w:c_delta] = Jw.reshape(r.size, -1)
+        J[:, c_delta:] = Jd.reshape(r.size, -1)
+    return r.ravel(), J
+
+
 def initial_wrench(data: WrenchData, R_A: np.ndarray) -> WrenchParams:
     """The linear starting point (module docstring) from the nominal arm's flange rotations
     R_A (n, 3, 3), level base. Raises CalibrationError when the poses do not turn gravity
@@ -176,3 +192,19 @@ def initial_wrench(data: WrenchData, R_A: np.ndarray) -> WrenchParams:
     T = np.concatenate([-_skew(fg) * 1e-3, np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
     sol2, *_ = np.linalg.lstsq(T.reshape(-1, 6), data.wrench[:, 3:].ravel(), rcond=None)
     return WrenchParams(np.zeros(2), R_t.T, mg, sol2[:3], np.concatenate([f0, sol2[3:]]))
+
+
+def wrench_report(w: WrenchParams, sd: np.ndarray, rows: np.ndarray) -> dict[str, object]:
+    """The fitted wrench model: {"estimate": {name: value}, "sd": {name: posterior SD}
+    (names and units of :data:`WRENCH_NAMES` / :data:`WRENCH_UNITS`; the sensor rotation as
+    the rotation vector of flange_R_sensor), "params": ``w``, "rows": 6n, "chi2": of the
+    whitened wrench ``rows``}. CalibrationError when the posterior SDs say the poses do not
+    identify the tool and the bias (a near-singular problem)."""
+    if not np.all(np.isfinite(sd)) or sd.max(initial=0.0) > 1e6:
+        raise CalibrationError("kinematics: the wrench rows do not identify the tool's weight, "
+                               "centre of gravity and the sensor's bias from these poses; "
+                               "turn the wrist more, or solve without the wrench")
+    vals = np.concatenate([w.tilt, rotvec_from_matrix(w.R_fs), [w.mg], w.cog_mm, w.bias])
+    return {"estimate": dict(zip(WRENCH_NAMES, map(float, vals), strict=True)),
+            "sd": dict(zip(WRENCH_NAMES, map(float, sd), strict=True)),
+            "params": w, "rows": int(rows.size), "chi2": float(rows @ rows)}
