@@ -176,3 +176,11 @@ def test_poses_that_never_turn_the_wrist_are_refused() -> None:
         est.fit_kinematics(q, [A], chain0, "none",
                            ([np.eye(4)], np.eye(4)), NOISE,
                            wrench=WrenchData.make(np.zeros((12, 6)), None, 12))
+
+
+def test_ml_without_the_kinematics_refuses_a_wrench() -> None:
+    from tmscal.calib import solve
+
+    chain0, _, _, _, _, q, B, C = _rig(12, 20)
+    with pytest.raises(CalibrationError, match="go with kinematics='estimate'"):
+        solve(base_from_flange(chain0, q), B, C, method="ml", wrench=np.zeros((20, 6)))
