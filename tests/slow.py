@@ -30,6 +30,7 @@ SLOW: tuple[str, ...] = (
     "tests/e2e/test_ur_robot.py",
     "tests/e2e/test_ur_wrench.py::test_urrobot_wrench_reads_the_same",
     "tests/e2e/test_wheel.py",
+    "tests/e2e/test_wrench_rows.py",
     "tests/interop/test_igtl_clients.py",
     "tests/interop/test_ur_rtde.py",
     "tests/property/test_adaptive_pool.py::test_every_selected_pose_is_inside_the_envelope",

@@ -1,8 +1,9 @@
 """Drivers from a rig config, through the one driver registry (``tmscal.registry``): the
 spec of the configured driver names its class and default port, and the driver's settings
 (``cfg.<kind>.settings``) give its own constructor arguments; nothing here names a brand.
-``Devices`` holds the devices of a run (the robot and a tracker or a force-torque sensor) and
-opens them again after a fault.
+``Devices`` holds the devices of a run (the robot and a tracker or a force-torque sensor; a
+tracker run whose config also has an ``ft`` section opens that sensor too, and records each
+pose's wrench beside the tracker samples) and opens them again after a fault.
 
 Poses and speeds pass through unchanged: mm, mm/s, base_from_flange. Every robot built here
 carries the config's safety envelope (caps, workspace box, tool points) and the config's
@@ -175,8 +176,10 @@ class Endpoints:
 
 class Devices:
     """The devices of a run: the robot and the ``sensor`` beside it ("tracker" or "ft", a
-    force-torque sensor), built from the config and ``endpoints``. ``open(envelope)`` opens
-    both, the robot carrying ``envelope``; ``close`` closes them (best effort), stopping the
+    force-torque sensor), built from the config and ``endpoints``; a tracker run whose config
+    also has an ``ft`` section opens that force-torque sensor as well (``wrench`` True: each
+    pose records its wrench, docs/kinematics.md, "Wrench rows"). ``open(envelope)`` opens
+    them, the robot carrying ``envelope``; ``close`` closes them (best effort), stopping the
     robot first when asked; a reconnect is ``close`` then ``open``."""
 
     def __init__(self, cfg: RigConfig, sensor: str, endpoints: Endpoints | None = None) -> None:
@@ -188,6 +191,8 @@ class Devices:
         self.robot: Robot | None = None
         self.tracker: Tracker | None = None
         self.ft: ForceTorque | None = None
+        #: a tracker run that also reads the config's force-torque sensor at every pose
+        self.wrench = sensor == "tracker" and cfg.ft is not None
 
     def open(self, envelope: Envelope | None = None) -> None:
         """Open the robot (with ``envelope``: at least as strict as the config's) and the
@@ -198,7 +203,8 @@ class Devices:
         if self.sensor == "tracker":
             self.tracker = make_tracker(self.cfg, ep.tracker_port)
             self.tracker.open()
-            return
+            if not self.wrench:
+                return
         ft_host = ep.ft_host
         on_robot = self.cfg.ft is not None and self.cfg.ft.host in (None, "robot")
         if ft_host is None and on_robot and ep.robot_host:
@@ -216,6 +222,8 @@ class Devices:
         sensor = self.tracker if self.sensor == "tracker" else self.ft
         if sensor is not None:
             steps.append((f"closing the {_NAMES[self.sensor]}", sensor.close))
+        if self.wrench and self.ft is not None:
+            steps.append((f"closing the {_NAMES['ft']}", self.ft.close))
         for what, step in steps:
             try:
                 if step:
@@ -232,11 +240,15 @@ class Devices:
         return ["ft"]
 
     def identities(self) -> dict[str, Any]:
-        """{"robot": identity, "tracker" or "ft": identity} for the session header."""
+        """{"robot": identity, "tracker" or "ft": identity} for the session header (a
+        tracker run with a force-torque sensor: "ft" as well)."""
         assert self.robot is not None
         sensor = self.tracker if self.sensor == "tracker" else self.ft
         assert sensor is not None
-        return {"robot": self.robot.identity(), self.sensor: sensor.identity()}
+        out = {"robot": self.robot.identity(), self.sensor: sensor.identity()}
+        if self.wrench and self.ft is not None:
+            out["ft"] = self.ft.identity()
+        return out
 
     def joints(self) -> np.ndarray:
         """The robot's joint angles (rad); ConfigError naming ``robot.driver`` when its

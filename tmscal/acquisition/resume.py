@@ -67,7 +67,10 @@ def resume_command(config: str | Path | None, out: str | Path,
 def check_same_rig(cfg: RigConfig, session: Any, sensor: str) -> None:
     """Refuse to resume a session into a different rig: the header's robot driver and that of
     the ``sensor`` beside it ("tracker" or "ft") must be the config's, and the session's
-    bodies the config's tracker tools (a force-torque run: ["ft"]). Raises SessionError."""
+    bodies the config's tracker tools (a force-torque run: ["ft"]); a tracker run that
+    recorded wrenches (the header's devices.ft) resumes only with that force-torque sensor
+    in the config, and one that did not, only without one (every pose has a wrench, or
+    none). Raises SessionError."""
     where = f"{session.path}"
     devs = session.header.get("devices")
     devs = devs if isinstance(devs, dict) else {}
@@ -79,6 +82,8 @@ def check_same_rig(cfg: RigConfig, session: Any, sensor: str) -> None:
             raise SessionError(f"{where}: the session was recorded with {role} driver "
                                f"{rec_driver!r}; {cfg.path} configures {sec.driver!r}; "
                                f"{RESUME_HINT}")
+    if sensor == "tracker":
+        _check_same_ft(cfg, devs.get("ft"), where)
     if sensor == "tracker" and cfg.tracker is not None:
         if session.bodies != list(cfg.tracker.tools):
             raise SessionError(f"{where}: the session's bodies {session.bodies} differ from the "
@@ -86,6 +91,23 @@ def check_same_rig(cfg: RigConfig, session: Any, sensor: str) -> None:
     elif sensor == "ft" and session.bodies != ["ft"]:
         raise SessionError(f"{where}: the session's bodies {session.bodies} are not a "
                            f"force-torque session's ['ft']; {RESUME_HINT}")
+
+
+def _check_same_ft(cfg: RigConfig, rec: Any, where: str) -> None:
+    """A tracker session's force-torque sensor (header devices.ft) against the config's."""
+    rec_driver = rec.get("driver") if isinstance(rec, dict) else None
+    cfg_driver = cfg.ft.driver if cfg.ft is not None else None
+    if rec_driver == cfg_driver:
+        return
+    if cfg_driver is None:
+        raise SessionError(f"{where}: the session recorded a wrench at every pose (ft driver "
+                           f"{rec_driver!r}); {cfg.path} has no ft section; {RESUME_HINT}")
+    if rec_driver is None:
+        raise SessionError(f"{where}: the session recorded no wrench; {cfg.path} configures "
+                           f"a force-torque sensor (ft driver {cfg_driver!r}): resume with "
+                           f"the config it was recorded with, or start a new session")
+    raise SessionError(f"{where}: the session was recorded with ft driver {rec_driver!r}; "
+                       f"{cfg.path} configures {cfg_driver!r}; {RESUME_HINT}")
 
 
 def _at(poses: np.ndarray, i: int) -> list[float]:

@@ -9,6 +9,10 @@ devices, reconnect, stop, resume, the session file, progress).
   reproduce every commanded pose already recorded.
 * A pose whose bodies were not seen well enough is sampled once more (moving again), then
   recorded as skipped with the reason.
+* With a force-torque sensor in the config (``ft``), each pose also records the averaged
+  wrench and its spread (``ft.samples`` readings after the tracker's, the same settle;
+  :func:`.sample.sample_wrench`), for the wrench rows of ``tmscal solve --kinematics
+  estimate`` (docs/kinematics.md); a sensor fault is a device fault like any other.
 * ``PlanStrategy`` is also the adaptive run's base (:mod:`.adaptive`): its candidates are
   this plan with ``adaptive.pool`` poses, measured the same way.
 
@@ -36,7 +40,7 @@ from .engine import AcquireResult, AcquisitionStopped, Engine, valid_or_skipped
 from .plan import PlanSpec, joints_spec, plan_poses
 from .progress import Progress
 from .resume import POSE_TOL_MM, RESUME_HINT, resume_command
-from .sample import PoseSample, sample_pose
+from .sample import PoseSample, WrenchSample, sample_pose, sample_wrench
 from .settings import SamplingSettings, sampling_settings
 from .strategy import Step, Strategy
 
@@ -48,12 +52,18 @@ __all__ = ["AcquisitionStopped", "AcquireResult", "PlanStrategy", "acquire", "re
 _LETTER = {"marker": "B", "probe": "C"}
 
 
-def _record(i: int, P: np.ndarray, s: PoseSample, t: float) -> PoseRecord:
-    """A session line: samples keyed A/B/C as the format says, spreads per body name."""
+def _record(i: int, P: np.ndarray, s: PoseSample, t: float,
+            w: WrenchSample | None = None) -> PoseRecord:
+    """A session line: samples keyed A/B/C as the format says, spreads per body name; the
+    wrench and its spread when the run reads a force-torque sensor."""
     samples = {_LETTER.get(k, k): v for k, v in s.samples.items()}
+    if w is not None:
+        samples["wrench"] = w.n
     return PoseRecord(index=i, A=s.A, B=s.bodies.get("marker"), C=s.bodies.get("probe"),
                       commanded=P, time=t, samples=samples, spread=s.spread,
-                      skipped=s.problem, joints_rad=s.joints)
+                      skipped=s.problem, joints_rad=s.joints,
+                      wrench=None if w is None else w.mean.tolist(),
+                      wrench_spread=None if w is None else w.spread.tolist())
 
 
 def measure_tracked(dev: Devices, i: int, P: np.ndarray, st: SamplingSettings, t: float,
@@ -61,8 +71,10 @@ def measure_tracked(dev: Devices, i: int, P: np.ndarray, st: SamplingSettings, t
                     ) -> PoseRecord:
     """Move to pose i (``P``, base_from_flange mm), settle and sample the tracker; a pose
     whose bodies were not seen well enough is sampled once more (moving again), then
-    recorded as skipped with the reason. ``phase`` hears "moving", "settling", "sampling";
-    ``t`` is the session time (s)."""
+    recorded as skipped with the reason. With a force-torque sensor open beside the
+    tracker (``dev.wrench``), a usable pose also averages ``ft.samples`` wrench readings
+    after the tracker's. ``phase`` hears "moving", "settling", "sampling"; ``t`` is the
+    session time (s)."""
     assert dev.robot is not None and dev.tracker is not None
     s: PoseSample | None = None
     for attempt in range(2):
@@ -77,7 +89,11 @@ def measure_tracked(dev: Devices, i: int, P: np.ndarray, st: SamplingSettings, t
             break
         log.info("pose %d attempt %d: %s", i, attempt + 1, s.problem)
     assert s is not None
-    return _record(i, P, s, t)
+    w = None
+    if dev.wrench and s.problem is None:
+        assert dev.ft is not None and dev.cfg.ft is not None
+        w = sample_wrench(dev.ft, dev.cfg.ft.samples)
+    return _record(i, P, s, t, w)
 
 
 def check_plan_matches(cfg: RigConfig, session: Session, spec: PlanSpec) -> None:

@@ -29,6 +29,10 @@ Samples: a fixed ``n_samples`` distinct frames (``sem_mm`` None), or by need: st
 every body's standard error of the mean position, its spread / √k after k usable frames, is at
 most ``sem_mm``, with ``min_samples`` as the floor and ``n_samples`` as the cap.
 
+Wrench (a tracker run with a force-torque sensor; a self-calibration run): ``sample_wrench``
+averages n consecutive readings [Fx, Fy, Fz N, Tx, Ty, Tz N·m] (sensor frame) and gives their
+standard deviation per channel.
+
 Averages: translations by arithmetic mean, rotations by the chordal L2 mean. Spreads: RMS
 distance of the samples' origins from the mean (mm) and RMS rotation angle from the mean
 rotation (deg). Frames: A = base_from_flange (robot), tracker_from_<body> per tool; 4×4 mm.
@@ -48,15 +52,15 @@ from typing import Any
 import numpy as np
 
 from ..config import SETTLE_MODES
-from ..drivers.base import Robot, Tracker
+from ..drivers.base import ForceTorque, Robot, Tracker
 from ..geometry import angle_between, pose_mean
 from ..timing import Deadline
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PoseSample", "sample_pose", "spread_of", "noise_sigma_mm", "stillness",
-           "window_frames", "SETTLE_MODES", "STILL_NOISE_MULTIPLE", "STILL_FLOOR_MM",
-           "MIN_WINDOW_FRAMES"]
+__all__ = ["PoseSample", "sample_pose", "sample_wrench", "WrenchSample", "spread_of",
+           "noise_sigma_mm", "stillness", "window_frames", "SETTLE_MODES",
+           "STILL_NOISE_MULTIPLE", "STILL_FLOOR_MM", "MIN_WINDOW_FRAMES"]
 
 #: the stillness tolerance, when not given, is this multiple of white noise's spread √3·σ̂
 STILL_NOISE_MULTIPLE = 2.0
@@ -105,6 +109,24 @@ def read_joints(robot: Robot) -> np.ndarray | None:
         return np.asarray(robot.joint_positions(), dtype=np.float64)
     except NotImplementedError:
         return None
+
+
+@dataclass(frozen=True)
+class WrenchSample:
+    """The averaged wrench (6,) [Fx, Fy, Fz N, Tx, Ty, Tz N·m] in the sensor frame, its
+    sample standard deviation per channel (6,) (zeros for one reading), and the count."""
+
+    mean: np.ndarray
+    spread: np.ndarray
+    n: int
+
+
+def sample_wrench(ft: ForceTorque, n: int) -> WrenchSample:
+    """Read ``n`` consecutive force-torque readings and average them (the robot holds
+    still). DeviceError from the sensor passes on (the engine reconnects)."""
+    w = np.asarray(ft.read(n), dtype=np.float64).reshape(-1, 6)
+    spread = w.std(axis=0, ddof=1) if len(w) > 1 else np.zeros(6)
+    return WrenchSample(w.mean(axis=0), spread, len(w))
 
 
 def spread_of(poses: np.ndarray, mean: np.ndarray) -> dict[str, float]:

@@ -66,6 +66,7 @@ from .engine import AcquireResult, Engine
 from .plan import check_plan
 from .progress import Progress
 from .resume import RESUME_HINT, resume_command
+from .sample import sample_wrench
 from .strategy import Step, Strategy
 
 log = logging.getLogger(__name__)
@@ -364,12 +365,11 @@ def measure_wrench(dev: Devices, i: int, P: np.ndarray, st: SelfcalSettings, t: 
         sleep(st.settle_s)
     phase("sampling")
     q = dev.joints()
-    w = np.asarray(dev.ft.read(st.samples), dtype=float)
+    w = sample_wrench(dev.ft, st.samples)
     A = dev.robot.flange_pose()
-    spread = w.std(axis=0, ddof=1) if len(w) > 1 else np.zeros(6)
     return PoseRecord(index=i, A=A, B=None, C=None, commanded=P, time=t,
-                      samples={"A": 1, "wrench": len(w)}, joints_rad=q.tolist(),
-                      wrench=w.mean(axis=0).tolist(), wrench_spread=spread.tolist())
+                      samples={"A": 1, "wrench": w.n}, joints_rad=q.tolist(),
+                      wrench=w.mean.tolist(), wrench_spread=w.spread.tolist())
 
 
 class SelfcalStrategy(Strategy):

@@ -313,7 +313,7 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
              tools_mm: Any = None, criterion: str = "lrt", noise: str = "estimate",
              scale_covariance: bool = True, max_iter: int = 50, kinematics: str | None = None,
              joints: Any = None, arm: Any = None, level: str = "auto", tolerances: Any = None,
-             folds: int = 5) -> Calibration:
+             folds: int = 5, wrench: Any = None, wrench_sigma: Any = None) -> Calibration:
     """Maximum-likelihood X, (Y,) Z with tracker distortion ``distortion`` ("auto": chosen
     by ``criterion``, "lrt" F tests by default; "none", "scale", "axis", "affine"); see the
     module docstring for the model, the noise options and the parameters. ``noise``
@@ -328,7 +328,10 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
     rad, ``arm`` the nominal model (an ``Arm`` or a registry name such as "ur5e"), ``level``
     ("auto", "none", "offsets", "full"), ``tolerances`` (a ``Tolerances``: the prior), ``folds``
     of the held-out level choice; ``distortion`` then "none" (default with kinematics) or a
-    fixed model ("auto" is not searched with the arm); the noise there is as given."""
+    fixed model ("auto" is not searched with the arm); the noise there is as given.
+    ``wrench`` (n, 6) [N, N·m] and ``wrench_sigma`` (N, N·m): a wrist sensor's averaged
+    wrench per pose, whose gravity rows join that likelihood (docs/kinematics.md, "Wrench
+    rows"); only with ``kinematics="estimate"``."""
     if kinematics is not None:
         from .kinematics.solve import solve_with_kinematics
 
@@ -340,7 +343,11 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
             distortion="none" if distortion == "auto" else distortion, tools_mm=tools_mm,
             robot_sigma_mm=robot_sigma_mm, robot_sigma_deg=robot_sigma_deg,
             tracker_sigma_mm=tracker_sigma_mm, tracker_sigma_deg=tracker_sigma_deg,
-            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal)
+            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal, wrench=wrench,
+            wrench_sigma=wrench_sigma)
+    if wrench is not None:
+        raise CalibrationError("method 'ml': the wrench rows go with kinematics='estimate' "
+                               "(the wrench sees the arm, not X, Y, Z)")
     if distortion not in DISTORTION_MODELS and distortion != "auto":
         raise CalibrationError(f"method 'ml': unknown distortion {distortion!r}; expected "
                                f"auto, {', '.join(DISTORTION_MODELS)}")

@@ -102,7 +102,7 @@ def threshold_n(values: Sequence[float], ns: Sequence[int], threshold: float) ->
 
 
 #: method options with one entry per pose, cut with the poses when they are split
-PER_POSE_OPTIONS = ("joints", "spreads")
+PER_POSE_OPTIONS = ("joints", "spreads", "wrench", "wrench_sigma")
 
 
 def per_pose_options(options: dict[str, Any], keep: Any, n: int) -> dict[str, Any]:
@@ -112,8 +112,8 @@ def per_pose_options(options: dict[str, Any], keep: Any, n: int) -> dict[str, An
     idx = np.arange(n)[keep]
     for k in PER_POSE_OPTIONS:
         v = out.get(k)
-        if v is not None and len(v) == n:
-            out[k] = np.asarray(v)[idx] if k == "joints" else [v[i] for i in idx]
+        if v is not None and np.ndim(v) > 0 and len(v) == n:
+            out[k] = np.asarray(v)[idx] if k != "spreads" else [v[i] for i in idx]
     return out
 
 

@@ -8,6 +8,7 @@ and bidirectional overrides as visible escapes (``tmscal.escape.visible``).
 
 from __future__ import annotations
 
+import math
 import textwrap
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
@@ -21,8 +22,8 @@ if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
-           "format_matrix", "distortion_text", "arm_rows", "before_after_rows", "error_rows",
-           "truth_rows",
+           "format_matrix", "distortion_text", "arm_rows", "wrench_fit_rows",
+           "before_after_rows", "error_rows", "truth_rows",
            "uncertainty_rows", "outlier_lines", "legend_lines", "number", "plain_value"]
 
 
@@ -158,6 +159,32 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
             continue
         lines.append(f"  {head}: {len(combos)}")
         lines += [w for c in combos for w in _wrap(c.get("text", "?"), "    ", "        ")]
+    return lines + wrench_fit_rows(arm.get("wrench"))
+
+
+def wrench_fit_rows(w: dict[str, Any] | None) -> list[str]:
+    """The wrench rows of an estimated arm (docs/kinematics.md, "Wrench rows"): how many,
+    their χ², and the tool, bias, base tilt and sensor rotation identified with the arm
+    (angles in degrees, ± posterior SD). Empty without wrench rows."""
+    if not w:
+        return []
+    e, sd = w["estimate"], w["sd"]
+
+    def show(names: list[str], unit: str, scale: float = 1.0) -> str:
+        return ", ".join(f"{n} {e[n] * scale:+.4g} ± {sd[n] * scale:.2g}" for n in names) \
+            + f" {unit}"
+
+    lines = _wrap(f"wrench rows: {w['rows']} (every pose's averaged wrist wrench in the same "
+                  f"likelihood; their χ² {w['chi2']:.4g})")
+    lines += _wrap(f"tool: mass {w['tool_mass_kg']:.4g} kg (mg {e['mg']:.4g} ± "
+                   f"{sd['mg']:.2g} N); centre of gravity "
+                   + show(["cog_x", "cog_y", "cog_z"], "mm"), "    ")
+    lines += _wrap("bias: " + show(["f0_x", "f0_y", "f0_z"], "N") + "; "
+                   + show(["t0_x", "t0_y", "t0_z"], "N·m"), "    ")
+    lines += _wrap("base tilt: " + show(["base_roll", "base_pitch"], "deg", 180 / math.pi)
+                   + "; sensor rotation (rotation vector): "
+                   + show(["sensor_rx", "sensor_ry", "sensor_rz"], "deg", 180 / math.pi),
+                   "    ")
     return lines
 
 

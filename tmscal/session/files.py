@@ -135,6 +135,22 @@ class Session:
             rows.append(list(q))
         return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
 
+    def wrenches(self, indices: list[int]) -> tuple[np.ndarray, np.ndarray] | None:
+        """(W (m, 6), σ (m, 6)) of the poses ``indices`` when every one recorded a wrench:
+        the averaged [Fx, Fy, Fz N, Tx, Ty, Tz N·m] in the sensor frame and the σ of that
+        mean, its spread / √samples (NaN where a pose recorded no spread); else None."""
+        by_index = {p.index: p for p in self.poses}
+        use = [by_index[i] for i in indices if i in by_index]
+        if not use or len(use) != len(indices) or any(p.wrench is None for p in use):
+            return None
+        W = np.array([p.wrench for p in use], dtype=np.float64)
+        sem = np.full((len(use), 6), np.nan)
+        for k, p in enumerate(use):
+            if p.wrench_spread is not None:
+                n = max(int(p.samples.get("wrench", 1)), 1)
+                sem[k] = np.asarray(p.wrench_spread, dtype=np.float64) / np.sqrt(n)
+        return W, sem
+
 
 def _open_regular(p: Path, flags: int, what: str) -> int:
     """os.open of an existing regular file only (reading, resuming; new files are made by

@@ -18,6 +18,7 @@ from ..calib import Calibration, solve, truth_errors
 from ..calib.kinematics.calibrated import ArmCalibration
 from ..calib.kinematics.estimate import Tolerances
 from ..calib.kinematics.model import Arm
+from ..calib.kinematics.wrench import SIGMA_FLOOR
 from ..calib.metrics import body_errors
 from ..calib.study import cross_validate, per_pose_options
 from ..errors import CalibrationError
@@ -216,8 +217,10 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     pose, the nominal arm ``arm`` (a registry name) or else the one the session header
     records, the ``level`` ("auto", "none", "offsets", "full") and the prior
     ``tolerances``; the tracker noise from the poses' sample spreads when every pose
-    recorded them. The errors are computed on the robot poses of the identified arm at the
-    held-out joints; the cross-validation folds keep the level chosen on all poses. An
+    recorded them; the wrench rows (docs/kinematics.md, "Wrench rows") when every pose
+    recorded a wrench, σ from its spreads (or the default). The errors are computed on the
+    robot poses of the identified arm at the held-out joints; the cross-validation folds
+    keep the level chosen on all poses. An
     :class:`~tmscal.calib.kinematics.Arm` instead recomputes every robot pose from its joints
     with that arm (``kinematics_source`` names it), which the calibration then carries when
     it is a registered arm the recorded poses follow (``kinematics.given_arm``). With either,
@@ -276,6 +279,11 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         sp = _spreads(session, idx, ["marker"] + ([] if C is None else ["probe"]))
         if sp is not None and options.get("tracker_cov") is None:
             options.setdefault("spreads", sp)
+        ws = session.wrenches(idx)
+        if ws is not None and "wrench" not in options:  # the wrench rows (every pose has one)
+            options["wrench"] = ws[0]
+            if not np.isnan(ws[1]).any():
+                options["wrench_sigma"] = np.maximum(ws[1], SIGMA_FLOOR)
     cal = solve(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
                 orthonormal=orthonormal, **per_pose_options(options, slice(0, n_solve), n))
     if given is not None:
@@ -302,7 +310,7 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     residuals = pose_residuals(session, cal)
     opts_shown = {k: plain(v) for k, v in options.items()
                   if k not in ("kinematics", "joints", "arm", "spreads", "tolerances", "level",
-                               "folds")}
+                               "folds", "wrench", "wrench_sigma")}
     res = SolveResult(
         method=cal.method, applied=cal.applied, n_solve=int(n_solve), n_test=int(n_test),
         errors_on=errors_on, n_skipped=sum(p.skipped is not None for p in session.poses),

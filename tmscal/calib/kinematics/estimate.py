@@ -37,6 +37,11 @@ Levels (:data:`LEVELS`): "none" (X, Y, Z on the nominal arm), "offsets" (joint z
 offsets θ0_i) and "full" (every θ0, d, a, α, and β where consecutive axes are parallel);
 ``level="auto"`` chooses by k-fold held-out error, with the information criterion (AIC)
 as a tie-break only when the held-out errors are within one standard error.
+
+Wrench rows (:mod:`tmscal.calib.kinematics.wrench`): where every pose has a wrist wrench, its
+gravity wrench joins the sum as 6 whitened rows per pose, with 15 parameters of its own and no
+prior (base tilt, sensor rotation, tool weight and centre of gravity, sensor bias), the
+deviations reaching them through the arm's rotation.
 """
 
 from __future__ import annotations
@@ -57,6 +62,7 @@ from ..ml_model import (
     undistortion,
     whitener,
 )
+from . import wrench as wm
 from .identifiability import Combination, identifiability
 from .jacobian import deviation_twists, parallel_joints
 from .model import Arm, base_from_flange, deviation_units
@@ -145,6 +151,8 @@ class _State:
     Z: np.ndarray
     delta: np.ndarray
     g: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: the wrench model's parameters (:mod:`.wrench`), with wrench rows
+    w: wm.WrenchParams | None = None
 
 
 class _Problem:
@@ -152,15 +160,17 @@ class _Problem:
 
     def __init__(self, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                  names: list[str], tau: np.ndarray, whiten: np.ndarray,
-                 distortion: str = "none", moments: list[np.ndarray | None] | None = None
-                 ) -> None:
+                 distortion: str = "none", moments: list[np.ndarray | None] | None = None,
+                 wrench: wm.WrenchData | None = None) -> None:
         self.q, self.bodies, self.chain0 = q, bodies, chain0
         self.names, self.tau, self.whiten = names, tau, whiten
         self.model, self.moments = distortion, moments or [None] * len(bodies)
         self.nb = len(bodies)
         self.n_g = DISTORTION_MODELS[distortion]
-        #: X, (Y,) Z and the distortion: the parameters without a prior
-        self.n_xyz = 6 * (self.nb + 1) + self.n_g
+        #: the wrench data (rows after the tracker's) and the first column of its parameters
+        self.wrench, self.c_w = wrench, 6 * (self.nb + 1) + self.n_g
+        #: X, (Y,) Z, the distortion and the wrench model: the parameters without a prior
+        self.n_xyz = self.c_w + (len(wm.WRENCH_NAMES) if wrench is not None else 0)
 
     @property
     def n_params(self) -> int:
@@ -230,13 +240,16 @@ class _Problem:
                 J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
         rw = _apply(self.whiten, res).ravel()
         prior = s.delta / self.tau
-        r = np.concatenate([rw, prior])
+        wr, Jwr = (np.zeros(0), np.zeros((0, self.n_params))) if self.wrench is None \
+            or s.w is None else wm.wrench_block(s.w, self.wrench, R_A, Jk, self.c_w,
+                                                self.n_xyz, self.n_params, J is not None)
+        r = np.concatenate([rw, wr, prior])
         if J is None:
             return r, None
         Jw = _apply_jac(self.whiten, J).reshape(-1, self.n_params)
         Jp = np.zeros((len(self.names), self.n_params))
         Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
-        return r, np.concatenate([Jw, Jp], axis=0)
+        return r, np.concatenate([Jw, Jwr, Jp], axis=0)
 
     def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
         """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
@@ -254,7 +267,8 @@ class _Problem:
         Ws = [pose(W, d[6 * j:6 * j + 6]) for j, W in enumerate(s.Ws)]
         Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6])
         c0 = 6 * (self.nb + 1)
-        return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g])
+        w = None if s.w is None else s.w.step(d[self.c_w:self.n_xyz])
+        return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g], w)
 
 
 def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -327,6 +341,8 @@ class KinematicFit:
     #: the tracker distortion model estimated with the rest and its undistortion G (3×3)
     distortion: str = "none"
     G: np.ndarray = field(default_factory=lambda: np.eye(3))
+    #: with wrench rows: :func:`.wrench.wrench_report` of the wrench model; None without
+    wrench: dict[str, Any] | None = None
 
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
@@ -341,30 +357,34 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                    start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                    tol: Tolerances = Tolerances(), max_iter: int = 50,
                    distortion: str = "none",
-                   moments: list[np.ndarray | None] | None = None) -> KinematicFit:
+                   moments: list[np.ndarray | None] | None = None,
+                   wrench: wm.WrenchData | None = None) -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
     spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
     "affine") estimated with the rest, ``moments`` the tools' second moments (``ml``'s
     ``tool_moment``; None: isotropic). The whitening is evaluated at the start and once more
-    at the estimate."""
+    at the estimate. ``wrench``: the wrench rows' data (:mod:`.wrench`), one per pose, or
+    None."""
     if distortion not in DISTORTION_MODELS:
         raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
                                f"{', '.join(DISTORTION_MODELS)}")
     names = level_parameters(chain0, level)
     tau = prior_sigmas(names, tol)
     s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
-               np.zeros(DISTORTION_MODELS[distortion]))
+               np.zeros(DISTORTION_MODELS[distortion]),
+               None if wrench is None
+               else wm.initial_wrench(wrench, base_from_flange(chain0, q)[:, :3, :3]))
     its = 0
     for _ in range(2):
         whiten = _whitener_for(s.Ws, noise, len(q))
-        prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments)
+        prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments, wrench)
         s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
         its += it
-    m = len(q) * 6 * len(bodies)
+    m = len(q) * 6 * (len(bodies) + (wrench is not None))
     data_r = r[:m]
     chi2 = float(data_r @ data_r)
-    Jx = J[:m, :prob.n_xyz]
+    Jx = J[:m, :prob.c_w]
     sx = np.linalg.svd(Jx / np.maximum(np.linalg.norm(Jx, axis=0), 1e-300), compute_uv=False)
     if sx[-1] <= 1e-7 * sx[0]:
         raise CalibrationError("kinematics: hand/eye, coil and robot/world are not "
@@ -385,9 +405,13 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                        P * vf, iterations=its, distortion=distortion,
                        G=undistortion(distortion, s.g))
     fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
+    if s.w is not None:
+        fit.wrench = wm.wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * vf),
+                                   r[m - 6 * len(q):m])
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(
-            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf)
+            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf,
+            None if wrench is None else prob.c_w)
     return fit
 
 
@@ -438,13 +462,15 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
                         max_iter: int = 50, distortion: str = "none",
-                        moments: list[np.ndarray | None] | None = None) -> KinematicsResult:
+                        moments: list[np.ndarray | None] | None = None,
+                        wrench: wm.WrenchData | None = None) -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
     keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
     and δ refitted on each training part); a simpler level wins when its held-out error is
     within one standard error of the best and its AIC is lower (the tie-break).
-    ``distortion`` and ``moments`` as :func:`fit_kinematics`, the same for every level."""
-    opts = {"distortion": distortion, "moments": moments}
+    ``distortion``, ``moments`` and ``wrench`` as :func:`fit_kinematics`, the same for every
+    level (the held-out error is the tracker's)."""
+    opts: dict[str, Any] = {"distortion": distortion, "moments": moments, "wrench": wrench}
     if level != "auto":
         fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts)
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
@@ -458,7 +484,9 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
             train = np.setdiff1d(np.arange(n), test)
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
-                                   _subset_noise(noise, train), tol, max_iter, **opts)
+                                   _subset_noise(noise, train), tol, max_iter,
+                                   **opts | {"wrench": None if wrench is None
+                                             else wrench.subset(train)})
             except CalibrationError:
                 errs = []
                 break

@@ -41,7 +41,8 @@ class Combination:
 
 
 def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np.ndarray,
-                    n_xyz: int, nb: int, distortion: bool, vf: float = 1.0
+                    n_xyz: int, nb: int, distortion: bool, vf: float = 1.0,
+                    wrench_col: int | None = None
                     ) -> tuple[list[Combination], list[Combination], list[Combination]]:
     """(identified, weak, unidentified) combinations of the deviations ``names`` (module
     docstring), from the whitened data Jacobian ``Jd`` (m, n_xyz + P) at the estimate: its
@@ -50,7 +51,10 @@ def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np
     prior σ are ``tau`` and estimate ``delta``; ``vf`` the variance factor. The unidentified ones
     are sorted by reason — combinations that move no flange pose, those Z absorbs, those
     X (and Y) absorb, those only all three together absorb — each set in reduced echelon
-    form (one leading parameter per combination), so that they read as parameters."""
+    form (one leading parameter per combination), so that they read as parameters. With
+    wrench rows (``wrench_col``: the first column of the wrench model's parameters,
+    :data:`tmscal.calib.kinematics.wrench.WRENCH_NAMES`), Z absorbs with the base tilt and
+    X (Y) with the sensor rotation, as the wrench sees the same directions."""
     nx = n_xyz
     Jk = Jd[:, nx:] * tau                               # δ in tolerance units
     tol = 1e-7 * max(float(np.linalg.norm(Jk, 2)), 1e-300)
@@ -69,14 +73,21 @@ def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np
                                     "tolerance says; spread the joints further", c.vector))
         else:
             ident.append(c)
-    reasons = [("moves no flange pose (equivalent parameters of the chain)", None),
-               ("absorbed by Z (robot/world): it moves the whole arm in the robot's frame",
-                slice(6 * nb, 6 * nb + 6)),
-               ("absorbed by X" + (" and Y" if nb > 1 else "") + " (hand/eye): it moves only "
-                "what the flange carries", slice(0, 6 * nb)),
-               ("absorbed by X, Y and Z together" if not distortion else
-                "absorbed by X, Y, Z and the tracker distortion together (e.g. a tracker scale "
-                "and the arm's overall size)", slice(0, nx))]
+    z_cols = list(range(6 * nb, 6 * nb + 6))
+    x_cols = list(range(6 * nb))
+    if wrench_col is not None:   # the base tilt goes with Z, the sensor rotation with X (Y)
+        z_cols += [wrench_col, wrench_col + 1]
+        x_cols += [wrench_col + 2, wrench_col + 3, wrench_col + 4]
+    reasons: list[tuple[str, slice | list[int] | None]] = [
+        ("moves no flange pose (equivalent parameters of the chain)", None),
+        ("absorbed by Z (robot/world): it moves the whole arm in the robot's frame", z_cols),
+        ("absorbed by X" + (" and Y" if nb > 1 else "") + " (hand/eye): it moves only "
+         "what the flange carries", x_cols),
+        ("absorbed by X, Y and Z together" if not distortion else
+         "absorbed by X, Y, Z and the tracker distortion together (e.g. a tracker scale "
+         "and the arm's overall size)", slice(0, nx))]
+    if wrench_col is not None:
+        reasons[-1] = (reasons[-1][0] + " (with the wrench model)", slice(0, nx))
     taken = np.zeros((len(names), 0))
     unident: list[Combination] = []
     for why, cols in reasons:

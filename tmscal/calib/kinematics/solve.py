@@ -22,6 +22,7 @@ from ..ml_model import DISTORTION_MODELS, tool_moment
 from .calibrated import ArmCalibration, controller_frame, spread_seeds
 from .estimate import LEVELS, KinematicFit, Tolerances, estimate_kinematics
 from .model import Arm, base_from_flange
+from .wrench import WRENCH_NAMES, WRENCH_UNITS, WrenchData
 
 __all__ = ["solve_with_kinematics", "NOISE_DEFAULTS"]
 
@@ -53,7 +54,24 @@ def _report(fit: KinematicFit, res: Any, tol: Tolerances) -> dict[str, Any]:
             "identified": combos(fit.identified), "weak": combos(fit.weak),
             "unidentified": combos(fit.unidentified),
             "cv": {lv: c for lv, c in res.cv.items()},
-            "variance_factor": fit.variance_factor, "iterations": fit.iterations}
+            "variance_factor": fit.variance_factor, "iterations": fit.iterations,
+            "wrench": _wrench_report(fit)}
+
+
+def _wrench_report(fit: KinematicFit) -> dict[str, Any] | None:
+    """The wrench rows' parameters for the report: estimate and SD by name (rad, N, mm,
+    N·m), the tool mass (kg), the rows and their χ²; None without wrench rows."""
+    w = fit.wrench
+    if w is None:
+        return None
+    from ..selfcal.model import G_STANDARD
+
+    return {"estimate": w["estimate"], "sd": w["sd"], "units": dict(zip(WRENCH_NAMES,
+                                                                         WRENCH_UNITS,
+                                                                         strict=True)),
+            "tool_mass_kg": w["estimate"]["mg"] / G_STANDARD,
+            "flange_R_sensor": w["params"].R_fs.tolist(), "rows": w["rows"],
+            "chi2": w["chi2"]}
 
 
 def _arm(arm: Any) -> Arm:
@@ -86,14 +104,19 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
                           robot_sigma_deg: float | None = None,
                           tracker_sigma_mm: float | None = None,
                           tracker_sigma_deg: float | None = None, tracker_cov: Any = None,
-                          spreads: Any = None, orthonormal: bool = True) -> Calibration:
+                          spreads: Any = None, orthonormal: bool = True, wrench: Any = None,
+                          wrench_sigma: Any = None) -> Calibration:
     """X, Y (with C), Z and the arm's deviations from robot poses A (the controller's, used
     only to find the frame it reports in), tracker poses B (and C), joints ``joints`` (n, dof)
     rad and the nominal ``arm`` (an Arm or a registry name); ``level`` "auto", "none",
     "offsets" or "full" (docs/kinematics.md); ``tolerances`` the prior; ``distortion`` a fixed
     tracker distortion model of ``ml`` estimated with the rest ("none" by default);
-    ``tools_mm`` the tools' fiducials; the noise as ``ml``'s options. Raises
-    CalibrationError for missing joints, a wrong arm, or too few poses."""
+    ``tools_mm`` the tools' fiducials; the noise as ``ml``'s options. ``wrench`` (n, 6)
+    [Fx, Fy, Fz N, Tx, Ty, Tz N·m]: the wrist sensor's averaged wrench at every pose, whose
+    gravity wrench rows then join the likelihood (docs/kinematics.md, "Wrench rows"), with
+    ``wrench_sigma`` its σ (a number, (6,) or (n, 6) N, N·m; None: the default of
+    :mod:`.wrench`). Raises CalibrationError for missing joints, a wrong arm, a malformed
+    wrench, or too few poses."""
     arm = _arm(arm)
     if distortion not in DISTORTION_MODELS:
         raise CalibrationError(f"kinematics estimate: distortion must be one of "
@@ -104,6 +127,7 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
                                f"{', '.join(LEVELS)}")
     tol = tolerances or Tolerances()
     q = _joints(joints, arm, len(A))
+    wdata = None if wrench is None else WrenchData.make(wrench, wrench_sigma, len(A))
     M = controller_frame(arm, A, q)
     A0 = base_from_flange(arm, q)
     start = solve(A0, B, C, method="qr24" if C is None else "qr36")
@@ -116,7 +140,7 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
     bodies = [B] if C is None else [B, C]
     moments = _moments(tools_mm, len(bodies))
     res = estimate_kinematics(q, bodies, arm, (Ws0, start.Z), noise, level, tol, folds,
-                              distortion=distortion, moments=moments)
+                              distortion=distortion, moments=moments, wrench=wdata)
     fit = res.fit
     Z = M @ fit.Z
     G4 = np.eye(4)
@@ -139,12 +163,15 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
              for k in ("rx (rad)", "ry (rad)", "rz (rad)", "tx (mm)", "ty (mm)", "tz (mm)")]
     names += [f"G.{i} (1)" for i in range(len(fit.G.ravel()) if distortion != "none" else 0)
               ][:DISTORTION_MODELS[distortion]]
+    if fit.wrench is not None:
+        names += [f"{n} ({u})" for n, u in zip(WRENCH_NAMES, WRENCH_UNITS, strict=True)]
     units = ["mm" if n.startswith(("d_", "a_")) else "rad" for n in fit.names]
     cal.extra = {"parameters": names + [f"{n} ({u})" for n, u in zip(fit.names, units,
                                                                         strict=True)],
                  "kinematics": fit.level, "start": start.method, "chi2": fit.chi2,
                  "residuals": fit.m, "variance_factor": fit.variance_factor,
                  "iterations": fit.iterations, "n_xyz": n_xyz,
+                 "wrench_rows": fit.wrench is not None,
                  "noise": {k: v for k, v in noise.items() if k not in ("spreads", "tracker_cov")}
                  | {"tracker": "spreads" if spreads is not None else
                     ("tracker_cov" if tracker_cov is not None else "sigmas")}}

@@ -80,11 +80,11 @@ class ArmModel(Arm):
 
     @classmethod
     def from_arm(cls, arm: Arm, **sensor: Any) -> ArmModel:
-        """The self-calibration model of ``arm`` (its DH chain, convention, base, flange and
-        limits) with the sensor and tool fields ``sensor`` (defaults: sensor on the flange,
-        a 1.5 kg tool 60 mm out along the sensor axis, no bias)."""
+        """The self-calibration model of ``arm`` (its DH chain, convention, base, flange,
+        Hayati angles and limits) with the sensor and tool fields ``sensor`` (defaults: sensor
+        on the flange, a 1.5 kg tool 60 mm out along the sensor axis, no bias)."""
         return cls(name=arm.name, dh=arm.dh, base=arm.base, joint_limits_rad=arm.joint_limits_rad,
-                   convention=arm.convention, flange=arm.flange, **sensor)
+                   convention=arm.convention, flange=arm.flange, beta=arm.beta, **sensor)
 
     def parameter_names(self) -> list[str]:
         """Names of the parameter vector p, in its one order (module docstring)."""
