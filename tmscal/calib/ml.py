@@ -328,7 +328,8 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
     rad, ``arm`` the nominal model (an ``Arm`` or a registry name such as "ur5e"), ``level``
     ("auto", "none", "offsets", "full"), ``tolerances`` (a ``Tolerances``: the prior), ``folds``
     of the held-out level choice; ``distortion`` then "none" (default with kinematics) or a
-    fixed model ("auto" is not searched with the arm); the noise there is as given."""
+    fixed model ("auto" is not searched with the arm); ``noise`` as here (estimated inside
+    the kinematic fit by default, :mod:`tmscal.calib.kinematics.noise`)."""
     if kinematics is not None:
         from .kinematics.solve import solve_with_kinematics
 
@@ -340,7 +341,7 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
             distortion="none" if distortion == "auto" else distortion, tools_mm=tools_mm,
             robot_sigma_mm=robot_sigma_mm, robot_sigma_deg=robot_sigma_deg,
             tracker_sigma_mm=tracker_sigma_mm, tracker_sigma_deg=tracker_sigma_deg,
-            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal)
+            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal, noise=noise)
     if distortion not in DISTORTION_MODELS and distortion != "auto":
         raise CalibrationError(f"method 'ml': unknown distortion {distortion!r}; expected "
                                f"auto, {', '.join(DISTORTION_MODELS)}")

@@ -60,6 +60,14 @@ from ..ml_model import (
 from .identifiability import Combination, identifiability
 from .jacobian import deviation_twists, parallel_joints
 from .model import Arm, base_from_flange, deviation_units
+from .noise import (
+    components,
+    estimated_components,
+    log_det,
+    noise_report,
+    theta_of,
+    with_factors,
+)
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
@@ -327,6 +335,16 @@ class KinematicFit:
     #: the tracker distortion model estimated with the rest and its undistortion G (3×3)
     distortion: str = "none"
     G: np.ndarray = field(default_factory=lambda: np.eye(3))
+    #: the noise the fit was weighted with (``ml``'s option dictionary; estimated or as
+    #: given) and its report (:func:`tmscal.calib.kinematics.noise.noise_report`)
+    noise_used: dict[str, Any] = field(default_factory=dict)
+    noise: dict[str, Any] = field(default_factory=dict)
+
+
+#: rounds of noise estimate → refit at most, and the relative change of every noise factor
+#: below which they stop
+NOISE_ROUNDS = 6
+NOISE_TOL = 0.01
 
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
@@ -341,13 +359,24 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                    start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                    tol: Tolerances = Tolerances(), max_iter: int = 50,
                    distortion: str = "none",
-                   moments: list[np.ndarray | None] | None = None) -> KinematicFit:
+                   moments: list[np.ndarray | None] | None = None,
+                   noise_mode: str = "estimate") -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
     spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
     "affine") estimated with the rest, ``moments`` the tools' second moments (``ml``'s
-    ``tool_moment``; None: isotropic). The whitening is evaluated at the start and once more
-    at the estimate."""
+    ``tool_moment``; None: isotropic).
+
+    ``noise_mode`` "given": the whitening is evaluated at the start and once more at the
+    estimate, the covariance scaled by the variance factor. "estimate" (default, as
+    ``ml``): after the fit with the given noise, the robot's rotation and translation noise
+    (and the tracker's level without spreads or tracker_cov) are estimated by REML from the
+    data rows at the estimate, the prior rows as rows of known variance
+    (:mod:`tmscal.calib.kinematics.noise`), and the fit is repeated with them, until no
+    factor changes by more than :data:`NOISE_TOL` (at most :data:`NOISE_ROUNDS` rounds); the
+    covariance is then that of the estimated noise, unscaled, and the information criterion
+    includes the noise's log-determinant (the likelihood with the noise estimated)."""
+    flags = estimated_components(noise, noise_mode)
     if distortion not in DISTORTION_MODELS:
         raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
                                f"{', '.join(DISTORTION_MODELS)}")
@@ -355,13 +384,27 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     tau = prior_sigmas(names, tol)
     s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
                np.zeros(DISTORTION_MODELS[distortion]))
-    its = 0
-    for _ in range(2):
-        whiten = _whitener_for(s.Ws, noise, len(q))
+    its, cur, comp, rounds = 0, noise, None, 0
+    m = len(q) * 6 * len(bodies)
+    for _ in range(1 if flags.any() else 2):
+        whiten = _whitener_for(s.Ws, cur, len(q))
         prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments)
         s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
         its += it
-    m = len(q) * 6 * len(bodies)
+    if flags.any():  # the noise from the residuals, then the fit with it, until it settles
+        raw = _Problem(q, bodies, chain0, names, tau, np.eye(6 * len(bodies)), distortion,
+                       moments)
+        while rounds < NOISE_ROUNDS:
+            rounds += 1
+            comp = components(*raw.evaluate(s), m, s.Ws, cur, flags, noise)
+            done = bool(np.all(np.abs(comp.theta / theta_of(cur) - 1.0) <= NOISE_TOL))
+            cur = with_factors(cur, comp.theta)
+            whiten = _whitener_for(s.Ws, cur, len(q))
+            prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments)
+            s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
+            its += it
+            if done:
+                break
     data_r = r[:m]
     chi2 = float(data_r @ data_r)
     Jx = J[:m, :prob.n_xyz]
@@ -378,16 +421,21 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     Jd = J[:m]
     p_eff = float(np.trace(P @ (Jd.T @ Jd)))
     vf = chi2 / max(m - p_eff, 1.0)
+    sc = 1.0 if flags.any() else vf  # the covariance's scale: estimated noise as it is
     k = len(names)
     fit = KinematicFit(level, prob.chain(s), names, s.delta.copy(),
-                       np.sqrt(np.diag(P)[prob.n_xyz:] * vf) if k else np.zeros(0),
+                       np.sqrt(np.diag(P)[prob.n_xyz:] * sc) if k else np.zeros(0),
                        s.Ws[0], s.Ws[1] if len(s.Ws) > 1 else None, s.Z, chi2, m, p_eff, vf,
-                       P * vf, iterations=its, distortion=distortion,
-                       G=undistortion(distortion, s.g))
-    fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
+                       P * sc, iterations=its, distortion=distortion,
+                       G=undistortion(distortion, s.g), noise_used=cur,
+                       noise=noise_report(noise_mode, noise, cur, comp, rounds))
+    if flags.any():  # −2 ln L with the noise estimated (ml's profiled form when given)
+        fit.aic = chi2 + log_det(whiten, len(q)) + 2.0 * p_eff
+    else:
+        fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(
-            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf)
+            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), sc)
     return fit
 
 
@@ -438,27 +486,35 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         start: tuple[list[np.ndarray], np.ndarray], noise: dict[str, Any],
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
                         max_iter: int = 50, distortion: str = "none",
-                        moments: list[np.ndarray | None] | None = None) -> KinematicsResult:
+                        moments: list[np.ndarray | None] | None = None,
+                        noise_mode: str = "estimate") -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
     keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
     and δ refitted on each training part); a simpler level wins when its held-out error is
     within one standard error of the best and its AIC is lower (the tie-break).
-    ``distortion`` and ``moments`` as :func:`fit_kinematics`, the same for every level."""
+    ``distortion``, ``moments`` and ``noise_mode`` as :func:`fit_kinematics`, the same for
+    every level. With the noise estimated, each level's cross-validation fits take the noise
+    that level estimated on all poses as given (the rig's noise does not change between
+    folds; a REML per fold would cost k more noise loops per level and estimate two or three
+    numbers from 4/5 of the poses, the same numbers less well)."""
     opts = {"distortion": distortion, "moments": moments}
     if level != "auto":
-        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts)
+        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts,
+                             noise_mode=noise_mode)
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
     n = len(q)
     k = max(2, min(folds, n // 4))
     fits, cv = {}, {}
     for lv in LEVELS:
-        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts)
+        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
+                                  noise_mode=noise_mode)
         errs = []
         for test in _folds(n, k):
             train = np.setdiff1d(np.arange(n), test)
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
-                                   _subset_noise(noise, train), tol, max_iter, **opts)
+                                   _subset_noise(fits[lv].noise_used, train), tol, max_iter,
+                                   **opts, noise_mode="given")
             except CalibrationError:
                 errs = []
                 break
