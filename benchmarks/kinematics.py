@@ -204,7 +204,8 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
                 print(f"  {m:6}{mean[f'{m} nominal']:>14.4f}{e:>16.4f}{tr:>12.4f}"
                       f"{e / tr:>19.2f}")
                 record("kinematics", {f"{arm}_{kind}_{m}_{k}_mm": mean[f"{m} {k}"]
-                                      for k in ("nominal", "estimated", "true")})
+                                      for k in ("nominal", "estimated", "true")}
+                       | {f"{arm}_{kind}_{m}_ratio": e / tr})
         print()
     print(f"## Poses needed: the estimated arm's (ml) coil placement after the first n poses "
           f"(mm, mean over {args.seeds} seeds), robot time (s)\n")
@@ -220,6 +221,8 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
         all_ = f"{args.ladder[every[0]]}" if every else "not reached"
         print(f"  {arm:6}{kind:8}" + "".join(f"{x:>9.4f}" for x in m) + f"   {first}, {all_}")
         print(f"  {'':6}{'time s':8}" + "".join(f"{x:>9.0f}" for x in tm))
+        record("kinematics", {f"{arm}_{kind}_{n}_poses_mm": x
+                              for n, x in zip(args.ladder, m, strict=True)})
         if ok:
             record("kinematics", {f"{arm}_{kind}_goal_poses": args.ladder[ok[0]],
                                   f"{arm}_{kind}_goal_s": tm[ok[0]]})

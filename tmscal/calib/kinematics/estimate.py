@@ -51,6 +51,7 @@ from ...geometry import make_pose, matrix_from_rotvec
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
+    g_of,
     noise_covariance,
     tracker_covs,
     undistort,
@@ -59,11 +60,13 @@ from ..ml_model import (
 )
 from .identifiability import Combination, identifiability
 from .jacobian import deviation_twists, parallel_joints
+from .levels import choose_level
 from .model import Arm, base_from_flange, deviation_units
 from .noise import (
     components,
     estimated_components,
     log_det,
+    log_dets,
     noise_report,
     theta_of,
     with_factors,
@@ -470,6 +473,20 @@ def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray],
     return e
 
 
+def _heldout_nll(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
+                 noise: dict[str, Any], moments: list[np.ndarray | None] | None
+                 ) -> np.ndarray:
+    """Per pose −2 ln p of the tracker poses under the fit (up to a constant): the whitened
+    χ² of its residuals by ``noise`` (the level's) plus ln det S_i (:mod:`.levels`)."""
+    Ws = [fit.X] if fit.Y is None else [fit.X, fit.Y]
+    whiten = _whitener_for(Ws, noise, len(q))
+    prob = _Problem(q, bodies, chain0, fit.names, np.ones(len(fit.names)), whiten,
+                    fit.distortion, moments)
+    r, _ = prob.evaluate(_State(Ws, fit.Z, fit.delta, g_of(fit.distortion, fit.G)), jac=False)
+    r = r[:len(q) * 6 * len(bodies)].reshape(len(q), -1)
+    return np.sum(r * r, axis=1) + log_dets(whiten, len(q))
+
+
 def _folds(n: int, k: int) -> list[np.ndarray]:
     idx = np.arange(n)
     return [idx[idx % k == f] for f in range(k)]
@@ -504,11 +521,11 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
     n = len(q)
     k = max(2, min(folds, n // 4))
-    fits, cv = {}, {}
+    fits, heldout = {}, {}
     for lv in LEVELS:
         fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
                                   noise_mode=noise_mode)
-        errs = []
+        scores: list[tuple[np.ndarray, np.ndarray]] = []
         for test in _folds(n, k):
             train = np.setdiff1d(np.arange(n), test)
             try:
@@ -516,29 +533,14 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                                    _subset_noise(fits[lv].noise_used, train), tol, max_iter,
                                    **opts, noise_mode="given")
             except CalibrationError:
-                errs = []
+                scores = []
                 break
-            errs.append(_heldout_e_t(f, q[test], [N[test] for N in bodies], moments))
-        if errs:
-            e = np.concatenate(errs)
-            cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": float(e.std(ddof=1) / np.sqrt(len(e))),
-                      "folds": float(k)}
-        else:
-            cv[lv] = None
-    scored = {lv: c for lv, c in cv.items() if c is not None}
-    if not scored:
+            held = [N[test] for N in bodies]
+            scores.append((_heldout_e_t(f, q[test], held, moments),
+                           _heldout_nll(f, q[test], held, chain0,
+                                        _subset_noise(fits[lv].noise_used, test), moments)))
+        heldout[lv] = tuple(np.concatenate(x) for x in zip(*scores)) if scores else None
+    best, reason, cv = choose_level(heldout, {lv: f.aic for lv, f in fits.items()}, k)
+    if best is None:
         raise CalibrationError(f"kinematics: too few poses ({n}) to cross-validate the levels")
-    best = min(scored, key=lambda lv: scored[lv]["e_t_mm"])
-    reason = (f"held-out e_t {scored[best]['e_t_mm']:.4g} mm, the lowest of "
-              + ", ".join(f"{lv} {c['e_t_mm']:.4g}" for lv, c in scored.items()))
-    for lv in LEVELS[:LEVELS.index(best)]:  # simpler levels first
-        c = scored.get(lv)
-        if c is None:
-            continue
-        close = c["e_t_mm"] - scored[best]["e_t_mm"] <= max(c["se_mm"], scored[best]["se_mm"])
-        if close and fits[lv].aic < fits[best].aic:
-            reason = (f"held-out e_t {c['e_t_mm']:.4g} mm within one standard error of "
-                      f"{best}'s {scored[best]['e_t_mm']:.4g} mm; the lower AIC decides")
-            best = lv
-            break
     return KinematicsResult(fits[best], fits, cv, reason)

@@ -28,7 +28,8 @@ from ..ml_model import robot_parts, tracker_covs, tracker_part
 from ..variance import COMPONENTS, Components, estimate_components
 
 __all__ = ["NOISE_MODES", "FLOOR", "estimated_components", "theta_of", "factors",
-           "with_factors", "components", "noise_report", "log_det"]
+           "with_factors", "components", "noise_report", "log_det",
+           "log_dets"]
 
 #: how the kinematic fit sets the noise (``ml``'s option of the same name)
 NOISE_MODES = ("estimate", "given")
@@ -102,12 +103,16 @@ def components(r: np.ndarray, J: np.ndarray, m: int, Ws: list[np.ndarray],
 FLOOR = 1e-4
 
 
+def log_dets(whiten: np.ndarray, n: int) -> np.ndarray:
+    """ln det S_i (n,) of the residual covariances whose whitener (L⁻¹, triangular: one
+    (q, q) shared by the n poses or (n, q, q)) is given: the likelihood's normalisation."""
+    d = -2.0 * np.sum(np.log(np.abs(np.diagonal(whiten, axis1=-2, axis2=-1))), axis=-1)
+    return np.broadcast_to(d, (n,)).astype(float)
+
+
 def log_det(whiten: np.ndarray, n: int) -> float:
-    """Σ_i ln det S_i of the residual covariances whose whitener (L⁻¹, one (q, q) shared by
-    the n poses or (n, q, q)) is given: the likelihood's normalisation."""
-    diag = np.diagonal(whiten, axis1=-2, axis2=-1)
-    s = -2.0 * float(np.sum(np.log(np.abs(diag))))
-    return s * n if whiten.ndim == 2 else s
+    """Σ_i ln det S_i (:func:`log_dets`)."""
+    return float(np.sum(log_dets(whiten, n)))
 
 
 def noise_report(mode: str, given: dict[str, Any], final: dict[str, Any],
