@@ -59,9 +59,9 @@ from ..ml_model import (
     whitener,
 )
 from .identifiability import Combination, identifiability
-from .jacobian import deviation_twists, parallel_joints
-from .levels import choose_level
-from .model import Arm, base_from_flange, deviation_units
+from .jacobian import deviation_twists
+from .levels import LEVELS, Tolerances, choose_level, level_parameters, prior_sigmas
+from .model import Arm, base_from_flange
 from .noise import (
     components,
     estimated_components,
@@ -74,51 +74,6 @@ from .noise import (
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
-
-LEVELS = ("none", "offsets", "full")
-
-
-@dataclass(frozen=True)
-class Tolerances:
-    """The prior: each deviation ~ N(0, τ²) with τ = ``length_mm`` for d, a (mm) and
-    ``angle_deg`` for θ0, α, β (degrees here, rad inside). The defaults are the assumption
-    of docs/kinematics.md for an arm without a per-robot factory calibration."""
-
-    length_mm: float = 0.5
-    angle_deg: float = 0.1
-
-    def __post_init__(self) -> None:
-        for k in ("length_mm", "angle_deg"):
-            v = getattr(self, k)
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-                raise CalibrationError(f"kinematics: tolerance {k} must be a finite number > 0, "
-                                       f"got {v!r}")
-
-
-def prior_sigmas(names: list[str], tol: Tolerances) -> np.ndarray:
-    """τ per parameter (mm or rad)."""
-    return np.array([tol.length_mm if u == "mm" else np.radians(tol.angle_deg)
-                     for u in deviation_units(names)])
-
-
-def level_parameters(chain: Arm, level: str) -> list[str]:
-    """The deviations a level estimates, in the chain's order."""
-    n = chain.n_joints
-    if level == "none":
-        return []
-    if level == "offsets":
-        return [f"theta0_{i}" for i in range(1, n + 1)]
-    if level == "full":
-        par = set(parallel_joints(chain))
-        out = []
-        for i in range(1, n + 1):
-            out += [f"theta0_{i}", f"d_{i}", f"a_{i}", f"alpha_{i}"]
-            if i in par:
-                out.append(f"beta_{i}")
-        return out
-    raise CalibrationError(f"kinematics: unknown level {level!r}; expected auto, "
-                           f"{', '.join(LEVELS)}")
-
 
 # --- residuals and their analytic Jacobian ---------------------------------------------------
 

@@ -1,5 +1,6 @@
-"""The level of the kinematic fit chosen from held-out scores (:func:`choose_level`;
-docs/kinematics.md, "The estimator"). Pure numerics on per-pose scores.
+"""The levels of the kinematic fit: what each estimates (:func:`level_parameters`), the prior
+on the deviations (:class:`Tolerances`), and the level chosen from held-out scores
+(:func:`choose_level`; docs/kinematics.md, "The estimator"). Pure numerics.
 
 Each level ("none", "offsets", "full") is scored on the poses each fold held out by the
 negative log-likelihood of their tracker poses under the model fitted without them, per pose
@@ -16,9 +17,61 @@ information criterion is lower.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["choose_level"]
+from ...errors import CalibrationError
+from .jacobian import parallel_joints
+from .model import Arm, deviation_units
+
+__all__ = ["LEVELS", "Tolerances", "prior_sigmas", "level_parameters", "choose_level"]
+
+LEVELS = ("none", "offsets", "full")
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """The prior: each deviation ~ N(0, τ²) with τ = ``length_mm`` for d, a (mm) and
+    ``angle_deg`` for θ0, α, β (degrees here, rad inside). The defaults are the assumption
+    of docs/kinematics.md for an arm without a per-robot factory calibration."""
+
+    length_mm: float = 0.5
+    angle_deg: float = 0.1
+
+    def __post_init__(self) -> None:
+        for k in ("length_mm", "angle_deg"):
+            v = getattr(self, k)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise CalibrationError(f"kinematics: tolerance {k} must be a finite number > 0, "
+                                       f"got {v!r}")
+
+
+def prior_sigmas(names: list[str], tol: Tolerances) -> np.ndarray:
+    """τ per parameter (mm or rad)."""
+    return np.array([tol.length_mm if u == "mm" else np.radians(tol.angle_deg)
+                     for u in deviation_units(names)])
+
+
+def level_parameters(chain: Arm, level: str) -> list[str]:
+    """The deviations a level estimates, in the chain's order."""
+    n = chain.n_joints
+    if level == "none":
+        return []
+    if level == "offsets":
+        return [f"theta0_{i}" for i in range(1, n + 1)]
+    if level == "full":
+        par = set(parallel_joints(chain))
+        out = []
+        for i in range(1, n + 1):
+            out += [f"theta0_{i}", f"d_{i}", f"a_{i}", f"alpha_{i}"]
+            if i in par:
+                out.append(f"beta_{i}")
+        return out
+    raise CalibrationError(f"kinematics: unknown level {level!r}; expected auto, "
+                           f"{', '.join(LEVELS)}")
+
+
 
 
 def choose_level(heldout: dict[str, tuple[np.ndarray, np.ndarray] | None],
@@ -29,28 +82,26 @@ def choose_level(heldout: dict[str, tuple[np.ndarray, np.ndarray] | None],
     in the order simpler → richer, the levels' information criteria ``aic`` and the number
     of ``folds``. The table: {level: {"e_t_mm", "se_mm" (its standard error), "nll" (mean
     −2 ln p per pose), "nll_se", "folds"} or None}."""
-    cv: dict[str, dict[str, float] | None] = {}
-    for lv, h in heldout.items():
-        if h is None:
-            cv[lv] = None
-            continue
-        e, c = h
-        cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": float(e.std(ddof=1) / np.sqrt(len(e))),
-                  "nll": float(c.mean()), "nll_se": float(c.std(ddof=1) / np.sqrt(len(c))),
-                  "folds": float(folds)}
-    scored = [lv for lv, h in heldout.items() if h is not None]
+    def se(x: np.ndarray) -> float:
+        return float(x.std(ddof=1) / np.sqrt(len(x)))
+
+    scored = {lv: h for lv, h in heldout.items() if h is not None}
+    cv: dict[str, dict[str, float] | None] = {lv: None for lv in heldout}
+    for lv, (e, c) in scored.items():
+        cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": se(e), "nll": float(c.mean()),
+                  "nll_se": se(c), "folds": float(folds)}
     if not scored:
         return None, "", cv
-    best = min(scored, key=lambda lv: heldout[lv][1].mean())  # type: ignore[index]
-    nll = {lv: heldout[lv][1] for lv in scored}  # type: ignore[index]
-    reason = (f"held-out −2 ln p {cv[best]['nll']:.4g} per pose, the lowest of "  # type: ignore
-              + ", ".join(f"{lv} {cv[lv]['nll']:.4g}" for lv in scored))  # type: ignore
-    for lv in scored[:scored.index(best)]:  # simpler levels first
+    nll = {lv: h[1] for lv, h in scored.items()}
+    best = min(nll, key=lambda lv: float(nll[lv].mean()))
+    reason = (f"held-out −2 ln p {nll[best].mean():.4g} per pose, the lowest of "
+              + ", ".join(f"{lv} {c.mean():.4g}" for lv, c in nll.items()))
+    order = list(nll)
+    for lv in order[:order.index(best)]:  # simpler levels first
         d = nll[lv] - nll[best]
-        se = float(d.std(ddof=1) / np.sqrt(len(d)))
-        if float(d.mean()) <= se and aic[lv] < aic[best]:
-            reason = (f"held-out −2 ln p {cv[lv]['nll']:.4g} per pose within one standard "  # type: ignore
-                      f"error ({se:.3g}) of {best}'s {cv[best]['nll']:.4g}; the lower AIC "  # type: ignore
+        if float(d.mean()) <= se(d) and aic[lv] < aic[best]:
+            reason = (f"held-out −2 ln p {nll[lv].mean():.4g} per pose within one standard "
+                      f"error ({se(d):.3g}) of {best}'s {nll[best].mean():.4g}; the lower AIC "
                       "decides")
             best = lv
             break
