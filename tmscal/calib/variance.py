@@ -22,6 +22,9 @@ prediction draws θ_k as θ̂_k ν_k / χ²_ν_k. Why not the per-pose robot rea
 the pose its joints encode, so its reads spread only by encoder jitter and never show the
 positioning or kinematic error that reaches the tracker; the residuals do.
 
+Rows of known variance (a prior's pseudo-observations, :mod:`tmscal.calib.kinematics.noise`)
+join the least-squares fit and the projection P but no component (``fixed``).
+
 References: Förstner W (1979). Ein Verfahren zur Schätzung von Varianz- und
 Kovarianzkomponenten. Allgemeine Vermessungs-Nachrichten 86:446–453. — Koch KR (1999).
 Parameter Estimation and Hypothesis Testing in Linear Models, 2nd ed. Springer. —
