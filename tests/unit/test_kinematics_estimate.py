@@ -348,3 +348,27 @@ def test_the_prior_rows_do_not_bias_the_noise_estimate(seed: int) -> None:
         nz = est.fit_kinematics(q, [B, C], chain0, level, start, NOISE).noise
         for k in ("robot_sigma_mm", "robot_sigma_deg", "tracker_factor"):
             assert nz[k] == pytest.approx(ml[k], rel=rel), (level, k, nz[k], ml[k])
+
+
+def test_the_level_is_chosen_by_held_out_likelihood_with_a_paired_tie_break() -> None:
+    """levels.choose_level: the lowest mean held-out −2 ln p wins even against a lower held-out
+    e_t; a simpler level within one standard error of the PAIRED per-pose difference wins
+    only with the lower AIC; a level that could not be scored is left out."""
+    from tmscal.calib.kinematics.levels import choose_level
+
+    rng = np.random.default_rng(0)
+    base = rng.normal(0.0, 5.0, 40)  # the pose-to-pose spread every level shares
+    e_t = rng.uniform(0.1, 0.3, 40)
+    wiggle = 0.01 * np.where(np.arange(40) % 2, 1.0, -1.0)  # paired SE 0.0016 per pose
+    held = {"none": (e_t, base + 3.0), "offsets": (e_t - 0.05, base + wiggle + 0.001),
+            "full": (e_t, base)}
+    best, reason, cv = choose_level(held, {"none": 0.0, "offsets": 5.0, "full": 1.0}, 5)
+    assert best == "full" and "lowest" in reason  # offsets is within its paired SE, AIC higher
+    assert cv["offsets"]["e_t_mm"] < cv["full"]["e_t_mm"] and cv["full"]["folds"] == 5
+    best, reason, _ = choose_level(held, {"none": 0.0, "offsets": 0.5, "full": 1.0}, 5)
+    assert best == "offsets" and "the lower AIC decides" in reason
+    # none is 3 per pose worse with a paired SE near 0: never within one SE, whatever its AIC
+    best, _, cv = choose_level({"none": held["none"], "offsets": None, "full": held["full"]},
+                               {"none": -100.0, "full": 1.0}, 5)
+    assert best == "full" and cv["offsets"] is None
+    assert choose_level({"none": None}, {}, 5)[0] is None
