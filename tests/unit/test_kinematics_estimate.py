@@ -350,8 +350,8 @@ def test_the_prior_rows_do_not_bias_the_noise_estimate(seed: int) -> None:
             assert nz[k] == pytest.approx(ml[k], rel=rel), (level, k, nz[k], ml[k])
 
 
-def test_the_level_is_chosen_by_held_out_likelihood_with_a_paired_tie_break() -> None:
-    """levels.choose_level: the lowest mean held-out −2 ln p wins even against a lower held-out
+def test_the_level_is_chosen_by_held_out_chi2_with_a_paired_tie_break() -> None:
+    """levels.choose_level: the lowest mean held-out χ² wins even against a lower held-out
     e_t; a simpler level within one standard error of the PAIRED per-pose difference wins
     only with the lower AIC; a level that could not be scored is left out."""
     from tmscal.calib.kinematics.levels import choose_level

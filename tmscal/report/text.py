@@ -139,11 +139,11 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
     if cv:
         k = int(next(iter(cv.values())).get("folds", 0))
         lines.append(f"  {'held-out by level (' + str(k) + ' interleaved folds)':<{_W}}"
-                     f"{'e_t mm':>15}{'± SE mm':>15}{'−2 ln p/pose':>15}")
+                     f"{'e_t mm':>15}{'± SE mm':>15}{'χ² per pose':>15}")
         for lv, c in cv.items():
             mark = "  ← chosen" if lv == arm.get("level") else ""
-            nll = f"{float(c['nll']):>15.2f}" if c.get("nll") is not None else " " * 15
-            lines.append(_row(f"  {lv}", float(c["e_t_mm"]), float(c["se_mm"])) + nll + mark)
+            chi2 = f"{float(c['chi2']):>15.2f}" if c.get("chi2") is not None else " " * 15
+            lines.append(_row(f"  {lv}", float(c["e_t_mm"]), float(c["se_mm"])) + chi2 + mark)
     tol = arm.get("tolerances") or {}
     if tol:
         lines += _wrap(f"prior: each length deviation N(0, ({tol.get('length_mm'):g} mm)²), "

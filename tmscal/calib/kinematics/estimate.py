@@ -66,7 +66,6 @@ from .noise import (
     components,
     estimated_components,
     log_det,
-    log_dets,
     noise_report,
     theta_of,
     with_factors,
@@ -428,18 +427,18 @@ def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray],
     return e
 
 
-def _heldout_nll(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
-                 noise: dict[str, Any], moments: list[np.ndarray | None] | None
-                 ) -> np.ndarray:
-    """Per pose −2 ln p of the tracker poses under the fit (up to a constant): the whitened
-    χ² of its residuals by ``noise`` (the level's) plus ln det S_i (:mod:`.levels`)."""
+def _heldout_chi2(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
+                  noise: dict[str, Any], moments: list[np.ndarray | None] | None
+                  ) -> np.ndarray:
+    """Per pose the χ² of the tracker poses' residuals under the fit, whitened by ``noise``
+    (:mod:`.levels`)."""
     Ws = [fit.X] if fit.Y is None else [fit.X, fit.Y]
     whiten = _whitener_for(Ws, noise, len(q))
     prob = _Problem(q, bodies, chain0, fit.names, np.ones(len(fit.names)), whiten,
                     fit.distortion, moments)
     r, _ = prob.evaluate(_State(Ws, fit.Z, fit.delta, g_of(fit.distortion, fit.G)), jac=False)
     r = r[:len(q) * 6 * len(bodies)].reshape(len(q), -1)
-    return np.sum(r * r, axis=1) + log_dets(whiten, len(q))
+    return np.sum(r * r, axis=1)
 
 
 def _folds(n: int, k: int) -> list[np.ndarray]:
@@ -461,9 +460,9 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         moments: list[np.ndarray | None] | None = None,
                         noise_mode: str = "estimate") -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
-    keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
-    and δ refitted on each training part); a simpler level wins when its held-out error is
-    within one standard error of the best and its AIC is lower (the tie-break).
+    keep the one with the lowest k-fold held-out χ² per pose (``folds`` interleaved folds;
+    X, Y, Z and δ refitted on each training part; every level's held-out residuals whitened
+    by the same noise, the richest level's; :mod:`.levels` says why and how ties are broken).
     ``distortion``, ``moments`` and ``noise_mode`` as :func:`fit_kinematics`, the same for
     every level. With the noise estimated, each level's cross-validation fits take the noise
     that level estimated on all poses as given (the rig's noise does not change between
@@ -476,10 +475,11 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
     n = len(q)
     k = max(2, min(folds, n // 4))
-    fits, heldout = {}, {}
+    fits = {lv: fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
+                               noise_mode=noise_mode) for lv in LEVELS}
+    weights = fits[LEVELS[-1]].noise_used  # the noise least inflated by the arm's error
+    heldout = {}
     for lv in LEVELS:
-        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
-                                  noise_mode=noise_mode)
         scores: list[tuple[np.ndarray, np.ndarray]] = []
         for test in _folds(n, k):
             train = np.setdiff1d(np.arange(n), test)
@@ -492,8 +492,8 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                 break
             held = [N[test] for N in bodies]
             scores.append((_heldout_e_t(f, q[test], held, moments),
-                           _heldout_nll(f, q[test], held, chain0,
-                                        _subset_noise(fits[lv].noise_used, test), moments)))
+                           _heldout_chi2(f, q[test], held, chain0,
+                                         _subset_noise(weights, test), moments)))
         heldout[lv] = tuple(np.concatenate(x) for x in zip(*scores)) if scores else None
     best, reason, cv = choose_level(heldout, {lv: f.aic for lv, f in fits.items()}, k)
     if best is None:

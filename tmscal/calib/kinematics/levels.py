@@ -2,17 +2,17 @@
 on the deviations (:class:`Tolerances`), and the level chosen from held-out scores
 (:func:`choose_level`; docs/kinematics.md, "The estimator"). Pure numerics.
 
-Each level ("none", "offsets", "full") is scored on the poses each fold held out by the
-negative log-likelihood of their tracker poses under the model fitted without them, per pose
-−2 ln p = r_iᵀ S_i⁻¹ r_i + ln det S_i (+ a constant): every residual component, rotations
-included, weighted by the noise that level estimated (the noise is part of each level's
-model: a level that leaves the arm's error in the residuals also inflates its noise, which
-the log-determinant charges). The held-out translation error e_t (mm) is reported beside it
-but does not choose: it is a sum of norms dominated by the tracker's and the robot's noise,
-and on the mock rigs it preferred a level whose coil placement was 1.7× worse (issue 20).
-A simpler level wins when the mean of its per-pose difference to the best is within one
-standard error of that paired difference (the poses are the same for every level) and its
-information criterion is lower.
+Each level ("none", "offsets", "full") is scored on the poses each fold held out by the χ² of
+their tracker poses' residuals under the model fitted without them (every residual
+component, rotations included), whitened by ONE noise for every level: the one the richest
+level estimated, whose residuals the arm's error inflates least (a level's own noise would
+make each level's χ² about its degrees of freedom, whatever its error). It is ``ml``'s
+weighted error measured on poses the fit did not see. The held-out translation error e_t
+(mm) is reported beside it but does not choose: a sum of norms dominated by the tracker's and
+the robot's noise, it chose `offsets` on the VS-060 mock rig of seed 1 where full placed the
+coil 1.7× better (issue 20). A simpler level wins when the mean of its per-pose difference
+to the best is within one standard error of that paired difference (the poses are the same
+for every level) and its information criterion is lower.
 """
 
 from __future__ import annotations
@@ -78,30 +78,30 @@ def choose_level(heldout: dict[str, tuple[np.ndarray, np.ndarray] | None],
                  aic: dict[str, float], folds: int
                  ) -> tuple[str | None, str, dict[str, dict[str, float] | None]]:
     """(the chosen level or None when no level could be scored, the reason, the table)
-    from ``heldout`` {level: (e_t per held-out pose mm, −2 ln p per held-out pose) or None},
-    in the order simpler → richer, the levels' information criteria ``aic`` and the number
-    of ``folds``. The table: {level: {"e_t_mm", "se_mm" (its standard error), "nll" (mean
-    −2 ln p per pose), "nll_se", "folds"} or None}."""
+    from ``heldout`` {level: (e_t per held-out pose mm, whitened χ² per held-out pose) or
+    None}, in the order simpler → richer, the levels' information criteria ``aic`` and the
+    number of ``folds``. The table: {level: {"e_t_mm", "se_mm" (its standard error), "chi2"
+    (mean χ² per pose), "chi2_se", "folds"} or None}."""
     def se(x: np.ndarray) -> float:
         return float(x.std(ddof=1) / np.sqrt(len(x)))
 
     scored = {lv: h for lv, h in heldout.items() if h is not None}
     cv: dict[str, dict[str, float] | None] = {lv: None for lv in heldout}
     for lv, (e, c) in scored.items():
-        cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": se(e), "nll": float(c.mean()),
-                  "nll_se": se(c), "folds": float(folds)}
+        cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": se(e), "chi2": float(c.mean()),
+                  "chi2_se": se(c), "folds": float(folds)}
     if not scored:
         return None, "", cv
-    nll = {lv: h[1] for lv, h in scored.items()}
-    best = min(nll, key=lambda lv: float(nll[lv].mean()))
-    reason = (f"held-out −2 ln p {nll[best].mean():.4g} per pose, the lowest of "
-              + ", ".join(f"{lv} {c.mean():.4g}" for lv, c in nll.items()))
-    order = list(nll)
+    chi2 = {lv: h[1] for lv, h in scored.items()}
+    best = min(chi2, key=lambda lv: float(chi2[lv].mean()))
+    reason = (f"held-out χ² {chi2[best].mean():.4g} per pose, the lowest of "
+              + ", ".join(f"{lv} {c.mean():.4g}" for lv, c in chi2.items()))
+    order = list(chi2)
     for lv in order[:order.index(best)]:  # simpler levels first
-        d = nll[lv] - nll[best]
+        d = chi2[lv] - chi2[best]
         if float(d.mean()) <= se(d) and aic[lv] < aic[best]:
-            reason = (f"held-out −2 ln p {nll[lv].mean():.4g} per pose within one standard "
-                      f"error ({se(d):.3g}) of {best}'s {nll[best].mean():.4g}; the lower AIC "
+            reason = (f"held-out χ² {chi2[lv].mean():.4g} per pose within one standard "
+                      f"error ({se(d):.3g}) of {best}'s {chi2[best].mean():.4g}; the lower AIC "
                       "decides")
             best = lv
             break
