@@ -163,6 +163,13 @@ def _three_arms(session: Any, targets: Any) -> dict[str, float]:
     return out
 
 
+def _tag(args: argparse.Namespace) -> str:
+    """The figures' name suffix of a run with other seeds or noise ("" for the defaults):
+    ``_seeds4`` for --first-seed 4, ``_noise2`` for --noise-scale 2."""
+    return ("" if args.first_seed == 1 else f"_seeds{args.first_seed}") + \
+        ("" if args.noise_scale == 1 else f"_noise{args.noise_scale:g}".replace(".", "_"))
+
+
 def rig(args: argparse.Namespace, tmp: Path) -> None:
     n_max = max([args.poses, *args.ladder])
     seeds = range(args.first_seed, args.first_seed + args.seeds)
@@ -203,9 +210,9 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
                 e, tr = mean[f"{m} estimated"], mean[f"{m} true"]
                 print(f"  {m:6}{mean[f'{m} nominal']:>14.4f}{e:>16.4f}{tr:>12.4f}"
                       f"{e / tr:>19.2f}")
-                record("kinematics", {f"{arm}_{kind}_{m}_{k}_mm": mean[f"{m} {k}"]
+                record("kinematics", {f"{arm}_{kind}_{m}_{k}_mm{_tag(args)}": mean[f"{m} {k}"]
                                       for k in ("nominal", "estimated", "true")}
-                       | {f"{arm}_{kind}_{m}_ratio": e / tr})
+                       | {f"{arm}_{kind}_{m}_ratio{_tag(args)}": e / tr})
         print()
     print(f"## Poses needed: the estimated arm's (ml) coil placement after the first n poses "
           f"(mm, mean over {args.seeds} seeds), robot time (s)\n")
@@ -221,11 +228,11 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
         all_ = f"{args.ladder[every[0]]}" if every else "not reached"
         print(f"  {arm:6}{kind:8}" + "".join(f"{x:>9.4f}" for x in m) + f"   {first}, {all_}")
         print(f"  {'':6}{'time s':8}" + "".join(f"{x:>9.0f}" for x in tm))
-        record("kinematics", {f"{arm}_{kind}_{n}_poses_mm": x
+        record("kinematics", {f"{arm}_{kind}_{n}_poses_mm{_tag(args)}": x
                               for n, x in zip(args.ladder, m, strict=True)})
         if ok:
-            record("kinematics", {f"{arm}_{kind}_goal_poses": args.ladder[ok[0]],
-                                  f"{arm}_{kind}_goal_s": tm[ok[0]]})
+            record("kinematics", {f"{arm}_{kind}_goal_poses{_tag(args)}": args.ladder[ok[0]],
+                                  f"{arm}_{kind}_goal_s{_tag(args)}": tm[ok[0]]})
     print()
 
 
@@ -255,7 +262,8 @@ def sim(args: argparse.Namespace, tmp: Path) -> None:
                 e[m].append(solve_session(s, m, **kw)[1].errors["e_t_mm"])
         print(f"  {f'{sigma:g} / {sigma:g} / {sigma:g}':32}{np.mean(e['qr24']):>10.4f}"
               f"{np.mean(e['qr36']):>12.4f}{np.mean(e['ml']):>20.4f}")
-        record("kinematics", {f"sim_{m}_e_t_mm_sigma{sigma:g}".replace(".", "_"): np.mean(v)
+        record("kinematics", {(f"sim_{m}_e_t_mm_sigma{sigma:g}".replace(".", "_")
+                               + _tag(args)): np.mean(v)
                               for m, v in e.items()})
     print()
 
