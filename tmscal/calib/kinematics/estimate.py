@@ -35,8 +35,9 @@ flange, or X/Y and/or Z absorb it.
 
 Levels (:data:`LEVELS`): "none" (X, Y, Z on the nominal arm), "offsets" (joint zero
 offsets θ0_i) and "full" (every θ0, d, a, α, and β where consecutive axes are parallel);
-``level="auto"`` chooses by k-fold held-out error, with the information criterion (AIC)
-as a tie-break only when the held-out errors are within one standard error.
+``level="auto"`` chooses by k-fold held-out χ², with the information criterion (AIC) as a
+tie-break only within one standard error (:mod:`.levels`). The robot's noise is estimated
+inside the fit by default (:mod:`.noise`).
 """
 
 from __future__ import annotations
