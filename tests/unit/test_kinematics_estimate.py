@@ -322,15 +322,15 @@ def test_noise_given_is_the_fit_before_the_noise_was_estimated() -> None:
     chain0, q, B, C = _noisy_rig(0)
     start = _start(chain0, q, B, C)
     fit = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE, noise_mode="given")
-    assert fit.chi2 == pytest.approx(1083.7656031712502, rel=1e-9)
+    assert fit.chi2 == pytest.approx(1083.7656031712502, rel=1e-7)
     np.testing.assert_allclose(fit.X[:3, 3], [19.30670212996469, -11.0682891292926,
-                                              -36.25224175352074], rtol=1e-9)
+                                              -36.25224175352074], rtol=1e-7)
     assert fit.delta[2] == pytest.approx(0.2990812137576049, rel=1e-7)
     assert fit.noise["mode"] == "given" and fit.noise_used is NOISE
     res = est.estimate_kinematics(q, [B, C], chain0, start, NOISE, noise_mode="given")
     assert res.fit.level == "full"
-    assert res.cv["full"]["e_t_mm"] == pytest.approx(0.5690584936605724, rel=1e-9)
-    assert res.fit.aic == pytest.approx(462.28160012332467, rel=1e-9)
+    assert res.cv["full"]["e_t_mm"] == pytest.approx(0.5690584936605724, rel=1e-7)
+    assert res.fit.aic == pytest.approx(462.28160012332467, rel=1e-7)
     estimated = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE)
     assert estimated.chi2 != pytest.approx(fit.chi2, rel=1e-3)
 
