@@ -52,6 +52,9 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/selfcal_rig.py
 	$(BIN)/python benchmarks/franka_demo.py
 	$(BIN)/python benchmarks/kinematics.py
+	$(BIN)/python benchmarks/kinematics.py --first-seed 4 --skip-sim --ladder 15,20,40
+	$(BIN)/python benchmarks/kinematics.py --noise-scale 2 --skip-sim --ladder 40
+	$(BIN)/python benchmarks/kinematics_ratio.py
 	$(BIN)/python benchmarks/ml_selection.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5
 	$(BIN)/python benchmarks/check_figures.py

@@ -2,19 +2,21 @@
 on the mock rigs with realistic arm errors, on simulated sessions, and how many poses (and how
 much robot time) it needs with the default plan and with the joints plan.
 
-    .venv/bin/python benchmarks/kinematics.py [--seeds 3] [--poses 40] [--ladder 10,15,20,30,40]
-                                              [--samples 100] [--skip-sim] [--skip-rig]
+    .venv/bin/python benchmarks/kinematics.py [--seeds 3] [--first-seed 1] [--poses 40]
+                                              [--ladder 10,15,20,30,40] [--samples 100]
+                                              [--noise-scale 1] [--skip-sim] [--skip-rig]
 
 1. **Mock rig** (``configs/mock-ur-polaris-kin.yaml``, a UR5e, and
-   ``configs/mock-denso-polaris-kin.yaml``, a VS-060; realistic arm errors drawn from the
-   mock seed 1…seeds; a temporary copy on a loopback address of its own, the tracker on a
-   pty): the mocks in a child process and the acquisition through the real drivers and wire
-   protocols, as ``tmscal demo --kinematics estimate`` runs them (``spawn_mock_rig``,
-   ``acquire``). On each session, the first ``--poses`` poses of its Eq. 14 plan: QR36 and
-   ml solved with the controller's NOMINAL arm (A as reported), with the ESTIMATED arm (ml:
-   ``solve --kinematics estimate``; QR36: A recomputed from the joints with the arm ml
-   estimated) and with the TRUE arm (A recomputed with the mock's true arm: the ceiling);
-   the same on the first ``--poses`` poses of a joints plan (part 2) on the same rig.
+   ``configs/mock-denso-polaris-kin.yaml``, a VS-060; realistic arm errors drawn from the mock seed
+   1…seeds; a temporary copy on a loopback address of its own, the tracker on a pty): the mocks in
+   a child process and the acquisition through the real drivers and wire protocols, as ``tmscal
+   demo --kinematics estimate`` runs them (``spawn_mock_rig``, ``acquire``; ``--first-seed`` shifts
+   the seeds, ``--noise-scale`` multiplies the mock's fiducial and robot noise). On each session,
+   the first ``--poses`` poses of its Eq. 14 plan: QR36 and ml solved with the controller's NOMINAL
+   arm (A as reported), with the ESTIMATED arm (ml: ``solve --kinematics estimate``; QR36: A
+   recomputed from the joints with the arm ml estimated) and with the TRUE arm (A recomputed with
+   the mock's true arm: the ceiling); the same on the first ``--poses`` poses of a joints plan
+   (part 2) on the same rig.
    Coil placement (mm, mean) against the mock rig's truth through each calibration's flange
    commands (``solving.kinematics.coil_placement``: the truth's controller solves its
    nominal kinematics for the command and the true arm goes there), over 100 targets: the
@@ -75,7 +77,7 @@ SETTLE_S = 1.0
 
 
 def _config(tmp: Path, arm: str, seed: int, plan: dict[str, Any], poses: int,
-            samples: int) -> Path:
+            samples: int, noise_scale: float = 1.0) -> Path:
     base, host = RIGS[arm]
     data = yaml.safe_load((CONFIGS / base).read_text())
     data["tracker"]["tools"] = {k: str(CONFIGS / v) for k, v in data["tracker"]["tools"].items()}
@@ -85,6 +87,7 @@ def _config(tmp: Path, arm: str, seed: int, plan: dict[str, Any], poses: int,
     data["plan"] = {**data["plan"], **plan, "poses": poses}
     data["sampling"]["samples"] = samples
     data["mock"]["seed"] = seed
+    data["mock"]["noise"] = {k: v * noise_scale for k, v in data["mock"]["noise"].items()}
     p = tmp / f"{arm}-{seed}-{plan.get('kind', 'eq14')}.yaml"
     p.write_text(yaml.safe_dump(data))
     return p
@@ -160,18 +163,28 @@ def _three_arms(session: Any, targets: Any) -> dict[str, float]:
     return out
 
 
+def _tag(args: argparse.Namespace) -> str:
+    """The figures' name suffix of a run with other seeds or noise ("" for the defaults):
+    ``_seeds4`` for --first-seed 4, ``_noise2`` for --noise-scale 2."""
+    return ("" if args.first_seed == 1 else f"_seeds{args.first_seed}") + \
+        ("" if args.noise_scale == 1 else f"_noise{args.noise_scale:g}".replace(".", "_"))
+
+
 def rig(args: argparse.Namespace, tmp: Path) -> None:
     n_max = max([args.poses, *args.ladder])
-    print(f"## Mock rigs with realistic arm errors (seeds 1..{args.seeds}, {args.samples} "
-          "samples per pose; coil placement mm, mean over 100 Eq. 14 targets)\n")
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    print(f"## Mock rigs with realistic arm errors (seeds {seeds[0]}..{seeds[-1]}, "
+          f"{args.samples} samples per pose, mock noise × {args.noise_scale:g}; coil placement "
+          "mm, mean over 100 Eq. 14 targets)\n")
     ladder: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
     for arm in RIGS:
         rows: dict[str, list[dict[str, float]]] = {"eq14": [], "joints": []}
         times: dict[str, list[float]] = {"eq14": [], "joints": []}
-        for seed in range(1, args.seeds + 1):
+        for seed in seeds:
             sessions = {}
             for kind, plan in (("eq14", {}), ("joints", JOINTS_PLAN)):
-                cfg_path = _config(tmp, arm, seed, plan, n_max, args.samples)
+                cfg_path = _config(tmp, arm, seed, plan, n_max, args.samples,
+                                   args.noise_scale)
                 s = _acquire(cfg_path, tmp / f"{arm}-{seed}-{kind}.jsonl")
                 sessions[kind] = (s, _robot_time(s, cfg_path, args.samples))
             targets = _targets(sessions["eq14"][0])
@@ -197,8 +210,9 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
                 e, tr = mean[f"{m} estimated"], mean[f"{m} true"]
                 print(f"  {m:6}{mean[f'{m} nominal']:>14.4f}{e:>16.4f}{tr:>12.4f}"
                       f"{e / tr:>19.2f}")
-                record("kinematics", {f"{arm}_{kind}_{m}_{k}_mm": mean[f"{m} {k}"]
-                                      for k in ("nominal", "estimated", "true")})
+                record("kinematics", {f"{arm}_{kind}_{m}_{k}_mm{_tag(args)}": mean[f"{m} {k}"]
+                                      for k in ("nominal", "estimated", "true")}
+                       | {f"{arm}_{kind}_{m}_ratio{_tag(args)}": e / tr})
         print()
     print(f"## Poses needed: the estimated arm's (ml) coil placement after the first n poses "
           f"(mm, mean over {args.seeds} seeds), robot time (s)\n")
@@ -214,9 +228,11 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
         all_ = f"{args.ladder[every[0]]}" if every else "not reached"
         print(f"  {arm:6}{kind:8}" + "".join(f"{x:>9.4f}" for x in m) + f"   {first}, {all_}")
         print(f"  {'':6}{'time s':8}" + "".join(f"{x:>9.0f}" for x in tm))
+        record("kinematics", {f"{arm}_{kind}_{n}_poses_mm{_tag(args)}": x
+                              for n, x in zip(args.ladder, m, strict=True)})
         if ok:
-            record("kinematics", {f"{arm}_{kind}_goal_poses": args.ladder[ok[0]],
-                                  f"{arm}_{kind}_goal_s": tm[ok[0]]})
+            record("kinematics", {f"{arm}_{kind}_goal_poses{_tag(args)}": args.ladder[ok[0]],
+                                  f"{arm}_{kind}_goal_s{_tag(args)}": tm[ok[0]]})
     print()
 
 
@@ -229,12 +245,13 @@ def _tmscal(*args: object) -> None:
 
 def sim(args: argparse.Namespace, tmp: Path) -> None:
     print(f"## Simulated sessions (tmscal simulate --arm ur5e, realistic errors, 40 Eq. 14 "
-          f"poses of 10 samples, seeds 1..{args.seeds}): 5-fold cross-validated e_t (mm)\n")
+          f"poses of 10 samples, seeds {args.first_seed}..{args.first_seed + args.seeds - 1}): "
+          "5-fold cross-validated e_t (mm)\n")
     print(f"  {'noise (tracker mm, robot mm/°)':32}{'QR24 raw':>10}{'QR36 rigid':>12}"
           f"{'estimated arm (ml)':>20}")
     for sigma in (0.05, 0.1):
         e = {"qr24": [], "qr36": [], "ml": []}
-        for seed in range(1, args.seeds + 1):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             out = tmp / f"sim-{sigma}-{seed}.jsonl"
             _tmscal("simulate", "-o", out, "--arm", "ur5e", "--poses", 40, "--seed", seed,
                     "--samples", 10, "--fiducial-sigma", sigma, "--robot-rot-sigma", sigma,
@@ -245,7 +262,8 @@ def sim(args: argparse.Namespace, tmp: Path) -> None:
                 e[m].append(solve_session(s, m, **kw)[1].errors["e_t_mm"])
         print(f"  {f'{sigma:g} / {sigma:g} / {sigma:g}':32}{np.mean(e['qr24']):>10.4f}"
               f"{np.mean(e['qr36']):>12.4f}{np.mean(e['ml']):>20.4f}")
-        record("kinematics", {f"sim_{m}_e_t_mm_sigma{sigma:g}".replace(".", "_"): np.mean(v)
+        record("kinematics", {(f"sim_{m}_e_t_mm_sigma{sigma:g}".replace(".", "_")
+                               + _tag(args)): np.mean(v)
                               for m, v in e.items()})
     print()
 
@@ -253,6 +271,9 @@ def sim(args: argparse.Namespace, tmp: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--first-seed", type=int, default=1, help="the first mock/simulate seed")
+    ap.add_argument("--noise-scale", type=float, default=1.0,
+                    help="factor on the mock rig's fiducial and robot noise (part 1 and 2)")
     ap.add_argument("--poses", type=int, default=40, help="poses of part 1's sessions")
     ap.add_argument("--ladder", type=lambda s: [int(x) for x in s.split(",")],
                     default=[10, 15, 20, 30, 40], help="pose counts of part 2")

@@ -18,7 +18,7 @@ from tmscal.calib.kinematics import arm_by_name, base_from_flange
 from tmscal.calib.kinematics import estimate as est
 from tmscal.calib.kinematics.ik import inverse
 from tmscal.calib.kinematics.jacobian import deviation_twists, parallel_joints
-from tmscal.geometry import make_pose, random_rotation
+from tmscal.geometry import make_pose, matrix_from_rotvec, random_rotation
 
 HOME = np.array([np.pi, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 NOISE = {"robot_sigma_mm": 0.05, "robot_sigma_deg": 0.03, "tracker_sigma_mm": 0.025,
@@ -82,7 +82,8 @@ def _start(chain0, q: np.ndarray, B: np.ndarray, C: np.ndarray):
 
 def test_noise_free_recovery_of_every_identifiable_combination() -> None:
     chain0, true, names, delta, (X, Y, Z), q, B, C = _rig(0, 40)
-    fit = est.fit_kinematics(q, [B, C], chain0, "full", _start(chain0, q, B, C), NOISE, LOOSE)
+    fit = est.fit_kinematics(q, [B, C], chain0, "full", _start(chain0, q, B, C), NOISE, LOOSE,
+                             noise_mode="given")  # noise-free: no noise to estimate
     # the tracker poses are reproduced exactly …
     A = base_from_flange(fit.chain, q)
     np.testing.assert_allclose(np.linalg.inv(fit.Z) @ A @ fit.X, B, atol=1e-6)
@@ -252,7 +253,8 @@ def test_a_tracker_scale_and_the_arms_size_are_one_direction() -> None:
     B[:, :3, 3] *= 1.001
     C[:, :3, 3] *= 1.001
     start = _start(arm0, q, B, C)
-    fits = {d: est.fit_kinematics(q, [B, C], arm0, "full", start, NOISE, LOOSE, distortion=d)
+    fits = {d: est.fit_kinematics(q, [B, C], arm0, "full", start, NOISE, LOOSE, distortion=d,
+                                  noise_mode="given")
             for d in ("none", "scale")}
     assert len(fits["scale"].identified) == len(fits["none"].identified) - 1 == 17
     f = fits["scale"]
@@ -261,3 +263,112 @@ def test_a_tracker_scale_and_the_arms_size_are_one_direction() -> None:
     undone = B[:, :3, 3] @ f.G.T
     assert np.abs(seen[:, :3, 3] - undone).max() < 1e-5
     assert any("together" in c.reason for c in f.unidentified)
+
+
+# --- the noise estimated inside the fit (tmscal.calib.kinematics.noise) ---------------------
+
+def _perturbed(P: np.ndarray, rng: np.random.Generator, rad: float, mm: float) -> np.ndarray:
+    """P · exp(ε): a rigid error in P's own frame, rotation vector N(0, rad²), offset N(0, mm²)
+    per component."""
+    E = np.tile(np.eye(4), (len(P), 1, 1))
+    E[:, :3, :3] = matrix_from_rotvec(rng.normal(0, rad, (len(P), 3)))
+    E[:, :3, 3] = rng.normal(0, mm, (len(P), 3))
+    return P @ E
+
+
+def _noisy_rig(seed: int, scale: float = 1.0, robot_deg: float = 0.01, robot_mm: float = 0.15,
+               n: int = 40):
+    """The UR5e with deviations at ``scale`` × the tolerance, a coil 150 mm below the flange,
+    the robot's flange error (rotation ``robot_deg`` per axis, offset ``robot_mm``) shared by
+    marker and probe, the tracker's at NOISE's level on each (body frame)."""
+    rng = np.random.default_rng(seed)
+    chain0 = arm_by_name("ur5e")
+    names = est.level_parameters(chain0, "full")
+    true = chain0.with_deviations(names, rng.normal(0, scale, len(names))
+                                  * est.prior_sigmas(names, est.Tolerances()))
+    X = make_pose(random_rotation(rng), rng.uniform(-50, 50, 3))
+    Y = make_pose(random_rotation(rng), [0.0, 0.0, 150.0] + rng.uniform(-20, 20, 3))
+    Z = make_pose(random_rotation(rng), rng.uniform(500, 1500, 3))
+    q = HOME + rng.uniform(-0.6, 0.6, (n, 6))
+    At = _perturbed(base_from_flange(true, q), rng, np.radians(robot_deg), robot_mm)
+    tr = (np.radians(NOISE["tracker_sigma_deg"]), NOISE["tracker_sigma_mm"])
+    B = _perturbed(np.linalg.inv(Z) @ At @ X, rng, *tr)
+    C = _perturbed(np.linalg.inv(Z) @ At @ Y, rng, *tr)
+    return chain0, q, B, C
+
+
+def test_the_robots_noise_is_estimated_inside_the_fit() -> None:
+    """Robot noise at 3× the default translation (0.15 mm) and ⅓ the default rotation (0.01°),
+    the defaults given as the start: the estimates land within 25 % (translation; about 100
+    effective degrees of freedom) and a factor 2.5 (rotation: 1–25 degrees of freedom, the
+    tracker's own 0.05° hides most of it) of the truth on every seed, the tracker's level
+    within 25 %, and the report says what was estimated."""
+    for seed in range(5):
+        chain0, q, B, C = _noisy_rig(seed)
+        fit = est.fit_kinematics(q, [B, C], chain0, "full", _start(chain0, q, B, C), NOISE)
+        nz = fit.noise
+        assert nz["mode"] == "estimate" and nz["estimated"] == ["robot_rot", "robot_trans",
+                                                                "tracker"]
+        assert 0.15 / 1.25 < nz["robot_sigma_mm"] < 0.15 * 1.25, nz
+        assert 0.01 / 2.5 < nz["robot_sigma_deg"] < 0.01 * 2.5, nz
+        assert 1 / 1.25 < nz["tracker_factor"] < 1.25, nz
+        assert nz["dof"]["robot_trans"] > 50 and 1 <= nz["rounds"] <= est.NOISE_ROUNDS
+        assert fit.noise_used["robot_sigma_mm"] == nz["robot_sigma_mm"]
+
+
+def test_noise_given_is_the_fit_before_the_noise_was_estimated() -> None:
+    """noise_mode="given": the figures the estimator gave before issue 20's noise estimate
+    (commit 1aab479, the same data), to the last digits; the default estimates instead."""
+    chain0, q, B, C = _noisy_rig(0)
+    start = _start(chain0, q, B, C)
+    fit = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE, noise_mode="given")
+    assert fit.chi2 == pytest.approx(1083.7656031712502, rel=1e-7)
+    np.testing.assert_allclose(fit.X[:3, 3], [19.30670212996469, -11.0682891292926,
+                                              -36.25224175352074], rtol=1e-7)
+    assert fit.delta[2] == pytest.approx(0.2990812137576049, rel=1e-7)
+    assert fit.noise["mode"] == "given" and fit.noise_used is NOISE
+    res = est.estimate_kinematics(q, [B, C], chain0, start, NOISE, noise_mode="given")
+    assert res.fit.level == "full"
+    assert res.cv["full"]["e_t_mm"] == pytest.approx(0.5690584936605724, rel=1e-7)
+    assert res.fit.aic == pytest.approx(462.28160012332467, rel=1e-7)
+    estimated = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE)
+    assert estimated.chi2 != pytest.approx(fit.chi2, rel=1e-3)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_prior_rows_do_not_bias_the_noise_estimate(seed: int) -> None:
+    """A perfect arm: the noise of the full kinematic fit (26 deviations under their prior)
+    matches plain ml's on the same data within 6 %, and the fit without deviations ("none",
+    the same model as ml's) matches it to the iterations' tolerance — the prior's
+    pseudo-observations are neither data nor ignored."""
+    chain0, q, B, C = _noisy_rig(seed, scale=0.0)
+    ml = solve(base_from_flange(chain0, q), B, C, method="ml", distortion="none").extra["noise"]
+    start = _start(chain0, q, B, C)
+    for level, rel in (("none", 1e-3), ("full", 0.06)):
+        nz = est.fit_kinematics(q, [B, C], chain0, level, start, NOISE).noise
+        for k in ("robot_sigma_mm", "robot_sigma_deg", "tracker_factor"):
+            assert nz[k] == pytest.approx(ml[k], rel=rel), (level, k, nz[k], ml[k])
+
+
+def test_the_level_is_chosen_by_held_out_chi2_with_a_paired_tie_break() -> None:
+    """levels.choose_level: the lowest mean held-out χ² wins even against a lower held-out
+    e_t; a simpler level within one standard error of the PAIRED per-pose difference wins
+    only with the lower AIC; a level that could not be scored is left out."""
+    from tmscal.calib.kinematics.levels import choose_level
+
+    rng = np.random.default_rng(0)
+    base = rng.normal(0.0, 5.0, 40)  # the pose-to-pose spread every level shares
+    e_t = rng.uniform(0.1, 0.3, 40)
+    wiggle = 0.01 * np.where(np.arange(40) % 2, 1.0, -1.0)  # paired SE 0.0016 per pose
+    held = {"none": (e_t, base + 3.0), "offsets": (e_t - 0.05, base + wiggle + 0.001),
+            "full": (e_t, base)}
+    best, reason, cv = choose_level(held, {"none": 0.0, "offsets": 5.0, "full": 1.0}, 5)
+    assert best == "full" and "lowest" in reason  # offsets is within its paired SE, AIC higher
+    assert cv["offsets"]["e_t_mm"] < cv["full"]["e_t_mm"] and cv["full"]["folds"] == 5
+    best, reason, _ = choose_level(held, {"none": 0.0, "offsets": 0.5, "full": 1.0}, 5)
+    assert best == "offsets" and "the lower AIC decides" in reason
+    # none is 3 per pose worse with a paired SE near 0: never within one SE, whatever its AIC
+    best, _, cv = choose_level({"none": held["none"], "offsets": None, "full": held["full"]},
+                               {"none": -100.0, "full": 1.0}, 5)
+    assert best == "full" and cv["offsets"] is None
+    assert choose_level({"none": None}, {}, 5)[0] is None

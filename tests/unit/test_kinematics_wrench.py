@@ -88,7 +88,7 @@ def test_noise_free_recovery_with_wrench_rows() -> None:
     F_s = _sensor(rng)
     data = WrenchData.make(_wrenches(true, q, F_s), None, len(q))
     fit = est.fit_kinematics(q, [B, C], chain0, "full", _start(chain0, q, B, C), NOISE, LOOSE,
-                             wrench=data)
+                             wrench=data, noise_mode="given")   # noise-free: nothing to estimate
     # tracker poses and wrenches reproduced exactly …
     A = base_from_flange(fit.chain, q)
     np.testing.assert_allclose(np.linalg.inv(fit.Z) @ A @ fit.Y, C, atol=1e-6)
@@ -128,8 +128,9 @@ def test_the_wrench_sharpens_the_wrist_and_never_blurs_anything() -> None:
     sigma = np.array([0.01] * 3 + [0.0005] * 3)
     W = _wrenches(true, q, _sensor(rng)) + rng.normal(0, 1, (len(q), 6)) * sigma
     start = _start(chain0, q, B, C)
-    a = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE)
-    b = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE,
+    # the same noise for both (as given): the information the wrench adds, nothing else
+    a = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE, noise_mode="given")
+    b = est.fit_kinematics(q, [B, C], chain0, "full", start, NOISE, noise_mode="given",
                            wrench=WrenchData.make(W, sigma, len(q)))
     k = len(names)
     va = np.diag(a.covariance)[-k:] / a.variance_factor

@@ -328,10 +328,11 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
     rad, ``arm`` the nominal model (an ``Arm`` or a registry name such as "ur5e"), ``level``
     ("auto", "none", "offsets", "full"), ``tolerances`` (a ``Tolerances``: the prior), ``folds``
     of the held-out level choice; ``distortion`` then "none" (default with kinematics) or a
-    fixed model ("auto" is not searched with the arm); the noise there is as given.
-    ``wrench`` (n, 6) [N, N·m] and ``wrench_sigma`` (N, N·m): a wrist sensor's averaged
-    wrench per pose, whose gravity rows join that likelihood (docs/kinematics.md, "Wrench
-    rows"); only with ``kinematics="estimate"``."""
+    fixed model ("auto" is not searched with the arm); ``noise`` as here (estimated inside
+    the kinematic fit by default, :mod:`tmscal.calib.kinematics.noise`). ``wrench`` (n, 6)
+    [N, N·m] and ``wrench_sigma`` (N, N·m): a wrist sensor's averaged wrench per pose, whose
+    gravity rows join that likelihood (docs/kinematics.md, "Wrench rows"); only with
+    ``kinematics="estimate"``."""
     if kinematics is not None:
         from .kinematics.solve import solve_with_kinematics
 
@@ -343,8 +344,8 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
             distortion="none" if distortion == "auto" else distortion, tools_mm=tools_mm,
             robot_sigma_mm=robot_sigma_mm, robot_sigma_deg=robot_sigma_deg,
             tracker_sigma_mm=tracker_sigma_mm, tracker_sigma_deg=tracker_sigma_deg,
-            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal, wrench=wrench,
-            wrench_sigma=wrench_sigma)
+            tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal, noise=noise,
+            wrench=wrench, wrench_sigma=wrench_sigma)
     if wrench is not None:
         raise CalibrationError("method 'ml': the wrench rows go with kinematics='estimate' "
                                "(the wrench sees the arm, not X, Y, Z)")

@@ -22,6 +22,9 @@ prediction draws θ_k as θ̂_k ν_k / χ²_ν_k. Why not the per-pose robot rea
 the pose its joints encode, so its reads spread only by encoder jitter and never show the
 positioning or kinematic error that reaches the tracker; the residuals do.
 
+Rows of known variance (a prior's pseudo-observations, :mod:`tmscal.calib.kinematics.noise`)
+join the least-squares fit and the projection P but no component (``fixed``).
+
 References: Förstner W (1979). Ein Verfahren zur Schätzung von Varianz- und
 Kovarianzkomponenten. Allgemeine Vermessungs-Nachrichten 86:446–453. — Koch KR (1999).
 Parameter Estimation and Hypothesis Testing in Linear Models, 2nd ed. Springer. —
@@ -47,7 +50,8 @@ class Components:
     rotation rad² per axis, robot translation mm² per component, tracker factor on its
     covariance), ``estimated`` (K,) bool, ``dof`` (K,) effective degrees of freedom (inf for a
     fixed component), ``parts`` {name: (k, k)} the parameter covariance per component
-    (Σ parts = (Jᵀ S⁻¹ J)⁻¹ at ``theta``), ``iterations``."""
+    (Σ parts = (Jᵀ S⁻¹ J)⁻¹ at ``theta``; with fixed rows also their part "fixed"),
+    ``iterations``."""
 
     theta: np.ndarray
     estimated: np.ndarray
@@ -71,18 +75,31 @@ def _left(L: np.ndarray, X: np.ndarray) -> np.ndarray:
 
 def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
                         theta0: np.ndarray, estimate: np.ndarray, max_iter: int = 60,
-                        tol: float = 1e-3) -> Components:
+                        tol: float = 1e-3,
+                        fixed: tuple[np.ndarray, np.ndarray] | None = None,
+                        floor: np.ndarray | None = None) -> Components:
     """REML variance components (module docstring) of the residuals ``r`` (n, q) with raw
     Jacobian ``J`` (n, q, k) at the estimate and the cofactors ``Qs`` (each (q, q) or
     (n, q, q)), from ``theta0`` (K,) > 0; ``estimate`` (K,) bool says which are estimated
     (the others stay at theta0). Stops when no factor changes by more than ``tol``
-    (relative) or after ``max_iter`` iterations."""
+    (relative) or after ``max_iter`` iterations.
+
+    ``fixed`` = (J_f (p, k), r_f (p,)): further rows of KNOWN unit variance, already
+    whitened (e.g. a Gaussian prior's pseudo-observations δ/τ = 0 + e, e ~ N(0, 1)): they
+    enter the least-squares fit and P (so the data's J need not have full rank alone; the
+    prior makes the normal matrix regular), but no component: the REML of this augmented
+    model is that of the mixed model with the prior as a random effect (the pseudo-
+    observations integrate the prior out). Their share of the parameter covariance is
+    ``parts["fixed"]``. ``floor`` (K,): the least value of each factor (default 1e-12 of
+    theta0)."""
     n, q, k = J.shape
+    Jp, rp = (np.zeros((0, k)), np.zeros(0)) if fixed is None else \
+        (np.asarray(fixed[0], dtype=float), np.asarray(fixed[1], dtype=float))
     shared = all(Q.ndim == 2 for Q in Qs)  # one S for every pose: one factorisation
     Qn = [Q if shared or Q.ndim == 3 else np.broadcast_to(Q, (n, q, q)) for Q in Qs]
     theta = np.asarray(theta0, dtype=float).copy()
     est = np.asarray(estimate, dtype=bool)
-    floor = 1e-12 * np.maximum(theta, 1e-300)
+    floor = 1e-12 * np.maximum(theta, 1e-300) if floor is None else np.asarray(floor, float)
     it = 0
     while True:
         S = sum(t * Q for t, Q in zip(theta, Qn, strict=True))
@@ -91,9 +108,10 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
         rw = r @ Li.T if shared else (Li @ r[..., None])[..., 0]
         Jf = Jw.reshape(-1, k)
         d = np.linalg.norm(Jf, axis=0)
+        d = np.sqrt(d * d + np.sum(Jp * Jp, axis=0))
         d[d == 0] = 1.0
-        H = np.linalg.inv((Jf / d).T @ (Jf / d)) / np.outer(d, d)
-        v = rw - (Jf @ (H @ (Jf.T @ rw.ravel()))).reshape(rw.shape)
+        H = np.linalg.inv((Jf / d).T @ (Jf / d) + (Jp / d).T @ (Jp / d)) / np.outer(d, d)
+        v = rw - (Jf @ (H @ (Jf.T @ rw.ravel() + Jp.T @ rp))).reshape(rw.shape)
         JH = (Jf @ H).reshape(Jw.shape)
         # the hat matrix's diagonal blocks (n, q, q), or only their sum with one shared S
         M = (np.swapaxes(JH, 0, 1).reshape(q, -1) @ np.swapaxes(Jw, 0, 1).reshape(q, -1).T
@@ -105,8 +123,11 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
         for j in np.flatnonzero(est):
             num = float(np.sum(v * (v @ Qw[j]))) if shared else \
                 float(np.sum(v * (Qw[j] @ v[..., None])[..., 0]))
-            red = float(_trace_sum(Qw[j], n) - np.sum(Qw[j] * M))
-            new[j] = max(theta[j] * num / max(red, 1e-300), floor[j])
+            tr = _trace_sum(Qw[j], n)
+            red = float(tr - np.sum(Qw[j] * M))
+            if red <= 1e-9 * tr:  # the fit absorbs the component: nothing to estimate from
+                continue
+            new[j] = max(theta[j] * num / red, floor[j])
         it += 1
         if not np.all(np.isfinite(new)):
             max_iter = it - 1  # no information to estimate from: keep the last θ
@@ -117,6 +138,8 @@ def estimate_components(J: np.ndarray, r: np.ndarray, Qs: list[np.ndarray],
             max_iter = it  # one more pass evaluates everything at the converged θ
     A = [Jf.T @ _left(Qk, Jw).reshape(-1, k) for Qk in Qw]
     parts = {name: theta[j] * H @ A[j] @ H for j, name in enumerate(COMPONENTS[:len(Qs)])}
+    if len(Jp):
+        parts["fixed"] = H @ (Jp.T @ Jp) @ H
     dof = np.full(len(Qs), np.inf)
     idx = np.flatnonzero(est)
     if len(idx):

@@ -139,11 +139,12 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
     cv = {k: v for k, v in (arm.get("cv") or {}).items() if v}
     if cv:
         k = int(next(iter(cv.values())).get("folds", 0))
-        lines.append(f"  {'held-out e_t by level (' + str(k) + ' interleaved folds)':<{_W}}"
-                     f"{'mean mm':>15}{'± SE mm':>15}")
+        lines.append(f"  {'held-out by level (' + str(k) + ' interleaved folds)':<{_W}}"
+                     f"{'e_t mm':>15}{'± SE mm':>15}{'χ² per pose':>15}")
         for lv, c in cv.items():
             mark = "  ← chosen" if lv == arm.get("level") else ""
-            lines.append(_row(f"  {lv}", float(c["e_t_mm"]), float(c["se_mm"])) + mark)
+            chi2 = f"{float(c['chi2']):>15.2f}" if c.get("chi2") is not None else " " * 15
+            lines.append(_row(f"  {lv}", float(c["e_t_mm"]), float(c["se_mm"])) + chi2 + mark)
     tol = arm.get("tolerances") or {}
     if tol:
         lines += _wrap(f"prior: each length deviation N(0, ({tol.get('length_mm'):g} mm)²), "

@@ -35,13 +35,15 @@ flange, or X/Y and/or Z absorb it.
 
 Levels (:data:`LEVELS`): "none" (X, Y, Z on the nominal arm), "offsets" (joint zero
 offsets θ0_i) and "full" (every θ0, d, a, α, and β where consecutive axes are parallel);
-``level="auto"`` chooses by k-fold held-out error, with the information criterion (AIC)
-as a tie-break only when the held-out errors are within one standard error.
+``level="auto"`` chooses by k-fold held-out χ², with the information criterion (AIC) as a
+tie-break only within one standard error (:mod:`.levels`). The robot's noise is estimated
+inside the fit by default (:mod:`.noise`).
 
 Wrench rows (:mod:`tmscal.calib.kinematics.wrench`): where every pose has a wrist wrench, its
 gravity wrench joins the sum as 6 whitened rows per pose, with 15 parameters of its own and no
 prior (base tilt, sensor rotation, tool weight and centre of gravity, sensor bias), the
-deviations reaching them through the arm's rotation.
+deviations reaching them through the arm's rotation; their noise is given (the recorded
+spreads), so for the noise estimate they are rows of known variance, as the prior's.
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ from ...geometry import make_pose, matrix_from_rotvec
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
+    g_of,
     noise_covariance,
     tracker_covs,
     undistort,
@@ -64,56 +67,20 @@ from ..ml_model import (
 )
 from . import wrench as wm
 from .identifiability import Combination, identifiability
-from .jacobian import deviation_twists, parallel_joints
-from .model import Arm, base_from_flange, deviation_units
+from .jacobian import deviation_twists
+from .levels import LEVELS, Tolerances, choose_level, level_parameters, prior_sigmas
+from .model import Arm, base_from_flange
+from .noise import (
+    components,
+    estimated_components,
+    log_det,
+    noise_report,
+    theta_of,
+    with_factors,
+)
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
-
-LEVELS = ("none", "offsets", "full")
-
-
-@dataclass(frozen=True)
-class Tolerances:
-    """The prior: each deviation ~ N(0, τ²) with τ = ``length_mm`` for d, a (mm) and
-    ``angle_deg`` for θ0, α, β (degrees here, rad inside). The defaults are the assumption
-    of docs/kinematics.md for an arm without a per-robot factory calibration."""
-
-    length_mm: float = 0.5
-    angle_deg: float = 0.1
-
-    def __post_init__(self) -> None:
-        for k in ("length_mm", "angle_deg"):
-            v = getattr(self, k)
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-                raise CalibrationError(f"kinematics: tolerance {k} must be a finite number > 0, "
-                                       f"got {v!r}")
-
-
-def prior_sigmas(names: list[str], tol: Tolerances) -> np.ndarray:
-    """τ per parameter (mm or rad)."""
-    return np.array([tol.length_mm if u == "mm" else np.radians(tol.angle_deg)
-                     for u in deviation_units(names)])
-
-
-def level_parameters(chain: Arm, level: str) -> list[str]:
-    """The deviations a level estimates, in the chain's order."""
-    n = chain.n_joints
-    if level == "none":
-        return []
-    if level == "offsets":
-        return [f"theta0_{i}" for i in range(1, n + 1)]
-    if level == "full":
-        par = set(parallel_joints(chain))
-        out = []
-        for i in range(1, n + 1):
-            out += [f"theta0_{i}", f"d_{i}", f"a_{i}", f"alpha_{i}"]
-            if i in par:
-                out.append(f"beta_{i}")
-        return out
-    raise CalibrationError(f"kinematics: unknown level {level!r}; expected auto, "
-                           f"{', '.join(LEVELS)}")
-
 
 # --- residuals and their analytic Jacobian ---------------------------------------------------
 
@@ -343,6 +310,16 @@ class KinematicFit:
     G: np.ndarray = field(default_factory=lambda: np.eye(3))
     #: with wrench rows: :func:`.wrench.wrench_report` of the wrench model; None without
     wrench: dict[str, Any] | None = None
+    #: the noise the fit was weighted with (``ml``'s option dictionary; estimated or as
+    #: given) and its report (:func:`tmscal.calib.kinematics.noise.noise_report`)
+    noise_used: dict[str, Any] = field(default_factory=dict)
+    noise: dict[str, Any] = field(default_factory=dict)
+
+
+#: rounds of noise estimate → refit at most, and the relative change of every noise factor
+#: below which they stop
+NOISE_ROUNDS = 6
+NOISE_TOL = 0.01
 
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
@@ -358,14 +335,25 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                    tol: Tolerances = Tolerances(), max_iter: int = 50,
                    distortion: str = "none",
                    moments: list[np.ndarray | None] | None = None,
-                   wrench: wm.WrenchData | None = None) -> KinematicFit:
+                   wrench: wm.WrenchData | None = None,
+                   noise_mode: str = "estimate") -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
     spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
     "affine") estimated with the rest, ``moments`` the tools' second moments (``ml``'s
-    ``tool_moment``; None: isotropic). The whitening is evaluated at the start and once more
-    at the estimate. ``wrench``: the wrench rows' data (:mod:`.wrench`), one per pose, or
-    None."""
+    ``tool_moment``; None: isotropic). ``wrench``: the wrench rows' data (:mod:`.wrench`),
+    one per pose, or None.
+
+    ``noise_mode`` "given": the whitening is evaluated at the start and once more at the
+    estimate, the covariance scaled by the variance factor. "estimate" (default, as
+    ``ml``): after the fit with the given noise, the robot's rotation and translation noise
+    (and the tracker's level without spreads or tracker_cov) are estimated by REML from the
+    tracker's rows at the estimate, the wrench's and the prior's as rows of known variance
+    (:mod:`tmscal.calib.kinematics.noise`), and the fit is repeated with them, until no
+    factor changes by more than :data:`NOISE_TOL` (at most :data:`NOISE_ROUNDS` rounds); the
+    covariance is then that of the estimated noise, unscaled, and the information criterion
+    includes the noise's log-determinant (the likelihood with the noise estimated)."""
+    flags = estimated_components(noise, noise_mode)
     if distortion not in DISTORTION_MODELS:
         raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
                                f"{', '.join(DISTORTION_MODELS)}")
@@ -375,13 +363,28 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                np.zeros(DISTORTION_MODELS[distortion]),
                None if wrench is None
                else wm.initial_wrench(wrench, base_from_flange(chain0, q)[:, :3, :3]))
-    its = 0
-    for _ in range(2):
-        whiten = _whitener_for(s.Ws, noise, len(q))
+    its, cur, comp, rounds = 0, noise, None, 0
+    m_t = len(q) * 6 * len(bodies)                      # the tracker's rows
+    m = len(q) * 6 * (len(bodies) + (wrench is not None))  # every data row
+    for _ in range(1 if flags.any() else 2):
+        whiten = _whitener_for(s.Ws, cur, len(q))
         prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments, wrench)
         s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
         its += it
-    m = len(q) * 6 * (len(bodies) + (wrench is not None))
+    if flags.any():  # the noise from the residuals, then the fit with it, until it settles
+        raw = _Problem(q, bodies, chain0, names, tau, np.eye(6 * len(bodies)), distortion,
+                       moments, wrench)
+        while rounds < NOISE_ROUNDS:
+            rounds += 1
+            comp = components(*raw.evaluate(s), m_t, s.Ws, cur, flags, noise)
+            done = bool(np.all(np.abs(comp.theta / theta_of(cur) - 1.0) <= NOISE_TOL))
+            cur = with_factors(cur, comp.theta)
+            whiten = _whitener_for(s.Ws, cur, len(q))
+            prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments, wrench)
+            s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
+            its += it
+            if done:
+                break
     data_r = r[:m]
     chi2 = float(data_r @ data_r)
     Jx = J[:m, :prob.c_w]
@@ -394,23 +397,29 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     d = np.sqrt(np.diag(H))
     d[d == 0] = 1.0
     w, V = np.linalg.eigh(H / np.outer(d, d))
+    w = np.maximum(w, 1e-15 * w.max())  # rounding, not information: H is positive definite
     P = (V / w) @ V.T / np.outer(d, d)
     Jd = J[:m]
     p_eff = float(np.trace(P @ (Jd.T @ Jd)))
     vf = chi2 / max(m - p_eff, 1.0)
+    sc = 1.0 if flags.any() else vf  # the covariance's scale: estimated noise as it is
     k = len(names)
     fit = KinematicFit(level, prob.chain(s), names, s.delta.copy(),
-                       np.sqrt(np.diag(P)[prob.n_xyz:] * vf) if k else np.zeros(0),
+                       np.sqrt(np.diag(P)[prob.n_xyz:] * sc) if k else np.zeros(0),
                        s.Ws[0], s.Ws[1] if len(s.Ws) > 1 else None, s.Z, chi2, m, p_eff, vf,
-                       P * vf, iterations=its, distortion=distortion,
-                       G=undistortion(distortion, s.g))
-    fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
+                       P * sc, iterations=its, distortion=distortion,
+                       G=undistortion(distortion, s.g), noise_used=cur,
+                       noise=noise_report(noise_mode, noise, cur, comp, rounds))
+    if flags.any():  # −2 ln L with the noise estimated (ml's profiled form when given)
+        fit.aic = chi2 + log_det(whiten, len(q)) + 2.0 * p_eff
+    else:
+        fit.aic = m * float(np.log(max(chi2 / m, 1e-300))) + 2.0 * p_eff
     if s.w is not None:
-        fit.wrench = wm.wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * vf),
+        fit.wrench = wm.wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * sc),
                                    r[m - 6 * len(q):m])
     if k:
         fit.identified, fit.weak, fit.unidentified = identifiability(
-            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), vf,
+            prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), sc,
             None if wrench is None else prob.c_w)
     return fit
 
@@ -446,6 +455,20 @@ def _heldout_e_t(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray],
     return e
 
 
+def _heldout_chi2(fit: KinematicFit, q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
+                  noise: dict[str, Any], moments: list[np.ndarray | None] | None
+                  ) -> np.ndarray:
+    """Per pose the χ² of the tracker poses' residuals under the fit, whitened by ``noise``
+    (:mod:`.levels`)."""
+    Ws = [fit.X] if fit.Y is None else [fit.X, fit.Y]
+    whiten = _whitener_for(Ws, noise, len(q))
+    prob = _Problem(q, bodies, chain0, fit.names, np.ones(len(fit.names)), whiten,
+                    fit.distortion, moments)
+    r, _ = prob.evaluate(_State(Ws, fit.Z, fit.delta, g_of(fit.distortion, fit.G)), jac=False)
+    r = r[:len(q) * 6 * len(bodies)].reshape(len(q), -1)
+    return np.sum(r * r, axis=1)
+
+
 def _folds(n: int, k: int) -> list[np.ndarray]:
     idx = np.arange(n)
     return [idx[idx % k == f] for f in range(k)]
@@ -463,54 +486,47 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         level: str = "auto", tol: Tolerances = Tolerances(), folds: int = 5,
                         max_iter: int = 50, distortion: str = "none",
                         moments: list[np.ndarray | None] | None = None,
-                        wrench: wm.WrenchData | None = None) -> KinematicsResult:
+                        wrench: wm.WrenchData | None = None,
+                        noise_mode: str = "estimate") -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
-    keep the one with the lowest k-fold held-out e_t (``folds`` interleaved folds; X, Y, Z
-    and δ refitted on each training part); a simpler level wins when its held-out error is
-    within one standard error of the best and its AIC is lower (the tie-break).
-    ``distortion``, ``moments`` and ``wrench`` as :func:`fit_kinematics`, the same for every
-    level (the held-out error is the tracker's)."""
-    opts: dict[str, Any] = {"distortion": distortion, "moments": moments, "wrench": wrench}
+    keep the one with the lowest k-fold held-out χ² per pose (``folds`` interleaved folds;
+    X, Y, Z and δ refitted on each training part; every level's held-out residuals whitened
+    by the same noise, the richest level's; :mod:`.levels` says why and how ties are broken).
+    ``distortion``, ``moments``, ``wrench`` and ``noise_mode`` as :func:`fit_kinematics`,
+    the same for every level (the held-out χ² is the tracker's). With the noise estimated,
+    each level's cross-validation fits take the noise that level estimated on all poses as
+    given (the rig's noise does not change between folds; a REML per fold would cost k more
+    noise loops per level and estimate two or three numbers from 4/5 of the poses, the same
+    numbers less well)."""
+    opts: dict[str, Any] = {"distortion": distortion, "moments": moments}
     if level != "auto":
-        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts)
+        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts,
+                             wrench=wrench, noise_mode=noise_mode)
         return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
     n = len(q)
     k = max(2, min(folds, n // 4))
-    fits, cv = {}, {}
+    fits = {lv: fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
+                               wrench=wrench, noise_mode=noise_mode) for lv in LEVELS}
+    weights = fits[LEVELS[-1]].noise_used  # the noise least inflated by the arm's error
+    heldout = {}
     for lv in LEVELS:
-        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts)
-        errs = []
+        scores: list[tuple[np.ndarray, np.ndarray]] = []
         for test in _folds(n, k):
             train = np.setdiff1d(np.arange(n), test)
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
-                                   _subset_noise(noise, train), tol, max_iter,
-                                   **opts | {"wrench": None if wrench is None
-                                             else wrench.subset(train)})
+                                   _subset_noise(fits[lv].noise_used, train), tol, max_iter,
+                                   **opts, noise_mode="given",
+                                   wrench=None if wrench is None else wrench.subset(train))
             except CalibrationError:
-                errs = []
+                scores = []
                 break
-            errs.append(_heldout_e_t(f, q[test], [N[test] for N in bodies], moments))
-        if errs:
-            e = np.concatenate(errs)
-            cv[lv] = {"e_t_mm": float(e.mean()), "se_mm": float(e.std(ddof=1) / np.sqrt(len(e))),
-                      "folds": float(k)}
-        else:
-            cv[lv] = None
-    scored = {lv: c for lv, c in cv.items() if c is not None}
-    if not scored:
+            held = [N[test] for N in bodies]
+            scores.append((_heldout_e_t(f, q[test], held, moments),
+                           _heldout_chi2(f, q[test], held, chain0,
+                                         _subset_noise(weights, test), moments)))
+        heldout[lv] = tuple(np.concatenate(x) for x in zip(*scores)) if scores else None
+    best, reason, cv = choose_level(heldout, {lv: f.aic for lv, f in fits.items()}, k)
+    if best is None:
         raise CalibrationError(f"kinematics: too few poses ({n}) to cross-validate the levels")
-    best = min(scored, key=lambda lv: scored[lv]["e_t_mm"])
-    reason = (f"held-out e_t {scored[best]['e_t_mm']:.4g} mm, the lowest of "
-              + ", ".join(f"{lv} {c['e_t_mm']:.4g}" for lv, c in scored.items()))
-    for lv in LEVELS[:LEVELS.index(best)]:  # simpler levels first
-        c = scored.get(lv)
-        if c is None:
-            continue
-        close = c["e_t_mm"] - scored[best]["e_t_mm"] <= max(c["se_mm"], scored[best]["se_mm"])
-        if close and fits[lv].aic < fits[best].aic:
-            reason = (f"held-out e_t {c['e_t_mm']:.4g} mm within one standard error of "
-                      f"{best}'s {scored[best]['e_t_mm']:.4g} mm; the lower AIC decides")
-            best = lv
-            break
     return KinematicsResult(fits[best], fits, cv, reason)

@@ -104,14 +104,19 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
                           robot_sigma_deg: float | None = None,
                           tracker_sigma_mm: float | None = None,
                           tracker_sigma_deg: float | None = None, tracker_cov: Any = None,
-                          spreads: Any = None, orthonormal: bool = True, wrench: Any = None,
+                          spreads: Any = None, orthonormal: bool = True,
+                          noise: str = "estimate", wrench: Any = None,
                           wrench_sigma: Any = None) -> Calibration:
     """X, Y (with C), Z and the arm's deviations from robot poses A (the controller's, used
     only to find the frame it reports in), tracker poses B (and C), joints ``joints`` (n, dof)
     rad and the nominal ``arm`` (an Arm or a registry name); ``level`` "auto", "none",
     "offsets" or "full" (docs/kinematics.md); ``tolerances`` the prior; ``distortion`` a fixed
     tracker distortion model of ``ml`` estimated with the rest ("none" by default);
-    ``tools_mm`` the tools' fiducials; the noise as ``ml``'s options. ``wrench`` (n, 6)
+    ``tools_mm`` the tools' fiducials; the noise as ``ml``'s options: ``noise`` "estimate"
+    (default) estimates the robot's rotation and translation noise (and the tracker's level
+    without ``spreads`` or ``tracker_cov``) from the fit's residuals, the sigmas only the
+    start (:mod:`.noise`); "given" takes them as given. ``extra["noise"]`` reports the noise
+    used (σ mm, degrees; degrees of freedom of the estimated components). ``wrench`` (n, 6)
     [Fx, Fy, Fz N, Tx, Ty, Tz N·m]: the wrist sensor's averaged wrench at every pose, whose
     gravity wrench rows then join the likelihood (docs/kinematics.md, "Wrench rows"), with
     ``wrench_sigma`` its σ (a number, (6,) or (n, 6) N, N·m; None: the default of
@@ -132,6 +137,7 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
     A0 = base_from_flange(arm, q)
     start = solve(A0, B, C, method="qr24" if C is None else "qr36")
     Ws0 = [start.X] if C is None else [start.X, start.Y]
+    mode = noise
     noise = dict(NOISE_DEFAULTS)
     given = {"robot_sigma_mm": robot_sigma_mm, "robot_sigma_deg": robot_sigma_deg,
              "tracker_sigma_mm": tracker_sigma_mm, "tracker_sigma_deg": tracker_sigma_deg}
@@ -140,7 +146,8 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
     bodies = [B] if C is None else [B, C]
     moments = _moments(tools_mm, len(bodies))
     res = estimate_kinematics(q, bodies, arm, (Ws0, start.Z), noise, level, tol, folds,
-                              distortion=distortion, moments=moments, wrench=wdata)
+                              distortion=distortion, moments=moments, wrench=wdata,
+                              noise_mode=mode)
     fit = res.fit
     Z = M @ fit.Z
     G4 = np.eye(4)
@@ -172,7 +179,5 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
                  "residuals": fit.m, "variance_factor": fit.variance_factor,
                  "iterations": fit.iterations, "n_xyz": n_xyz,
                  "wrench_rows": fit.wrench is not None,
-                 "noise": {k: v for k, v in noise.items() if k not in ("spreads", "tracker_cov")}
-                 | {"tracker": "spreads" if spreads is not None else
-                    ("tracker_cov" if tracker_cov is not None else "sigmas")}}
+                 "noise": fit.noise}
     return cal
