@@ -43,6 +43,7 @@ __all__ = [
     "rot_x",
     "rot_y",
     "rot_z",
+    "skew",
     "rotation_angle",
     "angle_between",
     "rotation_mean",
@@ -182,6 +183,14 @@ def orthonormalize(M: ArrayLike) -> Array:
 
 
 # --- elementary rotations -------------------------------------------------------------
+
+def skew(v: ArrayLike) -> Array:
+    """The cross-product matrices [v]× (…, 3, 3) of vectors v (…, 3): [v]× u = v × u."""
+    v = np.asarray(v, dtype=np.float64)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    return out - np.swapaxes(out, -1, -2)
+
 
 def _elementary_rotation(a: ArrayLike, axis: int) -> Array:
     """Rotation(s) about coordinate axis ``axis`` (0 = x, 1 = y, 2 = z) by angle(s) ``a`` in

@@ -157,3 +157,15 @@ def test_check_poses_tolerance_is_the_public_default():
     P[0, 0] = 1.0 + 2 * g.RIGID_TOL_DEFAULT  # ≈ 4 tol: rejected
     with pytest.raises(ValueError, match="not rigid"):
         g.check_pose(P)
+
+
+def test_skew_is_the_cross_product_batched():
+    """[v]× u = v × u for single vectors and stacks; antisymmetric."""
+    from tmscal.geometry import skew
+
+    rng = np.random.default_rng(12)
+    v, u = rng.normal(size=(4, 5, 3)), rng.normal(size=(4, 5, 3))
+    np.testing.assert_allclose(np.einsum("abij,abj->abi", skew(v), u), np.cross(v, u),
+                               rtol=1e-14, atol=1e-14)
+    np.testing.assert_array_equal(skew(v[0, 0]), -skew(v[0, 0]).T)
+    assert skew([1.0, 2.0, 3.0]).shape == (3, 3)

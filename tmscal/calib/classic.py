@@ -47,6 +47,7 @@ from ..geometry import (
     matrix_from_quaternion,
     matrix_from_rotvec,
     quaternion_from_matrix,
+    skew,
 )
 from .calibration import Applied, Calibration
 from .linear import check_rotation_diversity, resolve_translations
@@ -200,18 +201,10 @@ def quat_rotations(RA: np.ndarray, RNs: list[np.ndarray]) -> tuple[np.ndarray, l
     return matrix_from_quaternion(Vt[0]), R_Xs
 
 
-def _hat(v: np.ndarray) -> np.ndarray:
-    """Skew matrices (…, 3, 3) of vectors (…, 3)."""
-    x, y, z = np.moveaxis(v, -1, 0)
-    o = np.zeros_like(x)
-    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1),
-                     np.stack([-y, x, o], -1)], -2)
-
-
 def _right_jacobian(w: np.ndarray) -> np.ndarray:
     """Right Jacobian of SO(3) at w (3,): d exp(ŵ) = exp(ŵ) (J_r dw)^."""
     th = float(np.linalg.norm(w))
-    W = _hat(w)
+    W = skew(w)
     if th < 1e-8:
         return np.eye(3) - 0.5 * W
     return (np.eye(3) - (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * W @ W)
@@ -243,7 +236,7 @@ def _refine(A: np.ndarray, bodies: list[np.ndarray], Z: np.ndarray, Xs: list[np.
     def jacobian(p: np.ndarray) -> np.ndarray:
         R, _ = unpack(p)
         # dR_k/dw_k[a] = R_k hat(J_r(w_k)[:, a])
-        dR = [R[i] @ _hat(_right_jacobian(p[3 * i:3 * i + 3]).T) for i in range(m + 1)]
+        dR = [R[i] @ skew(_right_jacobian(p[3 * i:3 * i + 3]).T) for i in range(m + 1)]
         blocks = []
         for j, N in enumerate(bodies):
             Jr = np.zeros((n, 3, 3, 2 * k))

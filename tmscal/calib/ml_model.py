@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
-from ..geometry import invert, make_pose, orthonormalize
+from ..geometry import invert, make_pose, orthonormalize, skew
 
 __all__ = ["DISTORTION_MODELS", "STEPS", "G_STEP", "undistortion", "g_of", "tool_moment",
            "undistort", "Problem", "whiten_residuals", "check_sigma", "tracker_covs",
@@ -38,13 +38,6 @@ def _rodrigues(w: np.ndarray) -> np.ndarray:
     if th < 1e-8:
         return np.eye(3) + K + 0.5 * K @ K
     return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * K @ K
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """[v]× (…, 3, 3) of vectors v (…, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    return out - np.swapaxes(out, -1, -2)
 
 
 def _log_so3(R: np.ndarray) -> np.ndarray:
@@ -158,15 +151,15 @@ class Problem:
             Nt = undistort(N, G, self.model, M)
             E = invert(self.A @ W) @ (Z @ Nt)
             phi = _log_so3(E[:, :3, :3])
-            half = 0.5 * _skew(phi)
+            half = 0.5 * skew(phi)
             r = 6 * j
             J[:, r:r + 3, r:r + 3] = -(np.eye(3) - half)
-            J[:, r + 3:r + 6, r:r + 3] = _skew(E[:, :3, 3])
+            J[:, r + 3:r + 6, r:r + 3] = skew(E[:, :3, 3])
             J[:, r + 3:r + 6, r + 3:r + 6] = -W[:3, :3].T
             RNt = np.swapaxes(Nt[:, :3, :3], 1, 2)
             J[:, r:r + 3, 6 * m:6 * m + 3] = (np.eye(3) + half) @ RNt
             WAZ = W[:3, :3].T[None] @ RAt @ Z[:3, :3][None]
-            J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -WAZ @ _skew(Nt[:, :3, 3])
+            J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -WAZ @ skew(Nt[:, :3, 3])
             J[:, r + 3:r + 6, 6 * m + 3:6 * m + 6] = W[:3, :3].T[None] @ RAt
             if k > 6 * (m + 1):
                 J[:, r:r + 6, 6 * (m + 1):] = self._distortion_columns(N, Nt, M, WAZ, half)
@@ -285,7 +278,7 @@ def robot_parts(Ws: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     for j, W in enumerate(Ws):
         R, t = W[:3, :3], W[:3, 3]
         J[6 * j:6 * j + 3, :3] = R.T
-        J[6 * j + 3:6 * j + 6, :3] = -R.T @ _skew(t)
+        J[6 * j + 3:6 * j + 6, :3] = -R.T @ skew(t)
         J[6 * j + 3:6 * j + 6, 3:] = R.T
     return J[:, :3] @ J[:, :3].T, J[:, 3:] @ J[:, 3:].T
 

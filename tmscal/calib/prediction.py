@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import angle_between, invert
+from ..geometry import angle_between, invert, skew
 from ..motion import trapezoid_duration
 from .calibration import Calibration
 from .methods import solve
@@ -245,13 +245,6 @@ def _problem_of(cal: Calibration, A: np.ndarray, bodies: list[np.ndarray]) -> Pr
     return Problem(A, bodies, Ws, cal.Z, model, g_of(model, G), moments)
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """[v]× (…, 3, 3) of vectors v (…, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    return out - np.swapaxes(out, -1, -2)
-
-
 def placement_jacobians(prob: Problem, region: np.ndarray) -> np.ndarray:
     """Jacobians (R, 3, k) of the coil-centre placement error (mm, base frame) with respect to
     ml's parameters, at the estimate, for the flange poses ``region`` (R, 4, 4) mm.
@@ -268,7 +261,7 @@ def placement_jacobians(prob: Problem, region: np.ndarray) -> np.ndarray:
     J = np.zeros((len(region), 3, k))
     RZ = Z[:3, :3]
     jz = 6 * m
-    J[:, :, jz:jz + 3] = -RZ[None] @ _skew(tn)
+    J[:, :, jz:jz + 3] = -RZ[None] @ skew(tn)
     J[:, :, jz + 3:jz + 6] = np.eye(3)
     jy = 6 * (m - 1)
     J[:, :, jy + 3:jy + 6] = -region[:, :3, :3]
@@ -404,7 +397,7 @@ def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:
         J[:, r:r + 3, r:r + 3] = -np.eye(3)
         J[:, r + 3:r + 6, r + 3:r + 6] = -W[:3, :3].T
         J[:, r:r + 3, 6 * m:6 * m + 3] = RNt
-        J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -RNt @ _skew(Nj[:, :3, 3])
+        J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -RNt @ skew(Nj[:, :3, 3])
         J[:, r + 3:r + 6, 6 * m + 3:6 * m + 6] = RNt @ Z[:3, :3].T
     return J
 

@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import make_pose, matrix_from_rotvec
+from ...geometry import make_pose, matrix_from_rotvec, skew
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
@@ -84,14 +84,6 @@ __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_paramet
 
 # --- residuals and their analytic Jacobian ---------------------------------------------------
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(…, 3, 3) cross-product matrices of (…, 3) vectors."""
-    z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
-
-
 def _log_and_jr_inv(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation vectors φ (n, 3) of rotations R (n, 3, 3) (angle < π) and the inverse right
     Jacobians J_r⁻¹(φ) (n, 3, 3): log(R exp(η)) = φ + J_r⁻¹(φ) η + O(η²)."""
@@ -101,7 +93,7 @@ def _log_and_jr_inv(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     th = np.arctan2(s, 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0))
     small = s < 1e-9
     phi = w * np.where(small, 1.0, th / np.where(small, 1.0, s))[:, None]
-    K = _skew(phi)
+    K = skew(phi)
     th2 = np.where(small, 1.0, th * th)
     coef = np.where(small, 1.0 / 12.0,
                     1.0 / th2 - (1.0 + np.cos(th)) / (2.0 * np.where(small, 1.0, th)
@@ -178,7 +170,7 @@ class _Problem:
             if J is None:
                 continue
             R_Et = np.swapaxes(R_E, 1, 2)
-            tEx = _skew(t_E)
+            tEx = skew(t_E)
             # W = (R_W exp(ω), t_W + p): dlog = −J_r⁻¹ R_Eᵀ ω; dt = [t_E]× ω − R_Wᵀ p
             c = 6 * b
             J[:, 6 * b:6 * b + 3, c:c + 3] = -Jr @ R_Et
@@ -187,7 +179,7 @@ class _Problem:
             # Z = (R_Z exp(ω), t_Z + p): dlog = J_r⁻¹ R_Nᵀ ω; dt = −R_M R_Z [t_N]× ω + R_M p
             c = 6 * self.nb
             J[:, 6 * b:6 * b + 3, c:c + 3] = Jr @ np.swapaxes(N[:, :3, :3], 1, 2)
-            J[:, 6 * b + 3:6 * b + 6, c:c + 3] = -(R_M @ RZ) @ _skew(N[:, :3, 3])
+            J[:, 6 * b + 3:6 * b + 6, c:c + 3] = -(R_M @ RZ) @ skew(N[:, :3, 3])
             J[:, 6 * b + 3:6 * b + 6, c + 3:c + 6] = R_M
             # the arm: A' = A exp(ξ), η = Ad(W⁻¹) ξ: dlog = −J_r⁻¹ R_Eᵀ η_ω; dt = [t_E]× η_ω − η_v
             if self.names:

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import matrix_from_rotvec, rotvec_from_matrix
+from ...geometry import matrix_from_rotvec, rotvec_from_matrix, skew
 
 __all__ = ["WRENCH_NAMES", "WRENCH_UNITS", "DEFAULT_SIGMA", "SIGMA_FLOOR", "WrenchData",
            "WrenchParams", "initial_wrench", "gravity_up", "predict_wrench", "wrench_rows",
@@ -111,13 +111,6 @@ def gravity_up(tilt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, du
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
-
-
 def predict_wrench(p: WrenchParams, R_A: np.ndarray) -> np.ndarray:
     """The gravity wrench (n, 6) [N, N·m] in the sensor frame for flange rotations R_A
     (n, 3, 3) (base_from_flange)."""
@@ -143,16 +136,16 @@ def wrench_rows(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk_w: np.nda
     v = np.einsum("nji,j->ni", R_A, u_b)                       # R_Aᵀ u_b (flange frame)
     u = v @ p.R_fs                                             # R_fsᵀ v
     c = p.cog_mm * 1e-3
-    Gu = np.concatenate([-p.mg * np.eye(3), -p.mg * _skew(c)], axis=0)   # dw/du (6, 3)
+    Gu = np.concatenate([-p.mg * np.eye(3), -p.mg * skew(c)], axis=0)   # dw/du (6, 3)
     Jw = np.zeros((n, 6, len(WRENCH_NAMES)))
     du_tilt = np.einsum("ji,nkj,kl->nil", p.R_fs, R_A, du_b)   # R_fsᵀ R_Aᵀ du_b
     Jw[:, :, 0:2] = Gu @ du_tilt
-    Jw[:, :, 2:5] = Gu @ _skew(u)                              # u' = u + [u]× ω
+    Jw[:, :, 2:5] = Gu @ skew(u)                              # u' = u + [u]× ω
     Jw[:, :3, 5] = -u
     Jw[:, 3:, 5] = np.cross(c, -u)
-    Jw[:, 3:, 6:9] = -_skew(-p.mg * u) * 1e-3                  # dτ = dc × f_grav
+    Jw[:, 3:, 6:9] = -skew(-p.mg * u) * 1e-3                  # dτ = dc × f_grav
     Jw[:, :, 9:15] = np.eye(6)
-    Jd = Gu @ (p.R_fs.T @ _skew(v)) @ Jk_w                     # du = R_fsᵀ [v]× η_ω
+    Jd = Gu @ (p.R_fs.T @ skew(v)) @ Jk_w                     # du = R_fsᵀ [v]× η_ω
     s = data.sigma[:, :, None]
     return r, Jw / s, Jd / s
 
@@ -189,7 +182,7 @@ def initial_wrench(data: WrenchData, R_A: np.ndarray) -> WrenchParams:
     R_t = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt   # ≈ R_fsᵀ
     mg = float(S.mean())
     fg = data.wrench[:, :3] - f0
-    T = np.concatenate([-_skew(fg) * 1e-3, np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+    T = np.concatenate([-skew(fg) * 1e-3, np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
     sol2, *_ = np.linalg.lstsq(T.reshape(-1, 6), data.wrench[:, 3:].ravel(), rcond=None)
     return WrenchParams(np.zeros(2), R_t.T, mg, sol2[:3], np.concatenate([f0, sol2[3:]]))
 
