@@ -4,7 +4,9 @@ much robot time) it needs with the default plan and with the joints plan.
 
     .venv/bin/python benchmarks/kinematics.py [--seeds 3] [--first-seed 1] [--poses 40]
                                               [--ladder 10,15,20,30,40] [--samples 100]
-                                              [--noise-scale 1] [--skip-sim] [--skip-rig]
+                                              [--noise-scale 1] [--wrench-poses 30]
+                                              [--ft-samples 50] [--skip-sim] [--skip-rig]
+                                              [--skip-wrench]
 
 1. **Mock rig** (``configs/mock-ur-polaris-kin.yaml``, a UR5e, and
    ``configs/mock-denso-polaris-kin.yaml``, a VS-060; realistic arm errors drawn from the mock seed
@@ -28,6 +30,13 @@ much robot time) it needs with the default plan and with the joints plan.
    after the first n poses (any prefix of a plan is the shorter plan) for n in ``--ladder``;
    the fewest poses whose placement is ≤ 0.05 mm (mean over the seeds, and on every seed),
    and the robot time they take.
+4. **Wrench rows** (``configs/mock-ur-polaris-kin-ft.yaml``: the UR5e rig with its built-in
+   wrist sensor, whose mock reads the TRUE arm's gravity wrench plus noise; seeds 1…seeds):
+   sessions of ``--wrench-poses`` joints-plan poses with ``--ft-samples`` readings averaged
+   per pose; ``solve --kinematics estimate`` with the wrench rows (every pose has a wrench)
+   and on the same session with the wrenches removed: the coil placement (mm, the same
+   targets) both ways, and the tool's mass (kg), centre of gravity (mm) and the base tilt
+   (deg) the wrench rows find against the true arm's.
 3. **Simulated sessions** (``tmscal simulate --arm ur5e``, realistic errors, 40 Eq. 14 poses
    of 10 samples, seeds 1…seeds) at two noise levels (tracker fiducial σ and robot σ 0.05 mm
    / 0.05°, and 0.1 / 0.1°): 5-fold cross-validated e_t (mm) of the estimated model against
@@ -37,8 +46,8 @@ Robot time (s) is the motion model, not the fast mock's clock: straight Cartesia
 P0 through every commanded pose at the config's speed and acceleration caps
 (``tmscal.motion.move_duration``; a move the safety layer splits through P0 takes longer)
 + a 1 s settle + ``--samples`` / frame rate per pose. Takes about 4 minutes of CPU with the
-defaults (12 min of wall time on a shared, busy 2-core machine; ``--skip-sim`` and
-``--skip-rig`` for parts, ``--seeds`` for fewer).
+defaults (12 min of wall time on a shared, busy 2-core machine; ``--skip-sim``,
+``--skip-rig`` and ``--skip-wrench`` for parts, ``--seeds`` for fewer).
 """
 
 from __future__ import annotations
@@ -70,7 +79,8 @@ from tmscal.solving.solve import solve_session
 
 CONFIGS = Path(__file__).resolve().parents[1] / "tmscal" / "data" / "configs"
 RIGS = {"ur5e": ("mock-ur-polaris-kin.yaml", "127.0.0.187"),   # ur_rtde's ports are fixed
-        "vs060": ("mock-denso-polaris-kin.yaml", "127.0.0.188")}
+        "vs060": ("mock-denso-polaris-kin.yaml", "127.0.0.188"),
+        "ur5e-ft": ("mock-ur-polaris-kin-ft.yaml", "127.0.0.189")}
 JOINTS_PLAN = {"kind": "joints", "radius_mm": 200, "rotation_deg": 20}
 GOAL_MM = 0.05
 SETTLE_S = 1.0
@@ -236,6 +246,55 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
     print()
 
 
+def wrench(args: argparse.Namespace, tmp: Path) -> None:
+    """Part 4 (module docstring)."""
+    from tmscal.calib.kinematics import rpy_from_matrix
+
+    rows = []
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        cfg_path = _config(tmp, "ur5e-ft", seed, JOINTS_PLAN, args.wrench_poses, args.samples,
+                           args.noise_scale)
+        data = yaml.safe_load(cfg_path.read_text())
+        data["ft"]["samples"] = args.ft_samples
+        cfg_path.write_text(yaml.safe_dump(data))
+        s = _acquire(cfg_path, tmp / f"ur5e-ft-{seed}.jsonl")
+        assert all(p.wrench is not None for p in s.poses), "a pose without a wrench"
+        targets = _targets(s)
+        cal_w, _ = solve_session(s, "ml", kinematics="estimate", in_sample=True)
+        bare = replace(s, poses=[replace(p, wrench=None, wrench_spread=None) for p in s.poses])
+        cal_0, _ = solve_session(bare, "ml", kinematics="estimate", in_sample=True)
+        w = cal_w.arm.report["wrench"]
+        true = build_sim_rig(load_config(cfg_path)).arm_true
+        roll, pitch, _ = rpy_from_matrix(true.base)
+        e = w["estimate"]
+        row = {"with_mm": _placement(cal_w, s, targets),
+               "without_mm": _placement(cal_0, s, targets),
+               "mass_err_kg": abs(w["tool_mass_kg"] - true.tool_mass_kg),
+               "cog_err_mm": float(np.linalg.norm([e[f"cog_{k}"] for k in "xyz"]
+                                                  - np.asarray(true.tool_cog_mm))),
+               "tilt_err_deg": float(np.degrees(np.hypot(e["base_roll"] - roll,
+                                                         e["base_pitch"] - pitch)))}
+        rows.append(row)
+        print(f"ur5e seed {seed}, {args.wrench_poses} joints-plan poses, {args.ft_samples} "
+              f"wrench readings per pose: coil placement with the wrench rows "
+              f"{row['with_mm']:.4f} mm, without {row['without_mm']:.4f} mm; tool mass error "
+              f"{row['mass_err_kg']:.4f} kg, centre of gravity error {row['cog_err_mm']:.3f} mm, "
+              f"base tilt error {row['tilt_err_deg']:.3f} deg", flush=True)
+    mean = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+    print(f"\n## Wrench rows (mean of {len(rows)} seeds): coil placement with "
+          f"{mean['with_mm']:.4f} mm / without {mean['without_mm']:.4f} mm "
+          f"(ratio {mean['with_mm'] / mean['without_mm']:.2f}); tool mass error "
+          f"{mean['mass_err_kg']:.4f} kg, centre of gravity {mean['cog_err_mm']:.3f} mm, "
+          f"base tilt {mean['tilt_err_deg']:.3f} deg")
+    t = _tag(args)
+    record("kinematics", {f"wrench_with_mm{t}": round(mean["with_mm"], 4),
+                          f"wrench_without_mm{t}": round(mean["without_mm"], 4),
+                          f"wrench_ratio{t}": round(mean["with_mm"] / mean["without_mm"], 2),
+                          f"wrench_mass_err_kg{t}": round(mean["mass_err_kg"], 4),
+                          f"wrench_cog_err_mm{t}": round(mean["cog_err_mm"], 3),
+                          f"wrench_tilt_err_deg{t}": round(mean["tilt_err_deg"], 3)})
+
+
 def _tmscal(*args: object) -> None:
     r = subprocess.run([sys.executable, "-m", "tmscal.cli", *map(str, args)],
                        capture_output=True, text=True, timeout=600)
@@ -278,13 +337,19 @@ def main() -> None:
     ap.add_argument("--ladder", type=lambda s: [int(x) for x in s.split(",")],
                     default=[10, 15, 20, 30, 40], help="pose counts of part 2")
     ap.add_argument("--samples", type=int, default=100, help="tracker frames per pose")
+    ap.add_argument("--wrench-poses", type=int, default=30, help="poses of part 4's sessions")
+    ap.add_argument("--ft-samples", type=int, default=50,
+                    help="wrench readings averaged per pose in part 4")
     ap.add_argument("--skip-sim", action="store_true")
     ap.add_argument("--skip-rig", action="store_true")
+    ap.add_argument("--skip-wrench", action="store_true")
     args = ap.parse_args()
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="tmscal-kin-bench-") as d:
         if not args.skip_rig:
             rig(args, Path(d))
+        if not args.skip_wrench:
+            wrench(args, Path(d))
         if not args.skip_sim:
             sim(args, Path(d))
 
