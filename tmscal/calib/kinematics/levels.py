@@ -72,8 +72,6 @@ def level_parameters(chain: Arm, level: str) -> list[str]:
                            f"{', '.join(LEVELS)}")
 
 
-
-
 def choose_level(heldout: dict[str, tuple[np.ndarray, np.ndarray] | None],
                  aic: dict[str, float], folds: int
                  ) -> tuple[str | None, str, dict[str, dict[str, float] | None]]:
