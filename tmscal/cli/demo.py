@@ -46,7 +46,6 @@ def demo_config_name(kinematics: bool = False) -> str:
     return "mock-denso-polaris-kin.yaml" if kinematics else "mock-denso-polaris.yaml"
 
 
-
 @main.command()
 @click.option("--config", "config", type=INPUT_FILE, default=None,
               help="Mock rig config (default: the packaged mock-ur-polaris.yaml, in "
