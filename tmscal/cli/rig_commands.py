@@ -273,8 +273,10 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
 @click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
 @click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
 @click.option("--force", is_flag=True,
-              help="Record anew over an existing session at OUTPUT (removed once the config "
-                   "is read, never one another tmscal is recording); not with --resume.")
+              help="Record anew over an existing session at OUTPUT: it is replaced when the "
+                   "new run's header is written, after the devices answered and the plan was "
+                   "checked (a run that cannot start leaves it as it was), never one another "
+                   "tmscal is recording; not with --resume.")
 @adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,

@@ -70,8 +70,10 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
               help="Connect to the robot, make the plan and check it against the safety "
                    "envelope; move nothing, write nothing.")
 @click.option("--force", is_flag=True,
-              help="Record anew over an existing session at OUTPUT (removed once the config "
-                   "is read, never one another tmscal is recording); not with --resume.")
+              help="Record anew over an existing session at OUTPUT: it is replaced when the "
+                   "new run's header is written, after the devices answered and the plan was "
+                   "checked (a run that cannot start leaves it as it was), never one another "
+                   "tmscal is recording; not with --resume.")
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, pool: int,
             span_deg: float, seed: int, samples: int | None, robot_host: str | None,
