@@ -149,13 +149,17 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     """``tmscal demo --adaptive``: the adaptive run on the mock rig (mocks in a child), then
     the prediction beside the true coil-placement error against the rig's truth (over the
     same region), and QR36 on the session as ``demo`` prints it."""
-    import numpy as np
 
     from ..calib.prediction import true_coil_error
     from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..net import split_endpoint
     from ..poses import PlanSpec
-    from ..report.text import format_prediction, format_result, format_robot_time
+    from ..report.text import (
+        format_prediction,
+        format_result,
+        format_robot_time,
+        format_truth,
+    )
     from ..session import read_session
     from ..solving.kinematics import truth_arm_of, truth_controller
     from ..solving.solve import solve_session
@@ -195,9 +199,4 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
         click.echo(f"true coil-placement error {true_mm:.3g} mm (the ml calibration against the "
                    "mock rig's truth, mean over the same region)\n")
     click.echo(format_result(result))
-    click.echo("\n  truth (the mock rig's):")
-    from ..report.text import format_matrix
-    for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
-                    ("Z", "base_from_tracker")):
-        click.echo(f"  {k} = {name}")
-        click.echo(format_matrix(np.asarray(getattr(truth, k))))
+    click.echo(format_truth(truth))

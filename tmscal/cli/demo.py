@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 import click
-import numpy as np
 
 from ..net import split_endpoint
 from .acquire_adaptive import adaptive_options, check_adaptive_flags
@@ -90,7 +89,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
     from ..mocks.launch import build_sim_rig, spawn_mock_rig
-    from ..report.text import format_matrix, format_result
+    from ..report.text import format_result, format_truth
     from ..session import read_session
     from ..solving.solve import solve_session
     from .live import AcquireProgress, stderr_to_log
@@ -140,11 +139,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
         click.echo(f"acquired {res.recorded} poses ({res.skipped} skipped) in "
                    f"{res.elapsed_s:.1f} s through the wire protocols\n")
         click.echo(format_result(result))
-        click.echo("\n  truth (the mock rig's):")
-        for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
-                        ("Z", "base_from_tracker")):
-            click.echo(f"  {k} = {name}")
-            click.echo(format_matrix(np.asarray(getattr(truth, k))))
+        click.echo(format_truth(truth))
     finally:
         if tmp is not None:
             tmp.cleanup()

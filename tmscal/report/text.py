@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
-           "format_matrix", "distortion_text", "arm_rows", "wrench_fit_rows",
+           "format_matrix", "format_truth", "distortion_text", "arm_rows", "wrench_fit_rows",
            "before_after_rows", "error_rows", "truth_rows",
            "uncertainty_rows", "outlier_lines", "legend_lines", "number", "plain_value"]
 
@@ -60,6 +60,16 @@ def format_matrix(M: Any, indent: str = "    ") -> str:
     """A 4×4 matrix as aligned rows (mm in the last column); no negative zeros."""
     A = np.asarray(M, dtype=float)
     return "\n".join(indent + "  ".join(number(v, ">11.5f") for v in row) for row in A)
+
+
+def format_truth(truth: Any) -> str:
+    """The mock rig's true X = flange_from_marker, Y = flange_from_probe and Z =
+    base_from_tracker (4×4 mm; a ``RigTruth``), under a heading, as the demos print them."""
+    lines = ["", "  truth (the mock rig's):"]
+    for k, name in (("X", "flange_from_marker"), ("Y", "flange_from_probe"),
+                    ("Z", "base_from_tracker")):
+        lines += [f"  {k} = {name}", format_matrix(np.asarray(getattr(truth, k)))]
+    return "\n".join(lines)
 
 
 _W = 44  # label column width of the solve table
