@@ -134,7 +134,11 @@ class MockConfig:
     after each move; None: no oscillation), per-device options and faults, and kinematics
     ({arm: a registered arm, errors: paper|all|none|realistic, seed}: the mock robot moves a
     serial arm whose true parameters differ from its controller's nominal ones; None: no arm
-    model; docs/selfcal.md, docs/kinematics.md)."""
+    model; docs/selfcal.md, docs/kinematics.md), changes ({move: {"mm": (3,) mm, "deg": (3,)
+    rotation vector in degrees}}, move one of tracker, marker, coil, coil_centre: applied to
+    the truth when the rig is built) and events ([{"at_s": s, "move", "mm", "deg"}]: the same
+    changes at a time of the rig's clock), both as ``tmscal.sim.changes`` defines them
+    (docs/configs.md)."""
 
     clock: str = "fast"
     seed: int = 0
@@ -145,6 +149,8 @@ class MockConfig:
     robot: dict[str, Any] = field(default_factory=dict)
     kinematics: dict[str, Any] | None = None
     ft: dict[str, Any] = field(default_factory=dict)
+    changes: dict[str, Any] | None = field(default_factory=dict)
+    events: list[dict[str, Any]] | None = field(default_factory=list)
 
 
 @dataclass

@@ -24,8 +24,11 @@ from ..errors import ConfigError
 from ..net import loopback_family
 from ..registry import DriverSpec, get_spec
 from ..sim import (
+    MOVES,
     TMS_RIG_P0,
     ArmPair,
+    Change,
+    Event,
     Noise,
     Settle,
     SimRig,
@@ -44,9 +47,12 @@ __all__ = ["MockRig", "MockProcess", "build_sim_rig", "start_mock_rig", "spawn_m
 
 def build_sim_rig(cfg: RigConfig) -> SimRig:
     """The sim rig of a config's ``mock`` section: truth ("tms" built-in rig, "random", or
-    explicit X/Y/Z), noise (``sim.Noise`` fields), settling (``sim.Settle`` fields; absent:
-    none), seed, and the arm of ``mock.kinematics`` (absent: none; the start pose out of
-    its reach is a ConfigError); the flange starts at P0."""
+    explicit X/Y/Z) with ``mock.changes`` applied (``sim.changes``: the rig's ``truth`` is
+    the changed one; the start pose is the unchanged truth's), noise (``sim.Noise``
+    fields), settling (``sim.Settle`` fields; absent: none), seed, the arm of
+    ``mock.kinematics`` (absent: none; the start pose out of its reach is a ConfigError) and
+    the schedule of ``mock.events``; the flange starts at P0. Neither changes nor events
+    draw from the rig's RNG."""
     m = cfg.mock
     if m is None:
         raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig")
@@ -61,12 +67,14 @@ def build_sim_rig(cfg: RigConfig) -> SimRig:
         start = TMS_RIG_P0
     if not isinstance(cfg.plan.start, str):
         start = np.asarray(cfg.plan.start, dtype=float)
+    truth, events = _changes(cfg, truth)
     noise = construct(Noise, f"{cfg.path}: key 'mock.noise'", **m.noise)
     bodies = list(cfg.tracker.tools) if cfg.tracker else None
     settle = (None if m.settle is None
               else construct(Settle, f"{cfg.path}: key 'mock.settle'", **m.settle))
     try:
-        rig = SimRig(truth, noise=noise, rng=rng, start=start, settle=settle, arm=_arm(cfg))
+        rig = SimRig(truth, noise=noise, rng=rng, start=start, settle=settle, arm=_arm(cfg),
+                     events=events)
     except Unreachable as e:
         raise ConfigError(f"{cfg.path}: key 'mock.kinematics': {e} (plan.start)") from None
     if bodies is not None:
@@ -75,6 +83,29 @@ def build_sim_rig(cfg: RigConfig) -> SimRig:
             raise ConfigError(f"{cfg.path}: key 'tracker.tools.{unknown[0]}': the mock rig "
                               f"has bodies {rig.bodies} only")
     return rig
+
+
+def _changes(cfg: RigConfig, truth: Truth) -> tuple[Truth, list[Event]]:
+    """``truth`` with ``mock.changes`` applied (in the order of ``sim.changes.MOVES``,
+    whatever the config's order) and the events of ``mock.events``, each checked against the
+    truth it will change (a ``coil_centre`` change on a rig without a probe is a ConfigError
+    naming the key)."""
+    assert cfg.mock is not None
+    m = cfg.mock
+    for move, c in sorted((m.changes or {}).items(), key=lambda kv: MOVES.index(kv[0])):
+        try:
+            truth = Change(move, tuple(c["mm"]), tuple(c["deg"])).apply(truth)
+        except ValueError as e:
+            raise ConfigError(f"{cfg.path}: key 'mock.changes.{move}': {e}") from None
+    events = [Event(e["at_s"], Change(e["move"], tuple(e["mm"]), tuple(e["deg"])))
+              for e in m.events or []]
+    t = truth
+    for i in sorted(range(len(events)), key=lambda i: events[i].at_s):  # as the rig will
+        try:
+            t = events[i].change.apply(t)
+        except ValueError as e:
+            raise ConfigError(f"{cfg.path}: key 'mock.events[{i}].move': {e}") from None
+    return truth, events
 
 
 def _arm(cfg: RigConfig) -> ArmPair | None:
@@ -177,9 +208,9 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
             tm = _tracker_mock(cfg, mr.rig, clock)
             mr.devices.append(tm)
             if clock.fast and hasattr(tm, "tracker_time_s"):
-                # fast clock: the rig's time (the settling oscillation) is the tracker's
-                # virtual time, which advances as frames are requested
-                mr.rig.time_s = tm.tracker_time_s
+                # fast clock: the rig's time (the settling oscillation, the events' at_s) is
+                # the tracker's virtual time, which advances as frames are requested
+                mr.rig.use_clock(tm.tracker_time_s)
             mr.endpoints["tracker"] = _start_tracker(tm, tracker_transport, tracker_url)
         if cfg.robot is not None:
             rm = _robot_mock(cfg, mr.rig, clock, robot_host, robot_port)

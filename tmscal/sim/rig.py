@@ -34,15 +34,22 @@ Both read the rig's time base ``time_s`` (seconds; None: ``time.monotonic``). On
 fast clock the mock rig sets it to the tracker's virtual time (frames served / frame rate),
 so the oscillation decays as frames are read, not as wall time passes: a client that only
 sleeps does not advance fast time (see docs/devices.md).
+
+What moved since the calibration (``tmscal.sim.changes``: the tracker, the marker, the coil
+re-seated on the flange, the coil's centre) changes the truth: ``apply_change`` now, or
+``events`` (:class:`~tmscal.sim.changes.Event`) at a time of the rig's clock, each applied
+once, the first time the rig's state is read (``true_flange``, ``true_body``, ``observe``)
+at or after it. Neither draws from the rig's RNG.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -59,6 +66,9 @@ from ..geometry import (
     rotvec_from_matrix,
 )
 from .arm import ArmPair, Unreachable
+from .changes import Change, Event
+
+log = logging.getLogger(__name__)
 
 #: A four-sphere passive tool modelled on NDI 8700340 (inter-sphere distances ≈ 50, 103, 138,
 #: 56, 89, 62 mm). Sphere centres in the tool frame, mm; the origin is the centroid. The
@@ -311,6 +321,14 @@ class SimRig:
     says (``tmscal.sim.arm``); without one, behaviour and random draws are as before. The
     rig's ``truth`` carries the arm (``Truth.arm``): given on either, it is set on both; a
     different arm on each is a ValueError.
+
+    ``truth`` is the truth now: ``apply_change`` changes it (``tmscal.sim.changes``), and so
+    does each of ``events`` (:class:`~tmscal.sim.changes.Event`, any order; applied in time
+    order) once the rig's clock has run ``at_s`` seconds: ``now()`` minus its value when the
+    rig was built or its time base last set (``use_clock``). It is applied the first time the
+    rig's state is read at or after that time (``true_flange``, ``true_body``, ``observe``)
+    and listed in ``fired``. Without events and changes, behaviour and random draws are as
+    before.
     """
 
     truth: Truth
@@ -321,9 +339,16 @@ class SimRig:
     settle: Settle | None = None
     time_s: Callable[[], float] | None = None
     arm: ArmPair | None = None
+    events: Sequence[Event] = ()
 
     def __post_init__(self) -> None:
         self._lock = threading.RLock()
+        #: events not applied yet, in time order (a stable sort: equal times as given)
+        self._events: list[Event] = sorted(self.events, key=lambda e: e.at_s)
+        self._epoch = self.now()
+        #: every event applied, in order: (the event, the rig's time (s, since ``_epoch``)
+        #: when the state read that applied it was made)
+        self.fired: list[tuple[Event, float]] = []
         if self.arm is None:
             self.arm = self.truth.arm
         elif self.truth.arm is None:
@@ -356,6 +381,62 @@ class SimRig:
     def now(self) -> float:
         """The rig's time base, seconds (``time_s``, else ``time.monotonic``)."""
         return float(self.time_s()) if self.time_s is not None else time.monotonic()
+
+    def use_clock(self, time_s: Callable[[], float] | None) -> None:
+        """Make ``time_s`` (seconds; None: ``time.monotonic``) the rig's time base; the
+        events' times count from its value now (the mock rig calls this with the tracker's
+        virtual time on the fast clock, before any frame is served)."""
+        with self._lock:
+            self.time_s = time_s
+            self._epoch = self.now()
+
+    def elapsed(self) -> float:
+        """Seconds of the rig's time since its clock started (``use_clock``, else since the
+        rig was built): the time the events' ``at_s`` are compared with."""
+        with self._lock:
+            return self.now() - self._epoch
+
+    # --- what moved ---
+    def apply_change(self, move: str, mm: Sequence[float] = (0.0, 0.0, 0.0),
+                     deg: Sequence[float] = (0.0, 0.0, 0.0)) -> Truth:
+        """Change the rig now (``tmscal.sim.changes.changed``: ``move`` one of tracker,
+        marker, coil, coil_centre; ``mm`` a translation in mm, ``deg`` a rotation vector in
+        degrees) and return the new truth. The tracker sees it from the next frame read;
+        the robot's reported pose is unchanged. ValueError for a bad change (nothing
+        changes)."""
+        change = Change(move, tuple(mm), tuple(deg))  # type: ignore[arg-type]
+        with self._lock:
+            self._set_truth(change.apply(self.truth))
+            return self.truth
+
+    def schedule(self, events: Iterable[Event]) -> None:
+        """Add ``events`` to those not applied yet (times on the same clock as ``events``)."""
+        with self._lock:
+            self._events = sorted([*self._events, *events], key=lambda e: e.at_s)
+
+    @property
+    def pending(self) -> list[Event]:
+        """The events not applied yet, in time order."""
+        with self._lock:
+            return list(self._events)
+
+    def _set_truth(self, truth: Truth) -> None:
+        self.truth = truth
+        self._tracker_from_base = invert(truth.Z)
+
+    def _fire_due(self) -> None:
+        """Apply every event whose time has come, in time order (each once)."""
+        if not self._events:
+            return
+        with self._lock:
+            t = self.now() - self._epoch
+            while self._events and self._events[0].at_s <= t:
+                e = self._events.pop(0)
+                self._set_truth(e.change.apply(self.truth))
+                self.fired.append((e, t))
+                c = e.change
+                log.info("mock rig: %s moved by %s mm, %s deg at %.3f s (event at %g s)",
+                         c.move, list(c.mm), list(c.deg), t, e.at_s)
 
     @property
     def bodies(self) -> list[str]:
@@ -437,8 +518,10 @@ class SimRig:
 
     def true_flange(self) -> np.ndarray:
         """The true base_from_flange now (4×4 mm): on the move's path while a move runs, else
-        where the flange came to rest plus the settling oscillation."""
+        where the flange came to rest plus the settling oscillation. Applies the events
+        due first."""
         with self._lock:
+            self._fire_due()
             if self._path is not None:
                 return self._path() @ invert(self.commanded) @ self.flange
             if self._swing is None or self.settle is None:
@@ -470,9 +553,12 @@ class SimRig:
     # --- tracker side ---
     def true_body(self, body: str) -> np.ndarray:
         """Noise-free tracker_from_<body> = Z⁻¹ · A_true · (X or Y), 4×4 mm, A_true the true
-        flange now (``true_flange``: moving or settling included)."""
+        flange now (``true_flange``: moving or settling included), on the truth now (the
+        events due applied first)."""
         with self._lock:
-            return self._tracker_from_base @ self.true_flange() @ self.truth.flange_from(body)
+            self._fire_due()
+            flange = self.true_flange()
+            return self._tracker_from_base @ flange @ self.truth.flange_from(body)
 
     def observe(self, body: str, n: int | None = None) -> np.ndarray:
         """Noisy tracker_from_<body> (4×4 mm), or n independent observations (n, 4, 4):
