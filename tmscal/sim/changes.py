@@ -29,14 +29,11 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..geometry import make_pose, matrix_from_rotvec
-
-if TYPE_CHECKING:
-    from .rig import Truth
+from .truth import Truth
 
 __all__ = ["MOVES", "Change", "Event", "changed", "apply_changes"]
 
