@@ -42,7 +42,11 @@ MOVES = ("tracker", "marker", "coil", "coil_centre")
 
 
 def _vec(value: Sequence[float], name: str) -> np.ndarray:
-    v = np.asarray(value, dtype=np.float64)
+    """``value`` as three finite floats (3,), else ValueError naming ``name``."""
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        v = np.zeros(0)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name}: expected three finite numbers, got {value!r}")
     return v
@@ -103,7 +107,8 @@ class Event:
     change: Change
 
     def __post_init__(self) -> None:
-        if isinstance(self.at_s, bool) or not (math.isfinite(self.at_s) and self.at_s >= 0):
+        if (isinstance(self.at_s, bool) or not isinstance(self.at_s, int | float)
+                or not (math.isfinite(self.at_s) and self.at_s >= 0)):
             raise ValueError(f"at_s: expected a finite number ≥ 0, got {self.at_s!r}")
         object.__setattr__(self, "at_s", float(self.at_s))
 

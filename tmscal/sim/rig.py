@@ -359,13 +359,14 @@ class SimRig:
         degrees) and return the new truth. The tracker sees it from the next frame read;
         the robot's reported pose is unchanged. ValueError for a bad change (nothing
         changes)."""
-        change = Change(move, tuple(mm), tuple(deg))  # type: ignore[arg-type]
+        change = Change(move, mm, deg)  # type: ignore[arg-type]  (checked: three numbers)
         with self._lock:
             self._set_truth(change.apply(self.truth))
             return self.truth
 
     def schedule(self, events: Iterable[Event]) -> None:
-        """Add ``events`` to those not applied yet (times on the same clock as ``events``)."""
+        """Add ``events`` to those not applied yet (their ``at_s`` on the rig's clock, as
+        ``elapsed`` counts it; one already due applies at the next state read)."""
         with self._lock:
             self._events = sorted([*self._events, *events], key=lambda e: e.at_s)
 
