@@ -213,7 +213,8 @@ def test_the_coil_from_the_marker_alone_with_the_probe_removed(polaris, calib_fi
     finally:
         code, out, err = _stop(proc)
     assert code == 0, err
-    assert "from the marker" in out and "not sent" not in out + err
+    assert "coil: CoilToTracker = B · X⁻¹ · Y from the marker" in err
+    assert "not sent" not in out + err and "ProbeToTracker" not in err
     assert {m.device_name for m in msgs} == NAMES - {"ProbeToTracker"}
     Z, offset = _stored_Z(calib_file), _stored_coil_on_marker(calib_file)
     coil_in_base = mr.rig.true_flange() @ mr.rig.truth.Y  # the flange rests at P0
@@ -228,6 +229,26 @@ def test_the_coil_from_the_marker_alone_with_the_probe_removed(polaris, calib_fi
         assert _close(f["CoilToRobotBase"], coil_in_base, 2.0, 0.5)
 
 
+def test_a_marker_only_calibration_says_once_that_it_has_no_coil(polaris, calib_file,
+                                                                 tmp_path):
+    """A calibration without Y on the marker-only config: the coil cannot be derived, which
+    the stream says once at start; it streams the marker and Z."""
+    doc = yaml.safe_load(calib_file.read_text())
+    for m in (doc, doc["raw"]):
+        m.pop("Y")
+    calib = tmp_path / "marker-only.yaml"
+    calib.write_text(yaml.safe_dump(doc))
+    cfg, mr = polaris(tools={"marker": str(TOOLS_DIR / "marker-8700340.rom")})
+    proc, port = _start_stream(cfg, calib, mr.endpoints["tracker"])
+    try:
+        msgs = _read_all(port, 20)
+    finally:
+        code, out, err = _stop(proc)
+    assert code == 0, err
+    assert err.count("cannot be derived from the marker") == 1, err
+    assert {m.device_name for m in msgs} == {"MarkerToTracker", "TrackerToRobotBase"}
+
+
 _CROSSCHECK = re.compile(r"cross-check, probe vs marker-derived coil over (\d+) frames: mean "
                          r"([\d.]+) mm ([\d.]+)°, max ([\d.]+) mm ([\d.]+)°")
 
@@ -236,9 +257,12 @@ def _crosscheck(cfg: Path, calib: Path, tracker: str, frames: int = 90) -> tuple
                                                                                    float]:
     """(frames, mean mm, mean degrees) of the cross-check ``tmscal stream --frames`` prints
     when it stops."""
-    proc, _ = _start_stream(cfg, calib, tracker, "--frames", str(frames))
-    out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 0, err
+    r = subprocess.run([sys.executable, "-m", "tmscal.cli", "stream", str(cfg), "--calib",
+                        str(calib), "--tracker-port", tracker, "--port", "0", "--frames",
+                        str(frames)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "cross-checked" in r.stderr  # said once at start
+    out = r.stdout
     m = _CROSSCHECK.search(out)
     assert m, out
     n, mm, deg, max_mm, max_deg = int(m[1]), *map(float, m.groups()[1:])

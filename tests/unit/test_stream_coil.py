@@ -117,16 +117,16 @@ def test_coil_difference_and_the_cross_check():
 def test_the_cli_says_where_the_coil_comes_from_and_shows_the_cross_check():
     from tmscal.cli.stream import _coil_note, _crosscheck_line, _Status
 
-    note, warn = _coil_note("marker", ["marker", "probe"], True)
-    assert not warn and "from the marker" in note and "ProbeToTracker" in note
-    note, warn = _coil_note("marker", ["marker"], True)
-    assert not warn and "ProbeToTracker" not in note
-    note, warn = _coil_note("probe", ["marker", "probe"], False)
-    assert warn and "marker-only" in note and "from the probe only" in note
-    note, warn = _coil_note("probe", ["probe"], True)
-    assert warn and "no 'marker' tool" in note
-    note, warn = _coil_note(None, ["marker"], False)
-    assert warn and "not sent" in note
+    note = _coil_note("marker", ["marker", "probe"], True)
+    assert note.startswith("coil:") and "from the marker" in note and "ProbeToTracker" in note
+    note = _coil_note("marker", ["marker"], True)
+    assert note.startswith("coil:") and "ProbeToTracker" not in note
+    note = _coil_note("probe", ["marker", "probe"], False)
+    assert note.startswith("warning:") and "marker-only" in note and "probe only" in note
+    note = _coil_note("probe", ["probe"], True)
+    assert note.startswith("warning:") and "no 'marker' tool" in note
+    note = _coil_note(None, ["marker"], False)
+    assert note.startswith("warning:") and "not sent" in note
 
     st = StreamStats(frames=10, sent=10, coil_from="marker")
     assert _crosscheck_line(st) is None

@@ -61,23 +61,23 @@ class _Status:
             self.stream.flush()
 
 
-def _coil_note(source: str | None, tools: list[str], has_y: bool) -> tuple[str, bool]:
-    """(the line that says where the coil comes from, whether it is a warning), once at
-    start (docs/streaming.md, "Where the coil comes from")."""
+def _coil_note(source: str | None, tools: list[str], has_y: bool) -> str:
+    """The line that says where the coil comes from (a warning where the marker cannot give
+    it), printed once at start on stderr (docs/streaming.md, "Where the coil comes from")."""
     if source == "marker":
         line = ("coil: CoilToTracker = B · X⁻¹ · Y from the marker (the calibration's marker "
                 "← coil), CoilToRobotBase from it")
         if "probe" in tools:
             line += ("; the probe, where seen, is sent as ProbeToTracker and cross-checked "
                      "(status: probe vs marker coil)")
-        return line, False
+        return line
     if source == "probe":
         why = ("the calibration is marker-only (no Y): the coil cannot be derived from the "
                "marker" if not has_y else "no 'marker' tool in tracker.tools")
-        return f"warning: {why}; CoilToTracker and CoilToRobotBase from the probe only", True
+        return f"warning: {why}; CoilToTracker and CoilToRobotBase from the probe only"
     return ("warning: the calibration is marker-only (no Y) and tracker.tools has no 'probe': "
             "the coil cannot be derived from the marker; CoilToRobotBase and CoilToTracker "
-            "are not sent"), True
+            "are not sent")
 
 
 def _crosscheck_line(st: Any) -> str | None:
@@ -142,6 +142,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
       ProbeToTracker      tracker ← probe: C as measured
       MarkerToTracker     tracker ← coil marker: B as measured
       TrackerToRobotBase  robot base ← tracker: Z of the calibration
+
     The coil comes from the marker whenever the config tracks one and the calibration has
     a coil (Y): no probe is needed. The probe, where seen too, is a cross-check: the status
     line shows how far the coil it measures is from the marker's, and the last line its
@@ -170,9 +171,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     if "marker" not in tools and "probe" not in tools:
         raise click.UsageError(f"{config}: tracker.tools has neither 'marker' nor 'probe'; "
                                "nothing to stream")
-    note, warn = _coil_note(coil_source(tools, cal), tools, cal.Y is not None)
-    if warn:
-        click.echo(note, err=True)
+    click.echo(_coil_note(coil_source(tools, cal), tools, cal.Y is not None), err=True)
     stop = StopFlag(quiet=True)
     stop.install()
     status = _Status(sys.stderr, tools)
@@ -187,8 +186,6 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
         server.start()
         click.echo(f"OpenIGTLink server on {server.host}:{server.port}, TRANSFORM "
                    f"{', '.join(TRANSFORMS)} (mm); serving until Ctrl-C")
-        if not warn:
-            click.echo(note)
         sys.stdout.flush()
         st = stream_frames(tracker, cal, server, rate_hz=rate_hz, frames=frames, stop=stop,
                            on_frame=status)
