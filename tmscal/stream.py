@@ -156,7 +156,7 @@ def frame_transforms(frame: TrackerFrame, cal: Calibration, marker: str = "marke
     elif coil_from == "probe" and C is not None:
         coil, pose, body = C, C, "probe"
     else:
-        coil = pose = None
+        coil, pose, body = None, None, ""
     if coil is not None and pose is not None:
         command = _coil_command(cal, pose, body)
         if command is not None:
