@@ -8,29 +8,39 @@ TRANSFORM message per name in :data:`TRANSFORMS` (docs/streaming.md):
 ==================== ============================================================
 device name          transform (4×4, mm; Slicer's "FromToTo" naming: maps From into To)
 ==================== ============================================================
-CoilToRobotBase      robot base ← coil centre (probe): the coil pose the robot's
-                     controller must be told, A_cmd · Y (Z · C without an arm)
-CoilToTracker        tracker ← coil centre (probe): C, as the tracker measures it
+CoilToRobotBase      robot base ← coil centre: the coil pose the robot's controller
+                     must be told, A_cmd · Y (Z · coil without an arm)
+CoilToTracker        tracker ← coil centre: B · X⁻¹ · Y, from the marker
+ProbeToTracker       tracker ← probe: C, as the tracker measures it
 MarkerToTracker      tracker ← coil marker: B, as the tracker measures it
 TrackerToRobotBase   robot base ← tracker: Z of the calibration
 ==================== ============================================================
 
+The coil comes from one body for the whole stream (:func:`coil_source`): from the marker,
+B · X⁻¹ · Y with the calibration's marker ← coil (``Calibration.marker_from_coil``, the
+exported X and Y), whenever the config tracks a marker and the calibration has a coil (Y);
+the probe is then only a cross-check, sent as ProbeToTracker, and the difference between the
+coil it measures and the marker's (:func:`coil_difference`) is counted in
+:class:`StreamStats`. Without a marker tool, or with a marker-only calibration (no Y), the
+coil is the probe as measured (CoilToTracker = C), as a probe-only rig needs; with neither,
+no coil is sent.
+
 Z is the calibration's orthonormal base_from_tracker (``Calibration.exported()``, the ``Z`` of
 ``tmscal solve -o`` and of every export: docs/exports.md, "Which matrices leave tmscal"). With a
 tracker distortion in the calibration (the ``ml`` solver), CoilToRobotBase is Z applied to the
-undistorted probe pose, as the robot would place the coil (``Calibration.placement``); the
-tracker poses are sent as measured. With an identified arm in the calibration (``tmscal solve
---kinematics``, docs/kinematics.md), CoilToRobotBase is A_cmd · Y with A_cmd =
-``Calibration.flange_command(C)``: the flange pose the controller's own (nominal) kinematics
-must be told so that the real arm puts the coil where the probe is (inverse kinematics on
-the identified arm, forward on the nominal one), times the coil's Y, i.e. the coil pose to
-send to a controller whose tool frame is Y. Without an arm that is Z · C (the placement
-rule; exactly for orthonormal matrices), which is what is sent. A probe pose the identified
-arm cannot reach gets no CoilToRobotBase in that frame.
+undistorted coil pose (the marker or probe pose undistorted, then the coil on it), as the robot
+would place the coil (``Calibration.placement``); the tracker poses are sent as measured. With
+an identified arm in the calibration (``tmscal solve --kinematics``, docs/kinematics.md),
+CoilToRobotBase is A_cmd · Y with A_cmd = ``Calibration.flange_command``: the flange pose the
+controller's own (nominal) kinematics must be told so that the real arm puts the coil where
+it is (inverse kinematics on the identified arm, forward on the nominal one), times the coil's
+Y, i.e. the coil pose to send to a controller whose tool frame is Y. Without an arm that is
+Z · coil (the placement rule; exactly for orthonormal matrices), which is what is sent. A coil
+pose the identified arm cannot reach gets no CoilToRobotBase in that frame.
 
 A body that is missing or (partly) out of the tracker's volume in a frame is not sent for that
-frame, as PlusServer does by default: the client keeps the last pose it received
-(docs/streaming.md says how to notice).
+frame, nor what is derived from it, as PlusServer does by default: the client keeps the last
+pose it received (docs/streaming.md says how to notice).
 
 OpenIGTLink carries float32: about 1e-4 mm at 1,500 mm from the tracker.
 
@@ -49,7 +59,7 @@ import struct
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -59,12 +69,13 @@ import pyigtl
 from .calib import Calibration
 from .drivers.base import Tracker, TrackerFrame
 from .errors import CalibrationError
+from .geometry import angle_between
 
 log = logging.getLogger(__name__)
 
 __all__ = ["TRANSFORMS", "MAX_NAME_BYTES", "DEFAULT_PORT", "frame_transforms", "StreamServer",
-           "StreamStats", "stream_frames", "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S",
-           "MAX_BODY_BYTES"]
+           "StreamStats", "CrossCheck", "stream_frames", "coil_source", "coil_difference",
+           "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S", "MAX_BODY_BYTES"]
 
 #: OpenIGTLink's registered TCP port, the default of Slicer's OpenIGTLinkIF and PlusServer
 DEFAULT_PORT = 18944
@@ -90,45 +101,86 @@ _POLL_S = 0.05
 
 #: device name → what it is (frames and formula); the order in which each frame is sent
 TRANSFORMS: dict[str, str] = {
-    "CoilToRobotBase": "robot base ← coil centre (probe): the coil pose to command, A_cmd · Y "
-                       "(Z · C without an identified arm)",
-    "CoilToTracker": "tracker ← coil centre (probe): C as the tracker measures it",
+    "CoilToRobotBase": "robot base ← coil centre: the coil pose to command, A_cmd · Y "
+                       "(Z · coil without an identified arm)",
+    "CoilToTracker": "tracker ← coil centre: B · X⁻¹ · Y from the marker (C from the probe "
+                     "without a marker tool or without Y)",
+    "ProbeToTracker": "tracker ← probe: C as the tracker measures it",
     "MarkerToTracker": "tracker ← coil marker: B as the tracker measures it",
     "TrackerToRobotBase": "robot base ← tracker: Z of the calibration",
 }
 
 
+def coil_source(tools: Iterable[str], cal: Calibration, marker: str = "marker",
+                probe: str = "probe") -> str | None:
+    """Which body the coil comes from for a whole stream, given the tracker's tool names:
+    "marker" (B · X⁻¹ · Y) when the ``marker`` tool is tracked and the calibration has a
+    coil (Y); else "probe" (C as measured) when the ``probe`` tool is tracked; else None (no
+    coil can be sent: a marker-only calibration without a probe)."""
+    names = set(tools)
+    if marker in names and cal.Y is not None:
+        return "marker"
+    if probe in names:
+        return "probe"
+    return None
+
+
+def coil_difference(measured: np.ndarray, derived: np.ndarray) -> tuple[float, float]:
+    """(mm, degrees) between two coil poses (tracker ← coil, 4×4 mm): the distance of their
+    origins and the angle of the rotation between them; for the probe-measured coil C and
+    the marker-derived B · X⁻¹ · Y, the stream's cross-check."""
+    mm = float(np.linalg.norm(measured[:3, 3] - derived[:3, 3]))
+    return mm, float(np.degrees(angle_between(measured, derived)))
+
+
 def frame_transforms(frame: TrackerFrame, cal: Calibration, marker: str = "marker",
-                     probe: str = "probe") -> dict[str, np.ndarray]:
+                     probe: str = "probe", coil_from: str | None = "marker"
+                     ) -> dict[str, np.ndarray]:
     """The transforms of :data:`TRANSFORMS` for one tracker frame (4×4 float64, mm), by
     device name. TrackerToRobotBase is always there; MarkerToTracker only when the ``marker``
-    tool is usable in the frame (present, inside the volume), CoilToTracker and
-    CoilToRobotBase only when the ``probe`` tool is (and, with an identified arm in the
-    calibration, CoilToRobotBase only when that arm can reach the probe pose)."""
+    tool is usable in the frame (present, inside the volume), ProbeToTracker only when the
+    ``probe`` tool is. CoilToTracker and CoilToRobotBase come from ``coil_from``
+    (:func:`coil_source`): "marker", the coil B · X⁻¹ · Y whenever the marker is usable
+    (CalibrationError for a marker-only calibration); "probe", C whenever the probe is;
+    None, never. With an identified arm in the calibration, CoilToRobotBase only when that
+    arm can reach the coil pose."""
+    if coil_from not in ("marker", "probe", None):
+        raise ValueError(f"coil_from must be 'marker', 'probe' or None, got {coil_from!r}")
     Z = np.asarray(cal.exported()["Z"], dtype=float)
+    offset = cal.marker_from_coil() if coil_from == "marker" else None
     out: dict[str, np.ndarray] = {}
     C = _usable(frame, probe)
-    if C is not None:
-        coil = _coil_command(cal, C)
-        if coil is not None:
-            out["CoilToRobotBase"] = coil
-        out["CoilToTracker"] = C
     B = _usable(frame, marker)
+    if offset is not None and B is not None:
+        coil, pose, body = B @ offset, B, "marker"
+    elif coil_from == "probe" and C is not None:
+        coil, pose, body = C, C, "probe"
+    else:
+        coil, pose, body = None, None, ""
+    if coil is not None and pose is not None:
+        command = _coil_command(cal, pose, body)
+        if command is not None:
+            out["CoilToRobotBase"] = command
+        out["CoilToTracker"] = coil
+    if C is not None:
+        out["ProbeToTracker"] = C
     if B is not None:
         out["MarkerToTracker"] = B
     out["TrackerToRobotBase"] = Z
     return out
 
 
-def _coil_command(cal: Calibration, C: np.ndarray) -> np.ndarray | None:
-    """robot base ← coil (4×4 mm) to command for the probe pose C: Z · C' (C' undistorted
-    when the calibration says so) without an identified arm; with one, A_cmd · Y
-    (``Calibration.flange_command``), None when the arm cannot reach it."""
+def _coil_command(cal: Calibration, N: np.ndarray, body: str) -> np.ndarray | None:
+    """robot base ← coil (4×4 mm) to command for the tracker pose N of ``body`` ("probe":
+    the coil's own pose; "marker": the coil on it): Z · coil' (coil' undistorted when the
+    calibration says so; ``Calibration.placement``) without an identified arm; with one,
+    A_cmd · Y (``Calibration.flange_command``), None when the arm cannot reach it."""
     if cal.arm is None or cal.Y is None:
-        targets, _, _ = cal.placement(C[None])  # undistorted when the calibration says so
+        targets, _, _ = cal.placement(N[None], body)  # undistorted when the calibration says so
         return np.asarray(cal.exported()["Z"], dtype=float) @ targets[0]
     try:
-        return cal.flange_command(C[None])[0] @ np.asarray(cal.exported()["Y"], dtype=float)
+        return (cal.flange_command(N[None], body=body)[0]
+                @ np.asarray(cal.exported()["Y"], dtype=float))
     except CalibrationError as e:
         log.debug("no CoilToRobotBase in this frame: %s", e)
         return None
@@ -434,11 +486,45 @@ class StreamServer(socketserver.ThreadingTCPServer):
 
 
 @dataclass
+class CrossCheck:
+    """The difference between the coil the probe measures (C) and the coil derived from the
+    marker (B · X⁻¹ · Y), over the frames that saw both (:func:`coil_difference`): ``n``
+    frames, the ``last`` frame's (mm, degrees), and their means and maxima. The mock's noise
+    when the calibration holds; a wrong Y, or a marker or probe that moved on the coil since
+    the calibration, shows as the offset it is."""
+
+    n: int = 0
+    last: tuple[float, float] | None = None
+    max_mm: float = 0.0
+    max_deg: float = 0.0
+    _sum_mm: float = field(default=0.0, repr=False)
+    _sum_deg: float = field(default=0.0, repr=False)
+
+    def add(self, mm: float, deg: float) -> None:
+        self.n += 1
+        self.last = (mm, deg)
+        self._sum_mm += mm
+        self._sum_deg += deg
+        self.max_mm = max(self.max_mm, mm)
+        self.max_deg = max(self.max_deg, deg)
+
+    @property
+    def mean_mm(self) -> float | None:
+        return self._sum_mm / self.n if self.n else None
+
+    @property
+    def mean_deg(self) -> float | None:
+        return self._sum_deg / self.n if self.n else None
+
+
+@dataclass
 class StreamStats:
     """What a stream has done so far: distinct tracker ``frames`` read, frames ``sent`` to a
     client, TRANSFORM ``messages`` queued, per tool the frames it was not usable in
     (``unseen``), the measured ``rate_hz`` (tracker frames per second over the last second),
-    and the connected client (``peer``, "host:port", or None)."""
+    the connected client (``peer``, "host:port", or None), the body the coil comes from
+    (``coil_from``: "marker", "probe" or None; :func:`coil_source`) and, when it is the
+    marker, the probe's ``crosscheck`` over every frame read that saw both tools."""
 
     frames: int = 0
     sent: int = 0
@@ -446,6 +532,8 @@ class StreamStats:
     unseen: Counter[str] = field(default_factory=Counter)
     rate_hz: float | None = None
     peer: str | None = None
+    coil_from: str | None = None
+    crosscheck: CrossCheck = field(default_factory=CrossCheck)
     _recent: list[float] = field(default_factory=list, repr=False)
 
     def _tick(self, t: float) -> None:
@@ -463,12 +551,16 @@ def stream_frames(tracker: Tracker, cal: Calibration, server: StreamServer, *,
                   stall_s: float = 5.0) -> StreamStats:
     """Read each distinct frame of an open ``tracker`` and send its :func:`frame_transforms`
     to the server's client, until ``stop()`` is true (checked after every frame) or
-    ``frames`` distinct frames were read. ``rate_hz`` sends at most that many frames a second
-    (the others are read and dropped); None sends every frame (the tracker's frame rate).
-    Each message carries the frame's arrival time (seconds since 1970). ``on_frame`` gets the
-    running :class:`StreamStats` after every frame. A tracker without a new frame for
-    ``stall_s`` seconds raises DeviceTimeout (the tracker's own errors pass through)."""
-    stats = StreamStats()
+    ``frames`` distinct frames were read. The coil comes from :func:`coil_source` of the
+    tracker's tools, for the whole stream; when that is the marker, every frame read in
+    which the probe is usable too adds the probe's difference to ``crosscheck``.
+    ``rate_hz`` sends at most that many frames a second (the others are read and dropped);
+    None sends every frame (the tracker's frame rate). Each message carries the frame's
+    arrival time (seconds since 1970). ``on_frame`` gets the running :class:`StreamStats`
+    after every frame. A tracker without a new frame for ``stall_s`` seconds raises
+    DeviceTimeout (the tracker's own errors pass through)."""
+    stats = StreamStats(coil_from=coil_source(tracker.tools, cal))
+    offset = cal.marker_from_coil() if stats.coil_from == "marker" else None
     period = 0.0 if rate_hz is None else 1.0 / rate_hz
     last_sent = -np.inf
     it = tracker.distinct_frames(frames, stall_s=stall_s)
@@ -480,10 +572,15 @@ def stream_frames(tracker: Tracker, cal: Calibration, server: StreamServer, *,
                 st = fr.tools.get(tool)
                 if st is None or not st.usable:
                     stats.unseen[tool] += 1
+            if offset is not None:
+                B, C = _usable(fr, "marker"), _usable(fr, "probe")
+                if B is not None and C is not None:
+                    stats.crosscheck.add(*coil_difference(C, B @ offset))
             stats.peer = server.peer
             if fr.host_time - last_sent >= period:
                 stamp = time.time() - (time.monotonic() - fr.host_time)
-                n = server.send_transforms(frame_transforms(fr, cal), stamp)
+                n = server.send_transforms(frame_transforms(fr, cal, coil_from=stats.coil_from),
+                                           stamp)
                 if n:
                     last_sent = fr.host_time
                     stats.sent += 1

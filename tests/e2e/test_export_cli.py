@@ -84,7 +84,7 @@ def test_exports_of_a_session_acquired_on_the_mock_rig(tmp_path, mock_config):
     dev = ET.parse(tmp_path / "plus.xml").getroot().find("./DataCollection/Device")
     roms = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")}
     assert roms == {"CoilMarker": cfg["tracker"]["tools"]["marker"],
-                    "CoilCentre": cfg["tracker"]["tools"]["probe"]}
+                    "Probe": cfg["tracker"]["tools"]["probe"]}
     # the config's network Polaris (socket://HOST:PORT), a loopback address of the test's own
     assert dev.get("NetworkHostname") == urlparse(cfg["tracker"]["port"]).hostname
     Z = ET.parse(tmp_path / "plus.xml").getroot().find(

@@ -90,7 +90,7 @@ def test_plus_export_parses_with_hostile_names(calib, tmp_path, name):
         return
     assert dev.get("SerialPort") == f"/dev/{SHOWN[name]}"
     assert roms == {"CoilMarker": f"/roms/{SHOWN[name]}.rom",
-                    "CoilCentre": f"/roms/p{SHOWN[name]}.rom"}
+                    "Probe": f"/roms/p{SHOWN[name]}.rom"}
 
 
 @pytest.mark.parametrize("name", HOSTILE)

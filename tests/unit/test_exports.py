@@ -79,28 +79,103 @@ def test_itk_file_read_by_simpleitk_maps_as_documented(files, calib):
     assert "base_from_tracker" in text and "mm" in text
 
 
+def _plus_edges(root: ET.Element) -> list[tuple[str, str, np.ndarray | None]]:
+    """The transforms PLUS' transform repository holds for a device set, in the order it sets
+    them: each CoordinateDefinitions Transform (From, To, its Matrix read row by row), then
+    each tracked tool's ``<Id>To<ToolReferenceFrame>`` (None: its pose comes per frame)."""
+    edges: list[tuple[str, str, np.ndarray | None]] = []
+    for t in root.iter("Transform"):
+        vals = [float(v) for v in t.get("Matrix", "").split()]
+        assert len(vals) == 16
+        edges.append((t.get("From"), t.get("To"), np.reshape(vals, (4, 4))))
+    for dev in root.iter("Device"):
+        ref = dev.get("ToolReferenceFrame")
+        for src in dev.findall("./DataSources/DataSource"):
+            if src.get("Type") == "Tool":
+                edges.append((src.get("Id"), ref, None))
+    return edges
+
+
+def _plus_loop(edges) -> str | None:
+    """The first transform PLUS' repository refuses because a path between its two frames
+    already exists (vtkPlusTransformRepository::SetTransform: "A transform path already
+    exists between …"), as "FromToTo"; None when it accepts every one (the frames form a
+    tree)."""
+    group: dict[str, str] = {}
+
+    def root_of(f: str) -> str:
+        while group.setdefault(f, f) != f:
+            f = group[f]
+        return f
+
+    for a, b, _ in edges:
+        ra, rb = root_of(a), root_of(b)
+        if ra == rb:
+            return f"{a}To{b}"
+        group[ra] = rb
+    return None
+
+
+def _plus_chain(edges, frm: str, to: str, tools: dict[str, np.ndarray]) -> np.ndarray:
+    """``frm`` → ``to`` (4×4) composed along the repository's path, as PLUS computes it: a
+    definition's matrix or a tool's pose (``tools``: Id → pose; a tool not given is not
+    seen), or its inverse when walked backwards."""
+    step: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for a, b, M in edges:
+        T = tools.get(a) if M is None else M
+        if T is None:
+            continue
+        step.setdefault(a, []).append((b, T))
+        step.setdefault(b, []).append((a, np.linalg.inv(T)))
+    todo, seen = [(frm, np.eye(4))], {frm}
+    while todo:
+        f, T = todo.pop()
+        if f == to:
+            return T
+        for g, S in step.get(f, []):
+            if g not in seen:
+                seen.add(g)
+                todo.append((g, S @ T))  # g ← f ← frm
+    raise AssertionError(f"no path from {frm} to {to}")
+
+
+def test_the_plus_loop_check_finds_a_loop():
+    """The checker itself: the layout the export wrote before (the probe tool named
+    CoilCentre beside a CoilCentreToFlange definition) closes a loop PLUS refuses."""
+    I4 = np.eye(4)
+    old = [("CoilMarker", "Flange", I4), ("CoilCentre", "Flange", I4),
+           ("Tracker", "RobotBase", I4), ("CoilMarker", "Tracker", None),
+           ("CoilCentre", "Tracker", None)]
+    assert _plus_loop(old) == "CoilCentreToTracker"
+    assert _plus_loop(old[:4]) is None
+
+
 def test_plus_device_set_parses_against_plus_names(files, tmp_path):
     cal = load_calibration(files / "qr36.yaml")
     doc = yaml.safe_load((files / "qr36.yaml").read_text())
     root = ET.parse(export(files, "qr36.yaml", "plus", "plus.xml")).getroot()
     assert root.tag == "PlusConfiguration"
     tr = {(t.get("From"), t.get("To")): t for t in root.iter("Transform")}
-    assert set(tr) == {("CoilMarker", "Flange"), ("CoilCentre", "Flange"),
+    assert set(tr) == {("CoilMarker", "Flange"), ("CoilCentre", "CoilMarker"),
                        ("Tracker", "RobotBase")}
+    X, Y = np.asarray(doc["X"], dtype=float), np.asarray(doc["Y"], dtype=float)
     for (a, b), M, err in (
             (("CoilMarker", "Flange"), cal.X, doc["errors"]["marker"]["trans_mm"]),
-            (("CoilCentre", "Flange"), cal.Y, doc["errors"]["probe"]["trans_mm"]),
+            (("CoilCentre", "CoilMarker"), np.linalg.inv(X) @ Y, None),
             (("Tracker", "RobotBase"), cal.Z, doc["errors"]["e_t_mm"])):
         vals = [float(v) for v in tr[a, b].get("Matrix").split()]
         assert len(vals) == 16
         np.testing.assert_allclose(np.reshape(vals, (4, 4)), M, rtol=0, atol=1e-12)
-        assert float(tr[a, b].get("Error")) == pytest.approx(err, abs=5e-5)
+        if err is None:  # no hold-out error is defined for marker ← coil by itself
+            assert tr[a, b].get("Error") is None
+        else:
+            assert float(tr[a, b].get("Error")) == pytest.approx(err, abs=5e-5)
         dt.datetime.strptime(tr[a, b].get("Date"), "%Y.%m.%d %H:%M:%S")
     dev = root.find("./DataCollection/Device")
     assert dev.get("Type") == "NDITracker" and dev.get("ToolReferenceFrame") == "Tracker"
     ids = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")
            if s.get("Type") == "Tool"}
-    assert set(ids) == {"CoilMarker", "CoilCentre"}
+    assert set(ids) == {"CoilMarker", "Probe"}
     # with the rig config recorded (a session acquired at a rig), the ROM files and port
     doc["provenance"]["config"] = {"tracker": {
         "driver": "ndi", "port": "/dev/ttyUSB0", "baud": 115200, "frame_rate_hz": 60,
@@ -109,10 +184,47 @@ def test_plus_device_set_parses_against_plus_names(files, tmp_path):
     run("export", tmp_path / "rig.yaml", "--format", "plus", "-o", tmp_path / "p.xml")
     dev = ET.parse(tmp_path / "p.xml").getroot().find("./DataCollection/Device")
     roms = {s.get("Id"): s.get("RomFile") for s in dev.findall("./DataSources/DataSource")}
-    assert roms == {"CoilMarker": "/lab/roms/marker.rom", "CoilCentre": "/lab/roms/probe.rom"}
+    assert roms == {"CoilMarker": "/lab/roms/marker.rom", "Probe": "/lab/roms/probe.rom"}
     assert (dev.get("SerialPort"), dev.get("BaudRate")) == ("/dev/ttyUSB0", "115200")
     assert [s.get("Id") for s in dev.findall("./OutputChannels/OutputChannel/DataSource")] \
-        == ["CoilMarker", "CoilCentre"]
+        == ["CoilMarker", "Probe"]
+
+
+def test_plus_repository_gives_the_coil_from_the_marker_alone(files):
+    """PLUS' transform repository on the exported device set: every transform is accepted
+    (no loop), and the coil in the tracker, chained from the tracked CoilMarker alone, is
+    B · X⁻¹ · Y; through CoilMarker the coil in the flange is Y and the coil in the robot base
+    Z · B · X⁻¹ · Y. X, Y, Z read from the calibration file with PyYAML."""
+    doc = yaml.safe_load((files / "qr36.yaml").read_text())
+    X, Y, Z = (np.asarray(doc[k], dtype=float) for k in ("X", "Y", "Z"))
+    edges = _plus_edges(ET.parse(export(files, "qr36.yaml", "plus", "plus.xml")).getroot())
+    assert _plus_loop(edges) is None
+    A, B, C, _ = read_session(files / "s.jsonl").arrays()
+    for i in (0, 17, 42):
+        tools = {"CoilMarker": B[i], "Probe": C[i]}
+        coil = _plus_chain(edges, "CoilCentre", "Tracker", tools)
+        np.testing.assert_allclose(coil, B[i] @ np.linalg.inv(X) @ Y, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(_plus_chain(edges, "CoilCentre", "RobotBase", tools),
+                                   Z @ B[i] @ np.linalg.inv(X) @ Y, rtol=0, atol=1e-9)
+        # the probe as tracked, a cross-check: within the simulated noise of the coil
+        probe = _plus_chain(edges, "Probe", "Tracker", tools)
+        assert np.linalg.norm(probe[:3, 3] - coil[:3, 3]) < 1.0
+    np.testing.assert_allclose(_plus_chain(edges, "CoilCentre", "Flange", {}), Y, rtol=0,
+                               atol=1e-9)
+
+
+def test_plus_device_set_of_a_marker_only_calibration_has_no_coil(files, tmp_path):
+    """A marker-only calibration (no Y): no coil definition and no probe tool."""
+    doc = yaml.safe_load((files / "qr36.yaml").read_text())
+    for d in (doc, doc["raw"]):
+        d.pop("Y")
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(doc))
+    run("export", tmp_path / "m.yaml", "--format", "plus", "-o", tmp_path / "m.xml")
+    root = ET.parse(tmp_path / "m.xml").getroot()
+    assert {(t.get("From"), t.get("To")) for t in root.iter("Transform")} == {
+        ("CoilMarker", "Flange"), ("Tracker", "RobotBase")}
+    assert [s.get("Id") for s in root.iter("DataSource") if s.get("Type") == "Tool"] == [
+        "CoilMarker"]
 
 
 def test_plus_device_set_of_another_tracker_has_no_rom_files(files, tmp_path, monkeypatch):
@@ -133,7 +245,7 @@ def test_plus_device_set_of_another_tracker_has_no_rom_files(files, tmp_path, mo
     dev = ET.parse(tmp_path / "p.xml").getroot().find("./DataCollection/Device")
     assert dev.get("Type").startswith("CHECK") and dev.get("SerialPort") is None
     sources = dev.findall("./DataSources/DataSource")
-    assert [s.get("Id") for s in sources] == ["CoilMarker", "CoilCentre"]
+    assert [s.get("Id") for s in sources] == ["CoilMarker", "Probe"]
     assert all(s.get("RomFile") is None for s in sources)
 
 
@@ -214,6 +326,31 @@ def test_json_export_has_everything_and_loads_back(files):
     for k in ("X", "Y", "Z", "X_raw", "Z_raw"):
         np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
     np.testing.assert_allclose(d["used"]["Z"], a.used()["Z"], atol=0)
+
+
+@pytest.mark.parametrize("calib", ["qr36.yaml", "ml.yaml"])
+def test_json_export_carries_the_coil_on_the_marker(files, calib):
+    """``CoilToMarker`` (marker ← coil) is X⁻¹ · Y of the calibration file's X and Y, read
+    with PyYAML and json; rigid; it maps the coil's origin to where the marker sees it."""
+    src = yaml.safe_load((files / calib).read_text())
+    d = json.loads(export(files, calib, "json", f"{calib}.json").read_text())
+    X, Y = np.asarray(src["X"], dtype=float), np.asarray(src["Y"], dtype=float)
+    M = np.asarray(d["CoilToMarker"], dtype=float)
+    np.testing.assert_allclose(M, np.linalg.inv(X) @ Y, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(M[:3, :3] @ M[:3, :3].T, np.eye(3), atol=1e-12)
+    np.testing.assert_array_equal(M[3], [0, 0, 0, 1])
+    assert "marker_from_coil" in d["frames"]["CoilToMarker"]
+    assert d["frames"]["Y"] == "flange_from_probe"  # the file's own frames kept
+
+
+def test_json_export_of_a_marker_only_calibration_has_no_coil(files, tmp_path):
+    doc = yaml.safe_load((files / "qr36.yaml").read_text())
+    for m in (doc, doc["raw"]):
+        m.pop("Y")
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(doc))
+    run("export", tmp_path / "m.yaml", "--format", "json", "-o", tmp_path / "m.json")
+    d = json.loads((tmp_path / "m.json").read_text())
+    assert d["CoilToMarker"] is None and load_calibration(tmp_path / "m.json").Y is None
 
 
 def test_export_refuses_bad_use(files):

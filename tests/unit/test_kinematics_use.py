@@ -277,11 +277,38 @@ def test_stream_commands_the_coil_through_the_arm() -> None:
 
     def frame(P):
         return TrackerFrame(frame=0, host_time=0.0, tools={"probe": ToolState(pose=P)})
-    got = frame_transforms(frame(C[0]), cal)
+    got = frame_transforms(frame(C[0]), cal, coil_from="probe")
     np.testing.assert_allclose(got["CoilToRobotBase"], cal.flange_command(C[:1])[0] @ cal.Y,
                                atol=1e-9)
     assert np.linalg.norm(got["CoilToRobotBase"][:3, 3] - (cal.Z @ C[0])[:3, 3]) > 1e-3
     far = C[0].copy()
+    far[:3, 3] += np.linalg.inv(cal.Z)[:3, :3] @ np.array([5000.0, 0.0, 0.0])
+    gone = frame_transforms(frame(far), cal, coil_from="probe")
+    assert "CoilToRobotBase" not in gone and "CoilToTracker" in gone
+
+
+def test_stream_commands_the_coil_on_the_marker_through_the_arm() -> None:
+    """The coil from the marker alone (the probe removed): CoilToRobotBase is A_cmd · Y for
+    the coil B · X⁻¹ · Y, the same command as for a probe seen exactly there; a marker pose
+    whose coil the arm cannot reach gets none, and the coil in the tracker is still sent."""
+    from tmscal.drivers.base import ToolState, TrackerFrame
+    from tmscal.stream import frame_transforms
+
+    truth_arm, (X, Y, Z), q, A, B, C, _ = _controller_rig(n=30)
+    cal = solve(A, B, C, method="ml", joints=q, arm="ur5e", kinematics="estimate",
+                level="offsets")
+
+    def frame(P):
+        return TrackerFrame(frame=0, host_time=0.0, tools={"marker": ToolState(pose=P)})
+    coil = B[0] @ np.linalg.inv(cal.X) @ cal.Y
+    got = frame_transforms(frame(B[0]), cal)
+    np.testing.assert_allclose(got["CoilToTracker"], coil, atol=1e-9)
+    np.testing.assert_allclose(got["CoilToRobotBase"],
+                               cal.flange_command(B[:1], body="marker")[0] @ cal.Y, atol=1e-9)
+    np.testing.assert_allclose(got["CoilToRobotBase"],
+                               cal.flange_command(coil[None])[0] @ cal.Y, atol=1e-6)
+    assert np.linalg.norm(got["CoilToRobotBase"][:3, 3] - (cal.Z @ coil)[:3, 3]) > 1e-3
+    far = B[0].copy()
     far[:3, 3] += np.linalg.inv(cal.Z)[:3, :3] @ np.array([5000.0, 0.0, 0.0])
     gone = frame_transforms(frame(far), cal)
     assert "CoilToRobotBase" not in gone and "CoilToTracker" in gone

@@ -88,10 +88,12 @@ def _invesalius_Z(path: Path) -> np.ndarray:
     return Y
 
 
-def _streamed(cal: object, C: np.ndarray, B: np.ndarray) -> dict[str, np.ndarray]:
+def _streamed(cal: object, C: np.ndarray, B: np.ndarray, coil_from: str = "marker"
+              ) -> dict[str, np.ndarray]:
     """What a pyigtl client receives for one tracker frame with the marker at B and the
-    probe at C (tracker ← tool, mm)."""
+    probe at C (tracker ← tool, mm), the coil from ``coil_from``."""
     frame = TrackerFrame(1, 0.0, {"marker": ToolState(B), "probe": ToolState(C)})
+    sent = frame_transforms(frame, cal, coil_from=coil_from)  # type: ignore[arg-type]
     host = unique_host()
     with StreamServer(host, 0) as srv:
         client = pyigtl.OpenIGTLinkClient(host=host, port=srv.port)
@@ -99,9 +101,9 @@ def _streamed(cal: object, C: np.ndarray, B: np.ndarray) -> dict[str, np.ndarray
             wait_until(lambda: len(srv.peers) == 1, 30.0, "the pyigtl client connected")
             got: dict[str, np.ndarray] = {}
             guard = Deadline(30.0)
-            while len(got) < 4:
+            while len(got) < len(sent):
                 assert not guard.expired(), f"received only {sorted(got)}"
-                srv.send_transforms(frame_transforms(frame, cal), 1.0)  # type: ignore[arg-type]
+                srv.send_transforms(sent, 1.0)
                 time.sleep(0.01)
                 for m in client.get_latest_messages():
                     got[m.device_name] = np.asarray(m.matrix, dtype=float)
@@ -139,14 +141,21 @@ def test_file_loader_exports_and_stream_carry_the_same_rigid_z(calibs, name):
     C[:3, 3] += [20.0, -10.0, 5.0]
     B = C.copy()
     B[:3, 3] += [0.0, 30.0, 0.0]
-    got = _streamed(cal, C, B)
-    assert set(got) == {"TrackerToRobotBase", "CoilToTracker", "MarkerToTracker",
-                        "CoilToRobotBase"}
-    sent = got["TrackerToRobotBase"]
-    np.testing.assert_allclose(sent[:3, 3], Z[:3, 3], atol=F32_MM)
-    np.testing.assert_allclose(sent[:3, :3], Z[:3, :3], atol=F32_ROT)
-    if not cal.distortion:  # the coil through the same Z (with one, C is undistorted first)
-        np.testing.assert_allclose(got["CoilToRobotBase"][:3, 3], (Z @ C)[:3, 3], atol=F32_MM)
+    coil = B @ np.linalg.inv(np.asarray(doc["X"], dtype=float)) @ np.asarray(doc["Y"],
+                                                                              dtype=float)
+    for coil_from, expected in (("marker", coil), ("probe", C)):
+        got = _streamed(cal, C, B, coil_from)
+        assert set(got) == {"TrackerToRobotBase", "CoilToTracker", "ProbeToTracker",
+                            "MarkerToTracker", "CoilToRobotBase"}
+        sent = got["TrackerToRobotBase"]
+        np.testing.assert_allclose(sent[:3, 3], Z[:3, 3], atol=F32_MM)
+        np.testing.assert_allclose(sent[:3, :3], Z[:3, :3], atol=F32_ROT)
+        # the coil from the exported (rigid) X and Y, through the same Z (with a
+        # distortion, the pose is undistorted first)
+        np.testing.assert_allclose(got["CoilToTracker"][:3, 3], expected[:3, 3], atol=F32_MM)
+        if not cal.distortion:
+            np.testing.assert_allclose(got["CoilToRobotBase"][:3, 3], (Z @ expected)[:3, 3],
+                                       atol=F32_MM)
 
 
 def test_solve_prints_the_z_the_file_and_exports_carry_and_says_so(calibs, tmp_path):

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import CalibrationError
-from ..geometry import orthonormalize
+from ..geometry import invert, orthonormalize
 from .metrics import holdout_errors
 from .ml_model import undistort
 
@@ -99,31 +99,55 @@ class Calibration:
         :meth:`placement` apply)."""
         return {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
 
-    def placement(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(targets, Y, Z) with which a robot places the coil at measured probe poses C
-        (n, 4, 4) mm: the applied Y and Z; with a tracker ``distortion``, the targets
-        undistorted first (``ml_model.undistort``) and the rigid Y, Z, so that no scale of the
-        distortion leaks into the commanded flange pose Z C Y⁻¹."""
+    def marker_from_coil(self) -> np.ndarray:
+        """marker ← coil centre (4×4 mm, rigid): X⁻¹ · Y of the exported (orthonormal) X and
+        Y (:meth:`exported`), where the coil's effective centre sits in the marker's frame.
+        With it the marker alone gives the coil: tracker ← coil = B · X⁻¹ · Y
+        (docs/streaming.md, "Navigation without the probe"). CalibrationError for a
+        marker-only calibration (no Y)."""
+        if self.Y is None:
+            raise CalibrationError("a marker-only calibration has no coil (Y): the coil "
+                                   "cannot be derived from the marker")
+        return invert(self.X) @ self.Y
+
+    def placement(self, C: np.ndarray, body: str = "probe"
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(targets, Y, Z) with which a robot places the coil at measured tracker poses C
+        (n, 4, 4) mm of ``body``: the applied Y and Z; with a tracker ``distortion``, the
+        poses undistorted first (``ml_model.undistort``) and the rigid Y, Z, so that no scale
+        of the distortion leaks into the commanded flange pose Z C Y⁻¹. ``body`` "probe":
+        C are probe poses, the coil's own (targets = C'); "marker": C are marker poses B and
+        the targets are the coil on them, B' · X⁻¹ · Y (:meth:`marker_from_coil`; B'
+        undistorted, the marker ← coil offset rigid as calibrated)."""
+        if body not in ("probe", "marker"):
+            raise ValueError(f"body must be 'probe' or 'marker', got {body!r}")
+        C = np.asarray(C, dtype=float)
         d = self.distortion
         if d and d.get("matrix") is not None and d.get("model") != "none":
             G = np.linalg.inv(np.asarray(d["matrix"], dtype=float))
-            return undistort(C, G, "affine"), self.Y, self.Z
-        u = self.used()
-        return C, u["Y"], u["Z"]
+            targets, Y, Z = undistort(C, G, "affine"), self.Y, self.Z
+        else:
+            u = self.used()
+            targets, Y, Z = C, u["Y"], u["Z"]
+        if body == "marker":
+            targets = targets @ self.marker_from_coil()
+        return targets, Y, Z  # type: ignore[return-value]
 
-    def flange_command(self, C: np.ndarray, seeds: Any = None) -> np.ndarray:
+    def flange_command(self, C: np.ndarray, seeds: Any = None, body: str = "probe"
+                       ) -> np.ndarray:
         """The flange poses to command (n, 4, 4), base_from_flange mm in the controller's
         frame, so that the coil (probe frame) lands where the tracker would see the probe at
         poses C (n, 4, 4) mm: A = (Ẑ C' Ŷ⁻¹)⊥ with C', Ŷ, Ẑ as :meth:`placement` gives them
-        (a robot takes rigid poses); with an identified arm (:attr:`arm`), the pose the
+        (a robot takes rigid poses); ``body`` "marker": C are marker poses and C' the coil on
+        them (:meth:`placement`). With an identified arm (:attr:`arm`), the pose the
         controller's nominal kinematics must be told so that the real arm reaches A (inverse
         kinematics on the identified arm, forward on the nominal one; ``seeds``: joint
         configurations, rad, tried first). CalibrationError for a marker-only calibration or
         a pose the arm cannot reach."""
-        targets, Y, Z = self.placement(np.asarray(C, dtype=float).reshape(-1, 4, 4))
-        if Y is None:
+        if self.Y is None:
             raise CalibrationError("a marker-only calibration has no coil (Y): it cannot "
                                    "place the coil")
+        targets, Y, Z = self.placement(np.asarray(C, dtype=float).reshape(-1, 4, 4), body)
         A = orthonormalize(Z @ targets @ np.linalg.inv(Y))
         return A if self.arm is None else self.arm.command(A, seeds)
 

@@ -77,8 +77,9 @@ def _notes(fmt: str, cf: object, out_suffix: str) -> list[str]:
         from ..exports.invesalius import tcp_offset_mm
         x, y, z = tcp_offset_mm(cf)
         out.append(f"set the robot TCP offset to ({x:.3f}, {y:.3f}, {z:.3f}) mm, no rotation "
-                   "(the marker's origin in the flange frame); the file has no slot for Y, "
-                   "the coil centre: register the coil in InVesalius as usual")
+                   "(the marker's origin in the flange frame); the file has no slot for Y "
+                   "nor for the coil on the marker (X⁻¹·Y): register the coil in InVesalius "
+                   "as usual (docs/exports.md)")
     if fmt == "itk" and out_suffix not in (".tfm", ".txt"):
         out.append("ITK readers (3D Slicer, SimpleITK) pick the file type by its suffix: name "
                    "the file *.tfm")

@@ -37,7 +37,10 @@ class _Status:
                   else "no client")
         unseen = [f"{t} unseen {st.unseen[t] / st.frames:.0%}" for t in self.tools
                   if st.frames and st.unseen[t]]
-        return fit([f"frames {st.frames}", rate, client, f"sent {st.sent}", *unseen],
+        check = st.crosscheck.last
+        probe = ([f"probe vs marker coil {check[0]:.2f} mm {check[1]:.2f}°"] if check
+                 else [])
+        return fit([f"frames {st.frames}", rate, client, f"sent {st.sent}", *unseen, *probe],
                    self.width - 1)
 
     def __call__(self, st: Any) -> None:
@@ -56,6 +59,36 @@ class _Status:
         if self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def _coil_note(source: str | None, tools: list[str], has_y: bool) -> str:
+    """The line that says where the coil comes from (a warning where the marker cannot give
+    it), printed once at start on stderr (docs/streaming.md, "Where the coil comes from")."""
+    if source == "marker":
+        line = ("coil: CoilToTracker = B · X⁻¹ · Y from the marker (the calibration's marker "
+                "← coil), CoilToRobotBase from it")
+        if "probe" in tools:
+            line += ("; the probe, where seen, is sent as ProbeToTracker and cross-checked "
+                     "(status: probe vs marker coil)")
+        return line
+    if source == "probe":
+        why = ("the calibration is marker-only (no Y): the coil cannot be derived from the "
+               "marker" if not has_y else "no 'marker' tool in tracker.tools")
+        return f"warning: {why}; CoilToTracker and CoilToRobotBase from the probe only"
+    return ("warning: the calibration is marker-only (no Y) and tracker.tools has no 'probe': "
+            "the coil cannot be derived from the marker; CoilToRobotBase and CoilToTracker "
+            "are not sent")
+
+
+def _crosscheck_line(st: Any) -> str | None:
+    """The cross-check of a finished stream (probe-measured against marker-derived coil),
+    None without a frame that saw both."""
+    cc = st.crosscheck
+    if not cc.n:
+        return None
+    return (f"cross-check, probe vs marker-derived coil over {cc.n} frames: mean "
+            f"{cc.mean_mm:.3f} mm {cc.mean_deg:.3f}°, max {cc.max_mm:.3f} mm "
+            f"{cc.max_deg:.3f}°")
 
 
 def _check_host(host: str, allow_remote: bool) -> None:
@@ -104,12 +137,19 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
 
     \b
     Device names (Slicer's "FromToTo": the transform maps From into To; 4×4, mm):
-      CoilToRobotBase     robot base ← coil centre (probe): Z · C
-      CoilToTracker       tracker ← coil centre (probe): C as measured
+      CoilToRobotBase     robot base ← coil centre: Z · coil (the placement rule)
+      CoilToTracker       tracker ← coil centre: B · X⁻¹ · Y, from the marker
+      ProbeToTracker      tracker ← probe: C as measured
       MarkerToTracker     tracker ← coil marker: B as measured
       TrackerToRobotBase  robot base ← tracker: Z of the calibration
-    A tool that is missing or out of the tracker's volume is not sent for that frame (the
-    client keeps its last pose); the status line on stderr counts those frames.
+
+    The coil comes from the marker whenever the config tracks one and the calibration has
+    a coil (Y): no probe is needed. The probe, where seen too, is a cross-check: the status
+    line shows how far the coil it measures is from the marker's, and the last line its
+    mean and maximum. Without a marker tool, or with a marker-only calibration, the coil is
+    the probe as measured. A tool that is missing or out of the tracker's volume is not
+    sent for that frame, nor the coil derived from it (the client keeps its last pose); the
+    status line on stderr counts those frames.
 
     Several clients are served at once, each with its own limits: a client that reads
     slowly loses its oldest frames (not the others'), one that takes nothing for 10 s is
@@ -120,7 +160,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     from ..acquisition.devices import make_tracker
     from ..config import load_config
     from ..exports import load_calibration
-    from ..stream import TRANSFORMS, StreamServer, stream_frames
+    from ..stream import TRANSFORMS, StreamServer, coil_source, stream_frames
     from .rig_commands import StopFlag, close_quietly
 
     _check_host(host, allow_remote)
@@ -131,9 +171,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     if "marker" not in tools and "probe" not in tools:
         raise click.UsageError(f"{config}: tracker.tools has neither 'marker' nor 'probe'; "
                                "nothing to stream")
-    if "probe" not in tools:
-        click.echo("warning: no 'probe' tool in tracker.tools: CoilToRobotBase and "
-                   "CoilToTracker are not sent", err=True)
+    click.echo(_coil_note(coil_source(tools, cal), tools, cal.Y is not None), err=True)
     stop = StopFlag(quiet=True)
     stop.install()
     status = _Status(sys.stderr, tools)
@@ -154,6 +192,9 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
         status.finish()
         click.echo(f"stopped: {st.frames} tracker frames read, {st.sent} sent "
                    f"({st.messages} TRANSFORM messages)")
+        check = _crosscheck_line(st)
+        if check:
+            click.echo(check)
     except KeyboardInterrupt:  # a second Ctrl-C, during a read
         interrupted = True
         status.finish()

@@ -15,8 +15,12 @@ Y N X⁻¹ and the position of affine · N (the marker's origin in the base fram
 robot's TCP pose when the TCP is set at the marker's origin with the flange's orientation,
 i.e. TCP offset = t(X) (as its own registration requires: "robot TCP calibrated to the centre
 of the tracker marker"). Units mm. The file has no slot for tmscal's Y (flange_from_probe: the
-coil's effective centre and axis); InVesalius takes the coil centre from its own coil
-(object) registration instead. The file format allows no comments.
+coil's effective centre and axis) nor for marker ← coil (X⁻¹ · Y): it is exactly three
+matrices, which tms-robot-control splits in three. InVesalius takes the coil from its own coil
+(object) registration instead, which is not a transform but what the user measured: the
+tracked stylus at three fiducials of InVesalius' coil model and the coil marker's pose at the
+time (positions and Euler angles), from which InVesalius builds the coil's frame on its model
+(docs/exports.md says why tmscal cannot write one). The file format allows no comments.
 """
 
 from __future__ import annotations

@@ -5,18 +5,24 @@ PLUS names a transform ``<From>To<To>``; it maps point coordinates of frame From
 (4×4, mm, ``Matrix`` 16 numbers row by row). tmscal's transforms in PLUS' names:
 
 * ``CoilMarkerToFlange`` = X = flange_from_marker
-* ``CoilCentreToFlange`` = Y = flange_from_probe (the probe marks the coil's centre)
+* ``CoilCentreToCoilMarker`` = X⁻¹ · Y = marker_from_coil (the coil's effective centre on
+  the marker, ``Calibration.marker_from_coil``; none for a marker-only calibration)
 * ``TrackerToRobotBase`` = Z = base_from_tracker
 
-(orthonormal matrices). ``Error`` is the calibration's hold-out translation error in mm (the
-marker's for X, the probe's for Y, the total e_t for Z; docs/methods.md), ``Date`` when the
-calibration was written (PLUS' "YYYY.MM.DD hh:mm:ss"). The NDITracker device lists the tools
-as ``DataSource`` elements whose ``Id`` are the frames above (CoilMarker, CoilCentre), so
-PLUS' transform repository chains CoilMarkerToTracker with the definitions; the ROM files,
-serial port and baud rate come from the NDI driver's settings of the session's rig config
-when the calibration file records it (``tmscal solve -o`` does), else placeholders to fill
-in. A session on another tracker driver has no ROM files: its device block carries none, and
-its device type is a placeholder (the file's comment says so).
+(orthonormal matrices). Y = flange_from_probe is CoilCentreToFlange, which PLUS' transform
+repository computes through CoilMarker (X · X⁻¹ · Y): a definition of it too would close a
+loop, which the repository refuses ("A transform path already exists"). ``Error`` is the
+calibration's hold-out translation error in mm (the marker's for X, the total e_t for Z;
+docs/methods.md; no hold-out error is defined for X⁻¹ · Y alone, so it has none), ``Date``
+when the calibration was written (PLUS' "YYYY.MM.DD hh:mm:ss"). The NDITracker device lists
+the tools as ``DataSource`` elements: the marker as ``CoilMarker``, so that PLUS chains the
+tracked CoilMarkerToTracker with the definitions into CoilCentreToTracker (the coil from the
+marker alone), and the probe, where the calibration has one, as ``Probe`` (ProbeToTracker, a
+cross-check; a tool named CoilCentre would close a loop too). The ROM files, serial port and
+baud rate come from the NDI driver's settings of the session's rig config when the
+calibration file records it (``tmscal solve -o`` does), else placeholders to fill in. A
+session on another tracker driver has no ROM files: its device block carries none, and its
+device type is a placeholder (the file's comment says so).
 """
 
 from __future__ import annotations
@@ -35,11 +41,12 @@ from .calibfile import CalibrationFile
 
 __all__ = ["FRAMES", "TOOL_IDS", "matrix_text", "render", "recorded_tracker", "rom_files"]
 
-#: tmscal matrix → (PLUS From, PLUS To)
-FRAMES = {"X": ("CoilMarker", "Flange"), "Y": ("CoilCentre", "Flange"),
+#: tmscal matrix → (PLUS From, PLUS To), in the order written: X, marker ← coil (X⁻¹ · Y),
+#: Z. Y itself is not a definition: PLUS computes CoilCentreToFlange through CoilMarker
+FRAMES = {"X": ("CoilMarker", "Flange"), "CoilToMarker": ("CoilCentre", "CoilMarker"),
           "Z": ("Tracker", "RobotBase")}
 #: tmscal body → PLUS tool (DataSource) Id
-TOOL_IDS = {"marker": "CoilMarker", "probe": "CoilCentre"}
+TOOL_IDS = {"marker": "CoilMarker", "probe": "Probe"}
 
 
 def matrix_text(M: np.ndarray) -> str:
@@ -57,8 +64,7 @@ def _date(created: str | None) -> str:
 
 def _error(doc: dict[str, Any], key: str) -> str:
     e = doc.get("errors") or {}
-    v = {"X": (e.get("marker") or {}).get("trans_mm"),
-         "Y": (e.get("probe") or {}).get("trans_mm"), "Z": e.get("e_t_mm")}[key]
+    v = {"X": (e.get("marker") or {}).get("trans_mm"), "Z": e.get("e_t_mm")}.get(key)
     return "" if v is None else f"{float(v):.4f}"
 
 
@@ -147,22 +153,27 @@ def render(cf: CalibrationFile) -> str:
                   "ROM files; set its PLUS device and tool sources (CHECK)")
     note = (f"tmscal {cal.method} calibration {cf.path.name}: transforms in mm, 16 numbers "
             "row by row; AToB maps A coordinates into B. CoilMarkerToFlange = X "
-            "(flange_from_marker), CoilCentreToFlange = Y (flange_from_probe), "
-            "TrackerToRobotBase = Z (base_from_tracker). Error: hold-out translation error, "
-            f"mm. Tool ROM files and port: {known}.")
+            "(flange_from_marker), CoilCentreToCoilMarker = X⁻¹·Y (marker_from_coil: the "
+            "coil centre on the marker, so CoilCentreToTracker follows from the tracked "
+            "CoilMarker alone, and CoilCentreToFlange = Y through it), TrackerToRobotBase = Z "
+            "(base_from_tracker). Tool Probe: the calibration probe, a cross-check (remove it "
+            "when the probe is gone). Error: hold-out translation error, mm. Tool ROM files "
+            f"and port: {known}.")
     lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- {xml_comment(note)} -->",
              '<PlusConfiguration version="2.1">',
              '  <DataCollection StartupDelaySec="1.0" >',
              '    <DeviceSet Name="tmscal: NDI tracker and the robot calibration" '
-             'Description="CoilMarker and CoilCentre tracked; the calibration in '
+             'Description="CoilMarker (and the calibration Probe) tracked; the calibration in '
              'CoordinateDefinitions" />',
              *_device(cf, driver, settings), "  </DataCollection>", "  <CoordinateDefinitions>"]
-    exported = cal.exported()  # rigid, as every export (docs/exports.md)
+    exported = dict(cal.exported())  # rigid, as every export (docs/exports.md)
+    exported["CoilToMarker"] = cal.marker_from_coil() if cal.Y is not None else None
     for k, (a, b) in FRAMES.items():
         M = exported[k]
         if M is None:
             continue
+        err = "" if k == "CoilToMarker" else f"Error={xml_attr(_error(cf.doc, k))} "
         lines.append(f'    <Transform From="{a}" To="{b}" Matrix="{matrix_text(M)}" '
-                     f'Error={xml_attr(_error(cf.doc, k))} Date={xml_attr(date)} />')
+                     f'{err}Date={xml_attr(date)} />')
     lines += ["  </CoordinateDefinitions>", "</PlusConfiguration>", ""]
     return "\n".join(lines)
