@@ -27,6 +27,7 @@ import numpy as np
 
 from ..config import RigConfig
 from ..errors import TmscalError
+from ..escape import value_text
 from ..geometry import angle_between, check_pose
 from .devices import envelope_for
 
@@ -354,9 +355,9 @@ def _value_lines(values: dict[str, Any]) -> list[str]:
     for k, val in values.items():
         if isinstance(val, dict) and k.endswith("identity"):
             out.append(f"      {k}:")
-            out += [f"        {ik}: {iv}" for ik, iv in val.items()]
+            out += [f"        {ik}: {value_text(iv)}" for ik, iv in val.items()]
         else:
-            out.append(f"      {k}: {val}")
+            out.append(f"      {k}: {value_text(val)}")
     return out
 
 

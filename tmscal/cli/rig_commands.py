@@ -11,6 +11,7 @@ from typing import Any
 import click
 import numpy as np
 
+from ..escape import value_text
 from .acquire_adaptive import adaptive_options, check_adaptive_flags
 from .app import (
     EXIT_INTERRUPTED,
@@ -161,7 +162,8 @@ def track(config: Path, tracker_port: str | None, old_port: str | None, frames: 
     interrupted = False
     try:
         ident = tr.identity()
-        click.echo("tracker: " + ", ".join(f"{k} {v}" for k, v in ident.items() if v))
+        click.echo("tracker: " + ", ".join(f"{k} {value_text(v)}" for k, v in ident.items()
+                                           if v))
         handles = getattr(tr, "handles", {})  # an NDI's port handles
         names = ident.get("tools") if isinstance(ident.get("tools"), dict) else {}
         for name in tr.tools:
@@ -239,7 +241,8 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
         target = matrix_from_denso_p(vals)
     cfg = load_config(config, check_files=False)  # the robot needs no tracker files
     with make_robot(cfg, envelope_for(cfg, None), host) as rb:
-        click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
+        click.echo("robot: " + ", ".join(f"{k} {value_text(v)}"
+                                         for k, v in rb.identity().items() if v))
         here = rb.flange_pose()
         _echo_pose("flange (base ← flange)", here, rb)
         click.echo(_matrix_text(here))
