@@ -222,3 +222,26 @@ def test_track_ctrl_c_closes_the_tracker_quietly(tmp_path, mock_config):
             _, err = p.communicate(timeout=60)
             assert p.returncode == 0, err
             assert err == "", err  # no warning, no raw reply bytes, no error line
+
+
+@pytest.mark.e2e
+def test_output_into_a_closed_pipe_ends_quietly_with_141(tmp_path, mock_config):
+    """`tmscal track CONFIG --plain | head -1` with a real pipe: track prints until it is
+    stopped, so its writes after head has gone meet a closed pipe, whatever the timing. It
+    ends at once with 141 (128 + SIGPIPE, as a shell reports a program its pipe ended) and
+    writes nothing on stderr (before: "error: Broken pipe", exit 1)."""
+    cfg = _rig(mock_config)
+    with start_mock_rig(load_config(cfg), tracker_transport="tcp") as mr:
+        pointed = point_config(cfg, mr.endpoints)
+        track = subprocess.Popen(_cli("track", str(pointed), "--plain"),
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env(),
+                                 cwd=REPO)
+        head = subprocess.Popen(["head", "-1"], stdin=track.stdout, stdout=subprocess.PIPE)
+        assert track.stdout is not None
+        track.stdout.close()  # head holds the only read end
+        first, _ = head.communicate(timeout=120)
+        code = track.wait(timeout=120)
+        err = track.stderr.read() if track.stderr else b""
+    assert first.startswith(b"tracker: driver ndi"), first
+    assert code == 141, err
+    assert err == b"", err
