@@ -14,6 +14,9 @@ used by every writer of that kind (the PLUS export, the HTML report, the text ta
   first; then ``& < >`` (and quotes in attributes) become entities; in a comment, which
   has no entities, ``--`` is split ("- -") and a trailing ``-`` gets a space.
 - HTML (:func:`html_text`): :func:`visible`, then ``& < > " '`` as entities.
+- A value of a device's identity or a check's measurements (:func:`value_text`): a mapping
+  as ``{marker: 1, probe: 2}`` and a list as ``[0.0, 0.0, 0.0]`` (YAML's flow style, the
+  configs' own), never Python's ``{'marker': 1}`` repr; then :func:`visible`.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from __future__ import annotations
 import html
 import re
 
-__all__ = ["visible", "xml_text", "xml_attr", "xml_comment", "html_text"]
+__all__ = ["visible", "xml_text", "xml_attr", "xml_comment", "html_text", "value_text"]
 
 #: what :func:`visible` escapes (besides newline and carriage return, unless kept)
 _UNSAFE = re.compile(
@@ -71,3 +74,16 @@ def html_text(s: object, newlines: bool = False) -> str:
     """Text or an attribute value (between double quotes) of an HTML page:
     :func:`visible`, then ``& < > " '`` as entities."""
     return html.escape(visible(s, newlines=newlines), quote=True)
+
+
+def value_text(v: object) -> str:
+    """``v`` for a line of text output: a mapping as ``{key: value, …}``, a list or tuple as
+    ``[a, b, …]`` (YAML's flow style, recursively; no quotes), anything else as ``str``;
+    made :func:`visible`."""
+    def text(x: object) -> str:
+        if isinstance(x, dict):
+            return "{" + ", ".join(f"{text(k)}: {text(y)}" for k, y in x.items()) + "}"
+        if isinstance(x, (list, tuple)):
+            return "[" + ", ".join(text(y) for y in x) + "]"
+        return str(x)
+    return visible(text(v))

@@ -16,7 +16,7 @@ import socket
 from .errors import ConfigError
 
 __all__ = ["NotLoopbackError", "loopback_family", "is_loopback", "url_host",
-           "split_endpoint", "listen_error", "tcp_probe"]
+           "split_endpoint", "listen_error", "tcp_probe", "connect_problem", "socket_error"]
 
 
 class NotLoopbackError(ConfigError, ValueError):
@@ -114,3 +114,62 @@ def tcp_probe(host: str, port: int, timeout_s: float) -> str | None:
         return "timeout"
     except OSError as e:
         return str(e.strerror or e)
+
+
+#: errno values of "no route": the host is not on any network this computer reaches
+_NO_ROUTE = {errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN, errno.ENETDOWN,
+             errno.EADDRNOTAVAIL}
+
+
+def socket_error(e: BaseException | None) -> OSError | None:
+    """The socket error behind ``e``: ``e`` itself, or the first ``OSError`` in its chain of
+    causes and contexts (a library that wraps it, as pyserial's ``SerialException`` does), or
+    None when there is none."""
+    seen: set[int] = set()
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        if isinstance(e, (OSError, TimeoutError)) and (
+                isinstance(e, (TimeoutError, socket.gaierror, ConnectionError))
+                or e.errno is not None):
+            return e
+        e = e.__cause__ or e.__context__
+    return None
+
+
+def connect_problem(e: BaseException, host: str, port: int | str, key: str,
+                    timeout_s: float | None = None, proto: str = "TCP",
+                    service: str = "") -> str | None:
+    """What a failed connection to ``host:port`` (``proto`` TCP or UDP) means and what to
+    check, in one sentence naming the address and the config ``key`` it came from; None when
+    ``e`` holds no socket error (:func:`socket_error`). The one wording of the drivers' error
+    translation for the failures of the network:
+
+    * refused: the host answered but nothing listens on that port (a wrong port; the device's
+      ``service``, e.g. "PlusServer", not running);
+    * timed out (``timeout_s``): nothing answered (a wrong address, the device off or on
+      another network, a firewall dropping the port);
+    * no route to the host, a name that does not resolve: the address, this computer's
+      network;
+    * anything else: the system's text and the address."""
+    se = socket_error(e)
+    if se is None:
+        return None
+    where = f"{url_host(host)}:{port} ({proto})"
+    what = f" ({service})" if service else ""
+    check_ip = f"check the device's IP address and port ({key})"
+    if isinstance(se, ConnectionRefusedError) or se.errno == errno.ECONNREFUSED:
+        return (f"connection refused by {where}: the host answers but nothing listens on "
+                f"port {port} (or a firewall rejects it); {check_ip}, and that the device's "
+                f"service{what} is running")
+    if isinstance(se, TimeoutError) or se.errno == errno.ETIMEDOUT:
+        within = f" within {timeout_s:g} s" if timeout_s else ""
+        return (f"no answer from {where}{within}: {check_ip}, that the device is powered "
+                f"on and on this computer's network, and that no firewall blocks {proto} port "
+                f"{port}")
+    if isinstance(se, socket.gaierror):
+        return (f"cannot resolve the host name {host!r} ({se.strerror or se}): check the "
+                f"address ({key}) and this computer's name service")
+    if se.errno in _NO_ROUTE:
+        return (f"no route to {where} ({se.strerror or se}): {check_ip}, and that this "
+                "computer is on the device's network (its cable, its IP settings and subnet)")
+    return f"cannot connect to {where}: {se.strerror or se}; {check_ip}"

@@ -140,7 +140,7 @@ def test_tool_missing_everywhere_is_skipped_with_reason(tmp_path, mock_config):
         res = acquire(cfg, tmp_path / "s.jsonl", **endpoints_kwargs(mr.endpoints))
     assert res.skipped == 3 and res.recorded == 0
     s = read_session(tmp_path / "s.jsonl")
-    assert "marker usable in 0 of 5 frames" in s.poses[0].skipped
+    assert "marker seen in 0 of 5 frames" in s.poses[0].skipped
 
 
 @pytest.mark.e2e

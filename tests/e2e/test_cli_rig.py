@@ -26,6 +26,10 @@ def test_track_robot_dry_run_and_jog(tmp_path, mock_config):
         cfg = point_config(base_cfg, mr.endpoints, "pointed.yaml")
         r = CliRunner().invoke(main, ["track", str(cfg), "--frames", "3"])
         assert r.exit_code == 0, r.output
+        # the tracker's identity as the configs write values, not Python's dict repr
+        ident = r.output.splitlines()[0]
+        assert ident.startswith("tracker: driver ndi") and "handles {marker: 1, probe: 2}" \
+            in ident and "'" not in ident, ident
         lines = [ln for ln in r.output.splitlines() if ln.startswith("frame")]
         assert len(lines) == 3
         marker = [ln.split() for ln in r.output.splitlines() if ln.startswith("  marker ")]

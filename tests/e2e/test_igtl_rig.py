@@ -117,7 +117,7 @@ def test_a_tool_never_sent_or_stale_is_skipped_with_the_reason(mock_config, tmp_
         res = acquire(load_config(cfg_path), out, **endpoints_kwargs(mp.endpoints))
     assert (res.recorded, res.skipped) == (0, 3)
     s = read_session(out)
-    assert all("probe usable in 0 of 5 frames" in p.skipped for p in s.poses), \
+    assert all("probe seen in 0 of 5 frames" in p.skipped for p in s.poses), \
         [p.skipped for p in s.poses]
 
 

@@ -327,3 +327,35 @@ def _child(scenario: str, host: str, args: dict[str, Any], res: dict[str, Any]) 
 
 if __name__ == "__main__":
     child_main(_child)
+
+
+def test_idle_mock_sleeps_until_a_client_connects() -> None:
+    """An idle UR mock (`tmscal mock` with nobody connected) does not run its control
+    script's 4 ms loop (250 wake-ups a second kept 2 % of a core busy): no tick before any
+    client, ticks while a dashboard client is connected, and none again once it has left.
+    The pauses only give a loop that wrongly ticks the time to show it: a correct one ticks
+    no more however long they are."""
+    import socket
+    import time
+
+    from tests.rigs import wait_until
+    from tmscal.mocks.ur import DASHBOARD_PORT
+
+    mock = URMock(_rig(), host=unique_host(), clock=FAST)
+    ticks: list[float] = []
+    tick = mock._tick
+
+    def counted() -> None:
+        ticks.append(time.monotonic())
+        tick()
+
+    mock._tick = counted  # type: ignore[method-assign]
+    with mock:
+        time.sleep(0.3)
+        assert ticks == []
+        with socket.create_connection((mock.host, DASHBOARD_PORT), timeout=5.0):
+            wait_until(lambda: len(ticks) >= 3, 10.0, "the script loop to tick for a client")
+        wait_until(lambda: not mock._busy(), 10.0, "the dashboard client to be gone")
+        n = len(ticks)
+        time.sleep(0.3)
+        assert len(ticks) - n <= 1  # at most the tick under way when the client left

@@ -136,3 +136,32 @@ def test_reply_length_never_overshoots_text(data: bytes) -> None:
         return
     if n is not None and data[:1] != b"\xc4":
         assert data[n - 1:n] == b"\r" and b"\r" not in data[:n - 1]
+
+
+# --- tracker.port: a network address must say socket:// ----------------------------------------
+
+_IPV4 = st.tuples(*[st.integers(0, 255)] * 4).map(lambda t: ".".join(map(str, t)))
+_NAME = st.from_regex(r"[A-Za-z0-9][A-Za-z0-9.-]{0,30}", fullmatch=True)
+
+
+@SETTINGS
+@given(host=st.one_of(_IPV4, _NAME), port=st.integers(1, 65535))
+def test_a_bare_host_and_port_is_refused_with_its_socket_url(host: str, port: int) -> None:
+    from tmscal.drivers.ndi.settings import tracker_port_problem
+
+    problem = tracker_port_problem(f"{host}:{port}")
+    assert problem is not None and f"socket://{host}:{port}" in problem
+    assert tracker_port_problem(f"socket://{host}:{port}") is None
+
+
+@SETTINGS
+@given(st.text(max_size=80))
+def test_the_port_check_answers_every_text_and_passes_device_paths(text: str) -> None:
+    """Any text gets None or a reason, never an exception; a path under /dev without a URL
+    scheme or a control character is a device path, whatever colons it holds."""
+    from tmscal.drivers.ndi.settings import tracker_port_problem
+
+    assert tracker_port_problem(text) is None or isinstance(tracker_port_problem(text), str)
+    path = "/dev/" + text
+    if "://" not in path and not any(c in path for c in "\0\r\n"):
+        assert tracker_port_problem(path) is None

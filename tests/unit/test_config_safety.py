@@ -246,9 +246,25 @@ def test_make_robot_refuses_a_driver_that_drops_the_envelope(monkeypatch):
 
 @pytest.mark.parametrize("port", ["/dev/ttyUSB0", "/dev/pts/3", "COM3",
                                   "socket://127.0.0.1:8765", "socket://[::1]:8765",
-                                  "socket://vega.local:8765", "SOCKET://10.0.0.5:8765"])
+                                  "socket://vega.local:8765", "SOCKET://10.0.0.5:8765",
+                                  "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0",
+                                  r"\\.\COM10", "ttyUSB0"])
 def test_tracker_ports_accepted(port):
     assert tracker_port_problem(port) is None
+
+
+@pytest.mark.parametrize("port, url", [
+    ("192.168.1.10:8765", "socket://192.168.1.10:8765"),
+    ("192.168.1.10", "socket://192.168.1.10:8765"),   # no port: the Vega's API port
+    ("vega.local:8765", "socket://vega.local:8765"),
+    ("P9-01234:8765", "socket://P9-01234:8765"),
+    ("[fe80::1]:8765", "socket://[fe80::1]:8765")])
+def test_a_network_address_without_socket_scheme_is_refused_with_the_spelling(port, url):
+    """A Vega's address written as host:port passed config loading and failed only when the
+    port opened, "No such file or directory": refused at load, naming the key and the
+    socket:// spelling to use."""
+    msg = key_error({"tracker": {"port": port, "tools": {"marker": ROM}}}, "tracker.port")
+    assert f"'{port}'" in msg and "without socket://" in msg and url in msg, msg
 
 
 @pytest.mark.parametrize("port", ["spy:///dev/ttyUSB0?file=/tmp/x", "SPY://x?file=y",

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 
 from tmscal.cli import main
@@ -41,9 +42,18 @@ def rig(tmp_path_factory) -> dict[str, Path]:
     D = make_pose(rot_x(np.radians(1.0)), [3.0, 0.0, 0.0])
     bumped = [replace(p, B=D @ p.B, C=D @ p.C) for p in s.poses[60:]]
     write_session(d / "bumped.jsonl", s.header, bumped)
+    # a daily session that tracked the marker only (no probe on the coil today)
+    write_session(d / "marker.jsonl", {**s.header, "bodies": ["marker"]},
+                  [replace(p, C=None) for p in s.poses[60:]])
+    # one pose of today's session with its marker knocked by 2 mm: session pose index 70, the
+    # 11th pose of the file
+    knocked = [replace(p, B=p.B @ make_pose(np.eye(3), [2.0, 0.0, 0.0])) if p.index == 70
+               else p for p in s.poses[60:]]
+    write_session(d / "knocked.jsonl", s.header, knocked)
     code, out = _run("solve", d / "calib.jsonl", "-o", d / "cal.yaml", "--folds", 2)
     assert code == 0, out
-    return {k: d / f"{k}.jsonl" for k in ("today", "bumped")} | {"cal": d / "cal.yaml"}
+    return ({k: d / f"{k}.jsonl" for k in ("today", "bumped", "marker", "knocked")}
+            | {"cal": d / "cal.yaml"})
 
 
 def test_same_rig_passes_a_moved_tracker_fails(rig) -> None:
@@ -97,3 +107,42 @@ def test_verdict_rule_each_total_within_its_tolerance() -> None:
     assert verdict({"e_t_mm": float("nan"), "theta_t_deg": 0.1}, 1.0)["result"] == "FAIL"
     with pytest.raises(CalibrationError, match="tolerance_mm"):
         verdict(errs, -1.0)
+
+
+def _row(out: str, label: str) -> list[float]:
+    """The numbers of the check table's row that starts with ``label``."""
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith(label))
+    return [float(x) for x in line[len(line) - len(line.lstrip()) + len(label):].split()
+            if x[0].isdigit()]
+
+
+def test_marker_only_session_is_compared_with_the_stored_marker_row(rig) -> None:
+    """A session without the probe has a marker-only total: it stands beside the stored
+    marker row (like with like), not the stored two-body total, and the output says so; a
+    two-body session's total stands beside the stored total."""
+    stored = yaml.safe_load(rig["cal"].read_text())["errors"]
+    code, out = _run("solve", rig["marker"], "--calib", rig["cal"])
+    assert code == 0, out
+    total = _row(out, "total  e_t, θ_t (marker only)")
+    marker = _row(out, "marker")
+    assert total[:2] == marker[:2]  # the session's total is the marker's alone
+    assert total[2:] == [round(stored["marker"]["trans_mm"], 4),
+                         round(stored["marker"]["rot_deg"], 4)]
+    # the stored two-body total is larger: beside it a marker-only total looks too good
+    assert total[2] < round(stored["e_t_mm"], 4)
+    assert "stands beside the stored marker row" in " ".join(out.split())
+    code, out = _run("solve", rig["today"], "--calib", rig["cal"])
+    assert code == 0, out
+    assert _row(out, "total  e_t, θ_t")[2:] == [round(stored["e_t_mm"], 4),
+                                                 round(stored["theta_t_deg"], 4)]
+    assert "marker only" not in out
+
+
+def test_outlier_poses_are_labelled_as_session_pose_indices(rig) -> None:
+    """The knocked pose is named by its session pose index (70), not by its place in the
+    file (the 11th) nor read as a count."""
+    code, out = _run("solve", rig["knocked"], "--calib", rig["cal"])
+    assert code == 0, out
+    assert "  outlier poses (session pose index): 70\n" in out
+    code, out = _run("solve", rig["today"], "--calib", rig["cal"])
+    assert "  outlier poses (session pose index): none\n" in out

@@ -222,3 +222,17 @@ def test_report_of_a_hostile_stored_calibration_is_clean(calib, tmp_path):
     assert f"errors: the stored {method} calibration" in text  # the <pre> error table
     assert f"/data/{shown}.jsonl" in text and f"2024 {MARKUP}" in text
     assert r"rlo\u202ec.yaml" in text
+
+
+def test_value_text_writes_mappings_and_lists_as_the_configs_do() -> None:
+    """A device identity's values on a line of output: no Python repr (quotes, np.float64),
+    control characters made visible."""
+    import numpy as np
+
+    from tmscal.escape import value_text
+
+    assert value_text({"marker": 1, "probe": 2}) == "{marker: 1, probe: 2}"
+    assert value_text([0.0, np.float64(0.5)]) == "[0.0, 0.5]"
+    assert value_text({"tools": {"marker": [1, 2]}}) == "{tools: {marker: [1, 2]}}"
+    assert value_text("P6-00001") == "P6-00001"
+    assert value_text({"name": "a\x1b[2Jb"}) == "{name: a\\x1b[2Jb}"

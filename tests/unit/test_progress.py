@@ -19,7 +19,7 @@ from tmscal.acquisition.skips import SkipWatch
 from tmscal.cli.live import AcquireProgress, fit, stderr_to_log
 from tmscal.config import RunConfig, parse_config
 from tmscal.errors import ConfigError
-from tmscal.session import PoseRecord, skip_cause
+from tmscal.session import PoseRecord, seen_text, skip_cause
 
 
 def test_child_and_c_level_stderr_go_to_the_log_and_fd2_is_restored(caplog, capfd):
@@ -72,28 +72,52 @@ def _rec(i: int, skipped: str | None = None, spread: float = 0.04) -> PoseRecord
                       commanded=np.eye(4), spread=sp, skipped=skipped)
 
 
-_HIDDEN = "probe usable in 58 of 100 frames (< 80%: missing or out of volume)"
+_HIDDEN = "probe seen in 0 of 100 frames, below min_share 0.8 (missing or out of the volume)"
+#: intermittent dropouts: both tools seen, in fewer frames than min_share
+_FLICKER = ("marker seen in 68 of 100 frames, probe seen in 72 of 100 frames, below min_share "
+            "0.9 (dropouts, partly hidden or at the volume's edge)")
 
 
-def test_plain_lines_count_skips_from_a_resumed_session_and_fit_80_columns():
+def test_plain_lines_count_skips_from_a_resumed_session_and_carry_the_whole_reason():
+    """A measured pose's line fits 80 columns; a skipped pose's line carries its whole
+    reason, the shares and min_share included, however long."""
     out = io.StringIO()
     p = AcquireProgress(out, tty=False)
     p.started(done=10, total=500, skipped=4)
     p.pose(11, 500, _rec(10, spread=0.045))
-    p.pose(12, 500, _rec(11, skipped=_HIDDEN))
+    p.pose(12, 500, _rec(11, skipped=_FLICKER))
     lines = out.getvalue().splitlines()
     assert len(lines) == 2 and "\r" not in out.getvalue()
     assert lines[0].startswith("pose 11/500  ETA ")
     assert "skipped 4  marker spread 0.045 mm / 0.090°" in lines[0]
-    assert lines[1].endswith("skipped (5 so far): probe usable in 58 of 100 frames")
-    assert all(len(ln) <= 80 for ln in lines)
+    assert len(lines[0]) <= 80
+    assert lines[1].endswith(f"skipped (5 so far): {_FLICKER}")
+    assert len(lines[1]) > 80
 
 
-def test_skip_cause_names_the_bodies_not_seen():
+def test_skip_cause_names_the_bodies_not_seen_or_seen_too_rarely():
     assert skip_cause(_HIDDEN) == "probe not seen (missing or out of volume)"
-    both = "marker usable in 1 of 10 frames (< 80%: x); probe usable in 0 of 10 frames (< 80%)"
-    assert skip_cause(both) == "marker and probe not seen (missing or out of volume)"
+    assert skip_cause(_FLICKER) == ("marker and probe seen in too few frames (below "
+                                    "min_share 0.9)")
+    assert seen_text(_FLICKER) == "marker 68 of 100 frames, probe 72 of 100"
+    # a session of an earlier version: "usable in", the share as a percentage
+    old = "marker usable in 1 of 10 frames (< 80%: x); probe usable in 0 of 10 frames (< 80%)"
+    assert skip_cause(old) == "marker and probe seen in too few frames (below min_share 0.8)"
+    assert skip_cause("probe usable in 0 of 5 frames") == ("probe not seen (missing or out "
+                                                          "of volume)")
     assert skip_cause("invalid measurement (pose 'A' is not finite)") == "invalid measurement"
+    assert seen_text("invalid measurement (pose 'A' is not finite)") is None
+
+
+def test_skip_watch_names_min_share_and_the_measured_shares_of_dropouts():
+    """Tools seen in some frames but fewer than min_share are not "not seen": the warning
+    names min_share and how often the last such pose saw each tool."""
+    w = SkipWatch(RunConfig(warn_skip_share=0.1, stop_skip_share=0.5, skip_window=20))
+    said = [w.add(_rec(i, skipped=_FLICKER)) for i in range(3)]
+    assert said[2][0] == ("marker and probe seen in too few frames (below min_share 0.9) in 3 "
+                          "of the last 3 poses (the last: marker 68 of 100 frames, probe 72 "
+                          "of 100), above run.warn_skip_share 0.1; check the tools' line of "
+                          "sight")
 
 
 def test_skip_watch_warns_once_past_the_first_share_and_stops_past_the_second():

@@ -140,7 +140,9 @@ def test_a_pose_corrupted_on_purpose_is_the_one_outlier(tmp_path):
     assert [o["index"] for o in res.outliers] == [17]
     assert {(f["body"], f["metric"]) for f in res.outliers[0]["flags"]} >= {
         ("marker", "translation")}
-    assert "pose 17: marker translation" in format_result(res)
+    text = format_result(res)
+    assert "outlier poses (session pose index; rule:" in text  # an index, not a count
+    assert "pose index 17: marker translation" in text
     clean = write_sim(tmp_path / "ok.jsonl", *simulate(120, np.random.default_rng(5)))
     assert find_outliers({"index": [], "marker": {"trans_mm": [], "rot_deg": []}}) == []
     assert solve_session(clean, "qr36")[1].outliers == []

@@ -263,7 +263,8 @@ def test_a_body_never_seen_does_not_hold_up_settling():
     tr = SwingTracker(4, A0, TAU, FREQ, sigma_mm=0.005, missing=("probe",))
     s, last_settle = _run(tr, still_tol_mm=0.05)
     assert s.still and last_settle / RATE_HZ >= _t_envelope(A0, TAU, 3 * 0.05)
-    assert s.problem is not None and s.problem.startswith("probe usable in 0 of 30 frames")
+    assert s.problem is not None
+    assert s.problem.startswith("probe seen in 0 of 30 frames, below min_share 0.8")
 
 
 @pytest.mark.parametrize("kw", [{"settle": "wait"}, {"still_window_s": 0.0},

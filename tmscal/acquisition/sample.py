@@ -293,20 +293,25 @@ def _average(names: list[str], got: dict, A_reads: list, n_frames: int, min_shar
     samples: dict[str, int] = {"A": len(A_reads)}
     spread: dict[str, dict[str, float]] = {"A": spread_of(np.stack(A_reads), A)}
     share: dict[str, float] = {}
-    problems = []
+    low = []
     for b in names:
         k = len(got[b])
         share[b] = k / n_frames
         samples[b] = k
         if k == 0 or share[b] < min_share:
             out[b] = None
-            problems.append(f"{b} usable in {k} of {n_frames} frames "
-                            f"(< {min_share:.0%}: missing or out of volume)")
+            low.append(f"{b} seen in {k} of {n_frames} frames")
             continue
         P = np.stack(got[b])
         m = pose_mean(P)
         out[b] = m
         spread[b] = spread_of(P, m)
+    problems = []
+    if low:
+        why = ("missing or out of the volume" if all(samples[b] == 0 for b in names
+                                                      if out.get(b) is None)
+               else "dropouts, partly hidden or at the volume's edge")
+        problems.append(f"{', '.join(low)}, below min_share {min_share:g} ({why})")
     return out, samples, spread, share, problems
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..config import RigConfig
 from ..errors import TmscalError
+from ..escape import value_text
 from ..geometry import angle_between, check_pose
 from .devices import envelope_for
 
@@ -170,8 +171,10 @@ def check_tools(tracker: Any, min_share: float, s: Settings) -> Check:
                  frame_numbers=f"{nums[0]}..{nums[-1]}", real_time=s.real_time)
         low = {t: x for t, x in share.items() if x < min_share}
         if low:
-            return Check("tools", "fail", v, "seen in too few frames: " + ", ".join(
-                f"{t} {x:.0%} < {min_share:.0%}" for t, x in low.items()))
+            seen = {t: sum(f.tools[t].usable for f in frames if t in f.tools) for t in low}
+            return Check("tools", "fail", v, ", ".join(
+                f"{t} seen in {k} of {len(frames)} frames" for t, k in seen.items())
+                + f", below sampling.min_share {min_share:g}")
         if not s.real_time:
             return Check("tools", "pass", v, "frame rate reported only (the mock's fast clock)")
         off = abs(rate / tracker.frame_rate_hz - 1.0)
@@ -352,9 +355,9 @@ def _value_lines(values: dict[str, Any]) -> list[str]:
     for k, val in values.items():
         if isinstance(val, dict) and k.endswith("identity"):
             out.append(f"      {k}:")
-            out += [f"        {ik}: {iv}" for ik, iv in val.items()]
+            out += [f"        {ik}: {value_text(iv)}" for ik, iv in val.items()]
         else:
-            out.append(f"      {k}: {val}")
+            out.append(f"      {k}: {value_text(val)}")
     return out
 
 

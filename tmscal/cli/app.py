@@ -14,7 +14,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import click
 import numpy as np
@@ -30,6 +30,10 @@ EXIT_ERROR = 1
 #: error of tmscal's, a verdict (1 is an error, 2 a usage error)
 EXIT_CHECK_FAILED = 3
 EXIT_INTERRUPTED = 130
+#: the reader of stdout went away (``tmscal robot | head``): 128 + SIGPIPE, the status a shell
+#: reports for a program its pipe ended, so that ``set -o pipefail`` still sees that the
+#: output was cut short, and nothing is printed
+EXIT_BROKEN_PIPE = 141
 
 
 def fail(msg: str, code: int = EXIT_ERROR) -> None:
@@ -38,13 +42,31 @@ def fail(msg: str, code: int = EXIT_ERROR) -> None:
     sys.exit(code)
 
 
+def stdout_closed() -> NoReturn:
+    """Exit quietly with ``EXIT_BROKEN_PIPE`` after a write to a closed pipe (stdout, or
+    stderr piped with it): no message, since the reader is gone and wanted no more; both
+    streams go to the null device first, so that the interpreter's flush at exit raises
+    nothing either (Python's documentation on SIGPIPE: "Note on SIGPIPE")."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        for stream in (sys.stdout, sys.stderr):
+            os.dup2(null, stream.fileno())
+    except (OSError, ValueError, AttributeError):  # no file descriptor behind a stream
+        pass
+    sys.exit(EXIT_BROKEN_PIPE)
+
+
 def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn tmscal's typed errors (and OS errors) into one ``error:`` line and exit 1."""
+    """Turn tmscal's typed errors (and OS errors) into one ``error:`` line and exit 1; a
+    write to a closed pipe (``tmscal robot | head``) exits quietly with
+    ``EXIT_BROKEN_PIPE`` (:func:`stdout_closed`)."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return fn(*args, **kwargs)
+        except BrokenPipeError:
+            stdout_closed()
         except TmscalError as e:
             fail(_name_command(str(e)))
         except OSError as e:
@@ -271,6 +293,10 @@ class _OneLineErrors(click.Group):
             cmd = getattr(getattr(e, "ctx", None), "command_path", None) or "tmscal"
             click.echo(f"error: {e.format_message()} (see: {cmd} --help)", err=True)
             sys.exit(e.exit_code)
+        try:  # what is still buffered, while a closed pipe can be told apart
+            sys.stdout.flush()
+        except BrokenPipeError:
+            stdout_closed()
         if isinstance(rv, int) and not isinstance(rv, bool):
             sys.exit(rv)  # click's Exit (e.g. after --help) returns its code here
         sys.exit(0)

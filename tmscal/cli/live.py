@@ -9,12 +9,13 @@ refreshed in place::
 
     pose 123/500 |██████████▌                    | 25% ETA 02:31 sampling
     marker spread 0.045 mm / 0.094°   probe spread 0.051 mm / 0.102°
-    skipped 3; last: probe usable in 58 of 100 frames
+    skipped 3; last: probe seen in 58 of 100 frames, below min_share 0.8
 
-Elsewhere (a pipe, a log file) it prints one plain line per pose, without carriage returns.
-Every line fits the terminal's width (80 columns off a terminal); fields that do not fit are
-dropped from the end. Spreads are the RMS distance (mm) and RMS angle (deg) of a pose's
-samples about their mean (``tmscal.acquisition.sample.spread_of``).
+and a skipped pose's whole reason is written above them. Elsewhere (a pipe, a log file) it
+prints one plain line per pose, without carriage returns. Every line fits the terminal's
+width (80 columns off a terminal; fields that do not fit are dropped from the end) but the
+line of a skipped pose, which carries its whole reason. Spreads are the RMS distance (mm) and
+RMS angle (deg) of a pose's samples about their mean (``tmscal.acquisition.sample.spread_of``).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from tqdm import tqdm
 from tqdm.contrib.logging import logging_redirect_tqdm
 
 from ..acquisition.progress import Progress
+from ..escape import visible
 
 __all__ = ["AcquireProgress", "TrackView", "fit", "spread_text", "stderr_to_log", "track_rows",
            "isatty", "terminal_width"]
@@ -149,16 +151,20 @@ class AcquireProgress(Progress):
             self.skipped += 1
             self.last_reason = _short_reason(rec.skipped)
         if self._bars:
+            if rec.skipped:  # the whole reason, above the bars (the status line is cut)
+                tqdm.write(f"{self.label} {done}/{total} skipped: {visible(rec.skipped)}",
+                           file=self.stream)
             self._bars[0].set_description_str("", refresh=False)
             self._bars[0].update(done - self._bars[0].n)
             self._status(rec)
             return
         fields = [f"{self.label} {done}/{total}", f"ETA {self._eta(done, total)}"]
-        if rec.skipped:
-            fields += [f"skipped ({self.skipped} so far): {_short_reason(rec.skipped)}"]
-        else:
-            fields += [f"skipped {self.skipped}", *spread_text(rec)]
-        print(fit(fields, self.width, cut=bool(rec.skipped)), file=self.stream, flush=True)
+        if rec.skipped:  # the whole reason: the line may be longer than the width
+            print(_SEP.join(fields + [f"skipped ({self.skipped} so far): "
+                                      f"{visible(rec.skipped)}"]), file=self.stream, flush=True)
+            return
+        fields += [f"skipped {self.skipped}", *spread_text(rec)]
+        print(fit(fields, self.width), file=self.stream, flush=True)
 
     def _status(self, rec: Any = None) -> None:
         spread = spread_text(rec) if rec is not None and not rec.skipped else []

@@ -11,6 +11,7 @@ from typing import Any
 import click
 import numpy as np
 
+from ..escape import value_text
 from .acquire_adaptive import adaptive_options, check_adaptive_flags
 from .app import (
     EXIT_INTERRUPTED,
@@ -161,7 +162,8 @@ def track(config: Path, tracker_port: str | None, old_port: str | None, frames: 
     interrupted = False
     try:
         ident = tr.identity()
-        click.echo("tracker: " + ", ".join(f"{k} {v}" for k, v in ident.items() if v))
+        click.echo("tracker: " + ", ".join(f"{k} {value_text(v)}" for k, v in ident.items()
+                                           if v))
         handles = getattr(tr, "handles", {})  # an NDI's port handles
         names = ident.get("tools") if isinstance(ident.get("tools"), dict) else {}
         for name in tr.tools:
@@ -239,7 +241,8 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
         target = matrix_from_denso_p(vals)
     cfg = load_config(config, check_files=False)  # the robot needs no tracker files
     with make_robot(cfg, envelope_for(cfg, None), host) as rb:
-        click.echo("robot: " + ", ".join(f"{k} {v}" for k, v in rb.identity().items() if v))
+        click.echo("robot: " + ", ".join(f"{k} {value_text(v)}"
+                                         for k, v in rb.identity().items() if v))
         here = rb.flange_pose()
         _echo_pose("flange (base ← flange)", here, rb)
         click.echo(_matrix_text(here))
@@ -310,10 +313,11 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     if force and not dry_run:
         check_replaceable(output, config)
     if dry_run:
+        settings = None
         if adaptive:  # the candidates: the plan with adaptive.pool poses
             from ..acquisition.adaptive_run import settings_for
-            poses = settings_for(cfg, **overrides).pool
-        _dry_run(cfg, poses, samples, robot_host)
+            settings = settings_for(cfg, **overrides)
+        _dry_run(cfg, poses, samples, robot_host, settings, tracker_port)
         return
     stop = StopFlag()
     stop.install()
@@ -377,21 +381,73 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
     click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")
 
 
-def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str | None) -> None:
+def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str | None,
+             adaptive: Any = None, tracker_port: str | None = None) -> None:
+    """Print the dry run (``tmscal.acquisition.dryrun``): the tracker's offline checks, the
+    run that will happen (an adaptive run's bootstrap, pose limit, target and robot time at
+    most, then its candidates), the plan's extent and the envelope check, and what could not
+    be checked without the robot. SafetyError when a pose or a move would be refused."""
     from ..acquisition.dryrun import dry_run
     from ..errors import SafetyError
 
-    d = dry_run(cfg, poses, samples, robot_host)
-    s = d.summary
-    click.echo(f"plan {d.spec.kind}: {d.spec.n} poses, seed {d.spec.seed}, around P0 "
-               f"({d.p0_source}):")
-    click.echo("  P0 " + _pose_line(d.spec.p0))
-    click.echo(f"     angles: {RPY_CONVENTION}")
-    click.echo(f"  offsets from P0: x {s['x_range_mm'][0]:.1f}…{s['x_range_mm'][1]:.1f}, "
-               f"y {s['y_range_mm'][0]:.1f}…{s['y_range_mm'][1]:.1f}, "
-               f"z {s['z_range_mm'][0]:.1f}…{s['z_range_mm'][1]:.1f} mm; "
-               f"max {s['offset_max_mm']:.1f} mm")
-    click.echo(f"  rotation from P0: max {s['rotation_max_deg']:.2f} deg")
+    d = dry_run(cfg, poses, samples, robot_host, adaptive, tracker_port)
+    if d.tracker:
+        click.echo("tracker (checked offline; nothing opened):")
+        for line in d.tracker:
+            click.echo(f"  {line}")
+    a = d.adaptive
+    if a is not None:
+        click.echo(f"adaptive run (docs/adaptive.md): {a.bootstrap} well-spread bootstrap "
+                   f"poses, then one chosen pose at a time; stops when the predicted "
+                   f"coil-placement error is ≤ {a.target_mm:g} mm at {a.confidence * 100:g} %, "
+                   f"at most {a.max_poses} poses (max_poses)")
+        click.echo(f"  robot time at most {a.robot_time_max_s / 60:.1f} min: {a.max_poses} "
+                   f"poses × (a move ≤ {a.longest_move_s:.1f} s + settling and sampling ≤ "
+                   f"{a.per_pose_s:.1f} s), less when it reaches the target sooner (a pose "
+                   "retried after a skip samples again)")
+    if d.spec is None:
+        click.echo(f"plan {cfg.plan.kind}: its poses need the robot")
+    else:
+        s = d.summary
+        what = (f"the {a.pool} candidates (adaptive.pool) are the plan {d.spec.kind}"
+                if a is not None else f"plan {d.spec.kind}: {d.spec.n} poses")
+        click.echo(f"{what}, seed {d.spec.seed}, around P0 ({d.p0_source}):")
+        if d.p0_known:
+            click.echo("  P0 " + _pose_line(d.spec.p0))
+            click.echo(f"     angles: {RPY_CONVENTION}")
+        frame = "" if d.p0_known else " (in P0's flange frame)"
+        click.echo(f"  offsets from P0{frame}: x {s['x_range_mm'][0]:.1f}…"
+                   f"{s['x_range_mm'][1]:.1f}, y {s['y_range_mm'][0]:.1f}…"
+                   f"{s['y_range_mm'][1]:.1f}, z {s['z_range_mm'][0]:.1f}…"
+                   f"{s['z_range_mm'][1]:.1f} mm; max {s['offset_max_mm']:.1f} mm")
+        click.echo(f"  rotation from P0: max {s['rotation_max_deg']:.2f} deg")
+        if d.p0_known:
+            _extent_rows(s)
+        if a is None:  # an adaptive run's time is its line above, not the candidates'
+            click.echo(f"  estimated duration: {s['duration_s'] / 60:.1f} min (travel "
+                       f"{s['travel_mm'] / 1000:.1f} m = {s['motion_s']:.0f} s at "
+                       f"{d.speed_mm_s:g} mm/s, sampling {s['sampling_s']:.0f} s)")
+    for line in d.not_checked:
+        click.echo(f"  {line}")
+    if d.refusal is not None:
+        raise SafetyError(d.refusal)
+    if d.spec is None:
+        return
+    if not d.p0_known:
+        click.echo("  safety envelope: every pose within the offset and rotation limits from "
+                   "P0; the box and the paths are checked when the run starts, before "
+                   "anything moves (docs/safety.md)")
+        return
+    split = (f"; {len(d.split_moves)} move(s) leave on the straight path and go through P0 "
+             f"(to pose {', '.join(map(str, d.split_moves[:8]))}"
+             f"{', …' if len(d.split_moves) > 8 else ''})" if d.split_moves else "")
+    click.echo(f"  safety envelope: every pose inside, every move's path inside{split} "
+               "(docs/safety.md)")
+
+
+def _extent_rows(s: dict[str, Any]) -> None:
+    """The workspace box and the flange's and tool points' extent over the plan, in the
+    robot base frame (mm)."""
     click.echo(f"  {'in the robot base frame (mm)':<32} {'x':^16}{'y':^16}{'z':^16}")
     for label, key in (("workspace box (safety)", "box"), ("flange over the plan", "flange"),
                        ("tool points over the plan", "tool")):
@@ -401,13 +457,3 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
             click.echo(f"    {label:<30} {cells}")
     if s["tool_min_mm"] is None:
         click.echo("    (no safety.tool_points_mm: the box bounds the flange only)")
-    click.echo(f"  estimated duration: {s['duration_s'] / 60:.1f} min (travel "
-               f"{s['travel_mm'] / 1000:.1f} m = {s['motion_s']:.0f} s at "
-               f"{d.speed_mm_s:g} mm/s, sampling {s['sampling_s']:.0f} s)")
-    if d.refusal is not None:
-        raise SafetyError(d.refusal)
-    split = (f"; {len(d.split_moves)} move(s) leave on the straight path and go through P0 "
-             f"(to pose {', '.join(map(str, d.split_moves[:8]))}"
-             f"{', …' if len(d.split_moves) > 8 else ''})" if d.split_moves else "")
-    click.echo(f"  safety envelope: every pose inside, every move's path inside{split} "
-               "(docs/safety.md)")

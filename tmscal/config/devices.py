@@ -173,6 +173,12 @@ def parse_tracker(data: Any, src: str, base_dir: Path | None,
     if not tools:
         raise err(src, "tracker.tools", "name at least one tool (our name → what the driver "
                   "knows it by, e.g. {marker: marker.rom} for an NDI tracker)")
+    if issubclass(cls, TrackerSettings) and cls.FRAME_RATE_HZ is not None:
+        lo, hi = cls.FRAME_RATE_HZ
+        if not lo <= rate <= hi:
+            raise err(src, "tracker.frame_rate_hz", f"{rate:g} Hz is outside the frame rates "
+                      f"of the {driver} driver's devices, {lo:g}…{hi:g} Hz"
+                      + (f" ({cls.FRAME_RATE_DEVICES})" if cls.FRAME_RATE_DEVICES else ""))
     options = _options(data, src, "tracker", driver, cls)
     settings = cls.parse(data, src, base_dir, check_files)
     assert isinstance(settings, TrackerSettings)

@@ -31,7 +31,13 @@ subclassing :class:`DriverSettings` (trackers: :class:`TrackerSettings`) that de
   checked as ``parse`` checks it; ``ADDRESS_KEY`` is the key ``address()`` comes from, for
   messages;
 * ``mock_kwargs()`` (optional): what the driver's mock must know from these settings (ATI:
-  the counts per unit its records are scaled by).
+  the counts per unit its records are scaled by);
+* a tracker's ``FRAME_RATE_HZ`` (optional): the frame rates (Hz, inclusive) its devices can
+  run at, with ``FRAME_RATE_DEVICES`` naming them; ``tracker.frame_rate_hz`` outside is
+  refused when the config is read;
+* a tracker's ``preflight()`` (optional): the checks of ``tmscal acquire --dry-run`` that
+  need no device but more than ``parse`` does (NDI: the ROM files' contents), one line per
+  thing checked, a ``ConfigError`` naming the key for a problem.
 
 An unknown key in a section is refused naming it and the keys the driver accepts; an option
 may not name a generic key or one of ``KEYS`` (they have their own keys). docs/devices.md,
@@ -176,6 +182,10 @@ class TrackerSettings(DriverSettings):
     constructor with the ``KEYS``."""
 
     SECTION: ClassVar[str] = "tracker"
+    #: the frame rates (Hz, inclusive) the driver's devices run at (None: any the generic
+    #: check allows, 0 < f ≤ 10000), and the devices that range is of, for messages
+    FRAME_RATE_HZ: ClassVar[tuple[float, float] | None] = None
+    FRAME_RATE_DEVICES: ClassVar[str] = ""
 
     tools: dict[str, Any] = field(default_factory=dict, kw_only=True)
 
@@ -198,6 +208,12 @@ class TrackerSettings(DriverSettings):
     def kwargs(self) -> dict[str, Any]:
         """``tools`` and each of ``KEYS``."""
         return {"tools": dict(self.tools), **super().kwargs()}
+
+    def preflight(self) -> list[str]:
+        """The offline checks of a dry run beyond ``parse``'s (no device is opened): one
+        line per thing checked; ``ConfigError`` naming the key for a problem. The base class
+        checks nothing more."""
+        return []
 
 
 @dataclass(frozen=True)

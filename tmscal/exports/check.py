@@ -177,8 +177,18 @@ def format_check(res: dict[str, Any]) -> str:
     if "e_z_mm" in e:
         lines.append(_row("Z_P vs Z_M  e_z, θ_z", e["e_z_mm"], e["theta_z_deg"],
                           stored("e_z_mm", "theta_z_deg")))
-    lines.append(_row("total  e_t, θ_t", e["e_t_mm"], e["theta_t_deg"],
-                      stored("e_t_mm", "theta_t_deg")))
+    # a marker-only session's total is the marker's: beside the stored marker row, not the
+    # stored total of two bodies (like with like)
+    marker_only = s["bodies"] == ["marker"] and isinstance(st.get("probe"), dict)
+    lines.append(_row("total  e_t, θ_t" + (" (marker only)" if marker_only else ""),
+                      e["e_t_mm"], e["theta_t_deg"],
+                      stored("trans_mm", "rot_deg", "marker") if marker_only
+                      else stored("e_t_mm", "theta_t_deg")))
+    if marker_only:
+        lines += textwrap.wrap("  (this session has no probe poses: its total is the marker's "
+                               "alone, so it stands beside the stored marker row, not the "
+                               "stored total of marker and probe)", 98,
+                               subsequent_indent="   ")
     if c.get("errors_on"):
         lines.append(visible(f"  (stored: the calibration's own errors, {c['errors_on']})"))
     t = res["truth"]
@@ -194,7 +204,8 @@ def format_check(res: dict[str, Any]) -> str:
                          " mm")
     lines.append("")
     outl = res["outliers"]
-    lines.append("  outlier poses: " + (", ".join(str(o["index"]) for o in outl) or "none"))
+    lines.append("  outlier poses (session pose index): "
+                 + (", ".join(str(o["index"]) for o in outl) or "none"))
     lines += textwrap.wrap("  E = (A X)⁻¹ Z B (marker), (A Y)⁻¹ Z C (probe) with the stored "
                            "matrices on every pose of this session; e_trans = ‖t(E)‖ mm, θ its "
                            "rotation angle in degrees, averaged over the poses (Wang et al. "

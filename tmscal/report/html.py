@@ -338,7 +338,7 @@ def _residuals(session: Session, cal: Calibration, res: SolveResult, stored: boo
         table = _table([[o["index"], "; ".join(
             f"{f['body']} {f['metric']} {f['value']:.4f} {f['unit']} > "
             f"{f['threshold']:.4f} {f['unit']}" for f in o["flags"])] for o in res.outliers],
-            ["outlier pose", "why"])
+            ["outlier pose (session pose index)", "why"])
     return "\n".join([fig, table])
 
 

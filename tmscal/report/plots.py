@@ -148,7 +148,7 @@ def plot_residuals(res: dict[str, Any], n_solve: int, path: str, title: str,
                               label="outlier pose"))
     fig.legend(handles=handles, loc="outside right upper", frameon=False, fontsize=9)
     names = ", ".join(str(o["index"]) for o in outliers or []) or "none"
-    fig.suptitle(f"{title}\noutlier poses: {names}", fontsize=11)
+    fig.suptitle(f"{title}\noutlier poses (session pose index): {names}", fontsize=11)
     caption = ("Per pose: E = (AX)⁻¹ZB (marker), (AY)⁻¹ZC (probe); e = ‖t(E⊥)‖, θ = rotation "
                f"angle of E⊥ (docs/methods.md). Outlier rule: {RULE}.")
     fig.text(0.5, 0.0, textwrap.fill(caption, 140), ha="center", va="top", fontsize=8)

@@ -313,13 +313,14 @@ def outlier_lines(res: SolveResult) -> list[str]:
     """The outlier poses by the solve service's rule, or a line saying there are none."""
     from ..solving.outliers import RULE
     if not res.outliers:
-        return textwrap.wrap(f"outlier poses: none (rule: {RULE})", 98,
+        return textwrap.wrap(f"outlier poses (session pose index): none (rule: {RULE})", 98,
                              subsequent_indent="  ")
-    lines = textwrap.wrap(f"outlier poses (rule: {RULE}):", 98, subsequent_indent="  ")
+    lines = textwrap.wrap(f"outlier poses (session pose index; rule: {RULE}):", 98,
+                          subsequent_indent="  ")
     for o in res.outliers:
         why = "; ".join(f"{f['body']} {f['metric']} {f['value']:.4f} {f['unit']} > "
                         f"{f['threshold']:.4f} {f['unit']}" for f in o["flags"])
-        lines.append(f"  pose {o['index']}: {why}")
+        lines.append(f"  pose index {o['index']}: {why}")
     return lines
 
 

@@ -38,10 +38,13 @@ from .records import (
     PoseRecord,
     make_header,
     records_from_arrays,
+    seen_counts,
+    seen_text,
     skip_cause,
     validate_record,
 )
 
 __all__ = ["FORMAT", "VERSION", "PoseRecord", "Session", "SessionWriter", "make_header",
            "read_session", "records_from_arrays", "sha256_of", "validate_record",
-           "write_session", "skip_cause", "plain", "json_safe", "json_default"]
+           "write_session", "skip_cause", "seen_counts", "seen_text", "plain", "json_safe",
+           "json_default"]

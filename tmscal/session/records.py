@@ -216,18 +216,52 @@ class PoseRecord:
         return d
 
 
-#: the wording of ``acquisition.sample``'s problem for a body with too few usable frames
-_UNSEEN = re.compile(r"(\w+) usable in \d+ of \d+ frames")
+#: the wording of ``acquisition.sample``'s problem for bodies with too few usable frames:
+#: "marker seen in 68 of 100 frames, probe seen in 0 of 100 frames, below min_share 0.9
+#: (…)"; sessions of earlier versions say "marker usable in 68 of 100 frames (< 90%: missing
+#: or out of volume)" per body
+_UNSEEN = re.compile(r"(\w+) (?:usable|seen) in (\d+) of (\d+) frames(?: \(< ([0-9.]+)%)?")
+_MIN_SHARE = re.compile(r"below min_share ([0-9.]+)")
+
+
+def seen_counts(reason: str) -> list[tuple[str, int, int, float | None]]:
+    """The bodies a skipped pose's ``reason`` names as seen in too few frames, as (body,
+    frames it was usable in, frames read, ``sampling.min_share`` or None when the reason
+    does not say), in the reason's order; [] for any other reason."""
+    said = _MIN_SHARE.search(reason)
+    out = []
+    for body, k, n, pct in _UNSEEN.findall(reason):
+        limit = float(pct) / 100 if pct else float(said.group(1)) if said else None
+        out.append((body, int(k), int(n), limit))
+    return out
 
 
 def skip_cause(reason: str) -> str:
-    """A short cause for a skipped pose's ``reason`` (``PoseRecord.skipped``): the bodies not
-    seen well enough ("probe not seen (missing or out of volume)"), else the reason up to its
-    first parenthesis (e.g. "invalid measurement")."""
-    bodies = _UNSEEN.findall(reason)
-    if bodies:
-        return f"{' and '.join(bodies)} not seen (missing or out of volume)"
+    """A short cause for a skipped pose's ``reason`` (``PoseRecord.skipped``), the same for
+    every pose that failed alike (the skip watch and the report count by it): bodies never
+    seen, "probe not seen (missing or out of volume)"; bodies seen in some frames but fewer
+    than ``sampling.min_share`` of them, "marker and probe seen in too few frames (below
+    min_share 0.9)"; else the reason up to its first parenthesis (e.g. "invalid
+    measurement")."""
+    counts = seen_counts(reason)
+    if counts:
+        bodies = " and ".join(c[0] for c in counts)
+        if all(c[1] == 0 for c in counts):
+            return f"{bodies} not seen (missing or out of volume)"
+        limits = {c[3] for c in counts} - {None}
+        below = f" (below min_share {min(limits):g})" if limits else ""
+        return f"{bodies} seen in too few frames{below}"
     return reason.split(" (", 1)[0].strip() or "skipped"
+
+
+def seen_text(reason: str) -> str | None:
+    """How often each body of a skipped pose's ``reason`` was seen, in short ("marker 68 of
+    100 frames, probe 63 of 100"), or None for a reason of another kind."""
+    counts = seen_counts(reason)
+    if not counts:
+        return None
+    parts = [f"{b} {k} of {n}" for b, k, n, _ in counts]
+    return parts[0] + " frames" + "".join(f", {p}" for p in parts[1:])
 
 
 def validate_record(rec: PoseRecord, where: str = "") -> PoseRecord:

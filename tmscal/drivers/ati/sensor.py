@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
+from ...net import connect_problem
 from ...timing import Deadline
 from ..base import ForceTorque
 from . import codec
@@ -80,7 +81,8 @@ class ATINetFT(ForceTorque):
             s = socket.socket(family, socket.SOCK_DGRAM)
             s.connect(addr)  # only the sensor's datagrams are received
         except OSError as e:
-            raise ConnectionLost(f"{self._where}: cannot open UDP socket ({e})",
+            why = connect_problem(e, self.host, self.port, "ft.host, ft.port", proto="UDP")
+            raise ConnectionLost(f"{self._where}: cannot open UDP socket ({why or e})",
                                  device=self.name) from e
         s.settimeout(self.timeout_s)
         try:   # room for a burst of records while Python is busy elsewhere
@@ -202,7 +204,9 @@ class ATINetFT(ForceTorque):
                                     f"s ({got} of {total} received)", device=self.name) \
                     from None
             except OSError as e:   # ICMP port unreachable on a connected UDP socket
-                raise ConnectionLost(f"{self._where}: {e}", device=self.name) from e
+                why = connect_problem(e, self.host, self.port, "ft.host, ft.port",
+                                      proto="UDP", service="the Net F/T's RDT stream")
+                raise ConnectionLost(f"{self._where}: {why or e}", device=self.name) from e
             try:
                 return codec.parse_record(data)
             except ProtocolError as e:

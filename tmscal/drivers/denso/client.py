@@ -17,6 +17,7 @@ import threading
 from typing import Any
 
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError, RobotFault
+from ...net import connect_problem
 from ...timing import Deadline
 from .hresult import (
     DEVICE,
@@ -106,7 +107,9 @@ class BCAPClient:
         try:
             s = socket.create_connection((self.host, self.port), timeout=wait)
         except OSError as e:
-            raise ConnectionLost(f"b-CAP: cannot connect to {self._where()}: {e}",
+            why = connect_problem(e, self.host, self.port, "robot.host, robot.port", wait,
+                                  service="b-CAP")
+            raise ConnectionLost(f"b-CAP: cannot connect to {self._where()}: {why or e}",
                                  device=self.name) from e
         s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock = s

@@ -37,6 +37,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, ProtocolError
+from ...net import connect_problem
 from ...timing import Deadline
 from ..base import Tracker, TrackerFrame
 from . import wire
@@ -141,15 +142,12 @@ class IGTLTracker(Tracker):
     def _connect(self) -> socket.socket:
         try:
             sock = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
-        except TimeoutError as e:
-            raise DeviceTimeout(f"{self._where}: no connection within {self.timeout_s:g} s",
-                                device=self.name) from e
-        except ConnectionRefusedError as e:
-            raise ConnectionLost(f"{self._where}: connection refused (is PlusServer running "
-                                 "and listening on this port?)", device=self.name) from e
-        except OSError as e:  # unreachable, cannot resolve the name
-            raise ConnectionLost(f"{self._where}: cannot connect ({e})",
-                                 device=self.name) from e
+        except OSError as e:  # refused, no answer, unreachable, a name that does not resolve
+            why = connect_problem(e, self.host, self.port, "tracker.host, tracker.port",
+                                  self.timeout_s, service="PlusServer or another "
+                                  "OpenIGTLink server")
+            cls = DeviceTimeout if isinstance(e, TimeoutError) else ConnectionLost
+            raise cls(f"{self._where}: {why or e}", device=self.name) from e
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.settimeout(_POLL_S)
         return sock

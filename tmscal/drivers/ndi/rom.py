@@ -22,6 +22,7 @@ may still be refused by the tracker (PINIT: ERROR40 invalid tool definition).
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import os
 import stat
@@ -29,11 +30,11 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from ...errors import ConfigError
-from .wire import remote_host
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ROM_MAX_BYTES", "ROM_MAGIC", "rom_problem", "read_rom", "read_roms"]
+__all__ = ["ROM_MAX_BYTES", "ROM_MAGIC", "rom_problem", "read_rom", "read_roms",
+           "remote_host"]
 
 #: the largest tool definition PVWR can write: 16 chunks of 64 bytes (0000…03C0)
 ROM_MAX_BYTES = 1024
@@ -103,12 +104,30 @@ def read_rom(tool: str, path: str | os.PathLike[str]) -> bytes:
     return data
 
 
+def remote_host(port: str) -> str | None:
+    """The host of a ``socket://host:port`` tracker port when it is not this computer, else
+    None (a device path; a loopback address: 127.0.0.0/8, ::1, ``localhost``). A host name
+    other than ``localhost`` counts as remote (it is not resolved here)."""
+    scheme, sep, rest = port.partition("://")
+    if not sep or scheme.lower() != "socket":
+        return None
+    host = rest.rpartition(":")[0].strip("[]")
+    if host.lower().rstrip(".") == "localhost" or host.lower().endswith(".localhost"):
+        return None
+    try:
+        if ipaddress.ip_address(host).is_loopback:
+            return None
+    except ValueError:
+        pass  # a host name
+    return host
+
+
 def read_roms(paths: Mapping[str, str | os.PathLike[str] | None],
               port: str | None = None) -> dict[str, bytes]:
     """Tool name → checked tool definition, for every tool that has a ROM file (None: a tool
     already loaded on the device). The first bad file raises (:func:`read_rom`). ``port``:
     the tracker port they are for; when it is ``socket://`` to a host other than this
-    computer (:func:`.wire.remote_host`), a warning names the host and the tools."""
+    computer (:func:`remote_host`), a warning names the host and the tools."""
     roms = {tool: read_rom(tool, path) for tool, path in paths.items() if path is not None}
     host = remote_host(port) if port is not None else None
     if roms and host is not None:

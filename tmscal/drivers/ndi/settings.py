@@ -20,7 +20,9 @@ from typing import Any, ClassVar, Self
 
 from ...config.settings import Option, TrackerSettings
 from ...config.values import err, show
+from ...errors import ConfigError
 from .codes import BAUD_CODES
+from .rom import read_rom
 
 __all__ = ["NDISettings", "tracker_port_problem", "rom_path", "check_rom_exists",
            "log_wire_path", "short_path"]
@@ -29,17 +31,38 @@ __all__ = ["NDISettings", "tracker_port_problem", "rom_path", "check_rom_exists"
 _WAIT = Option(float, above=0, hi=120)
 
 
+#: the API port of a networked NDI tracker (the Vega), for the hint of ``tracker_port_problem``
+VEGA_API_PORT = 8765
+
+#: a network address written without ``socket://``: an IPv4 address (with or without a port),
+#: a bracketed IPv6 address, or ``host:port`` (no slash, backslash or space: never a device
+#: path, a pty or a Windows COM port)
+_BARE_ADDRESS = re.compile(r"(?P<host>\d{1,3}(?:\.\d{1,3}){3}|\[[0-9A-Fa-f:.]+\])"
+                           r"(?::(?P<port>\d{1,5}))?"
+                           r"|(?P<name>[A-Za-z0-9._-]+):(?P<nport>\d{1,5})")
+
+
 def tracker_port_problem(port: str) -> str | None:
     """Why ``port`` is not an acceptable tracker port, or None when it is: a device path
     (``/dev/ttyUSB0``, ``/dev/pts/3``, ``COM3``; no URL scheme) or ``socket://host:port``.
-    Every other pyserial URL scheme (spy://, loop://, rfc2217://, hwgrep://, alt:// …) is
-    refused: some of them open or write files named in the URL."""
+    A network address without the scheme (``192.168.1.10:8765``, ``192.168.1.10``,
+    ``vega.local:8765``, ``[fe80::1]:8765``) is refused with the ``socket://`` spelling to
+    use: pyserial would take it for a device path and fail only when it opens ("No such
+    file or directory"). Every other pyserial URL scheme (spy://, loop://, rfc2217://,
+    hwgrep://, alt:// …) is refused: some of them open or write files named in the URL."""
     if not isinstance(port, str) or not port.strip():
         return "expected a device path or socket://host:port"
     if "\0" in port or any(c in port for c in "\r\n"):
         return "contains a control character"
     if "://" not in port:
-        return None
+        m = _BARE_ADDRESS.fullmatch(port.strip())
+        if m is None:
+            return None
+        host = m.group("host") or m.group("name")
+        num = m.group("port") or m.group("nport") or str(VEGA_API_PORT)
+        return (f"a network address without socket://; a networked tracker is written "
+                f"socket://{host}:{num} (an NDI Vega's API port is {VEGA_API_PORT}); a "
+                "serial tracker is a device path such as /dev/ttyUSB0 or COM3")
     scheme, _, rest = port.partition("://")
     if scheme.lower() != "socket":
         return (f"URL scheme {scheme!r} is not allowed; use a device path (e.g. /dev/ttyUSB0) "
@@ -160,6 +183,10 @@ class NDISettings(TrackerSettings):
 
     KEYS: ClassVar[tuple[str, ...]] = ("port", "baud", "reply", "log_wire")
     ADDRESS_KEY: ClassVar[str] = "port"
+    #: from the Polaris Vicra's 20 Hz (Spectra 20, 30 or 60 Hz; Aurora 40 Hz) to the fastest
+    #: Polaris Vega; a rate outside is a typo or another device's
+    FRAME_RATE_HZ: ClassVar[tuple[float, float] | None] = (20.0, 400.0)
+    FRAME_RATE_DEVICES: ClassVar[str] = "NDI Polaris Vicra 20 Hz, Spectra 20–60 Hz, Vega"
     OPTIONS: ClassVar[Mapping[str, Option]] = {
         "timeout_s": _WAIT, "retries": Option(int, lo=0, hi=100), "reset": Option(bool, null=True),
         "reset_timeout_s": _WAIT, "init_timeout_s": _WAIT, "pinit_timeout_s": _WAIT,
@@ -208,6 +235,35 @@ class NDISettings(TrackerSettings):
             check_rom_exists(self.src, name, rom)
         return super().kwargs()
 
+    def preflight(self) -> list[str]:
+        """The dry run's offline checks: every ROM file is read and checked as the driver
+        checks it before uploading (:func:`.rom.read_rom`: at most 1024 bytes, starting with
+        ``NDI``, binary; a YAML or text file is refused), ``ConfigError`` naming
+        ``tracker.tools.<name>`` and the file; and what the port is (its form was checked
+        when the config was read; whether anything answers there is not checked offline)."""
+        lines = []
+        for name, rom in self.tools.items():
+            if rom is None:
+                lines.append(f"tool {name}: no ROM file (a tool the tracker has loaded)")
+                continue
+            check_rom_exists(self.src, name, rom)
+            try:
+                data = read_rom(name, rom)
+            except ConfigError as e:
+                raise err(self.src, f"tracker.tools.{name}",
+                          str(e).removeprefix(f"tool {name!r}: ")) from None
+            lines.append(f"tool {name}: {short_path(rom)}: an NDI tool definition "
+                         f"({len(data)} bytes)")
+        if not self.port:
+            lines.append("port: none in the config (give --tracker-port)")
+        elif self.port.lower().startswith("socket://"):
+            lines.append(f"port {self.port}: a networked tracker (that it answers there is "
+                         "checked when it connects: tmscal track)")
+        else:
+            lines.append(f"port {self.port}: a serial device (that the tracker answers there "
+                         "is checked when it connects: tmscal track)")
+        return lines
+
     def address(self) -> str:
         """The serial device or ``socket://host:port`` URL ("" when the config gives none)."""
         return self.port
@@ -216,7 +272,8 @@ class NDISettings(TrackerSettings):
         """These settings on port ``text`` (checked as ``tracker.port`` is)."""
         problem = tracker_port_problem(text)
         if problem:
-            raise self.err("port", f"{show(text)}: {problem}")
+            raise self.err("port", f"{show(text)} (the address given instead of the config's, "
+                           f"e.g. by --tracker-port): {problem}")
         if self.log_wire is not None:
             _check_wire_port(text, self.src)
         return dataclasses.replace(self, port=text)

@@ -11,7 +11,6 @@ overwritten, an input file least of all); ``spy://`` wraps a local serial device
 
 from __future__ import annotations
 
-import ipaddress
 import urllib.parse
 from pathlib import Path
 from typing import Any
@@ -19,29 +18,15 @@ from typing import Any
 import serial
 
 from ...errors import ConfigError, ConnectionLost
-from .settings import tracker_port_problem
+from ...net import connect_problem
+from .rom import remote_host
+from .settings import VEGA_API_PORT, tracker_port_problem
 
 __all__ = ["open_port", "wire_log_problem", "spy_url", "remote_host", "silence_message"]
 
 _READ_SLICE_S = 0.05
-
-
-def remote_host(port: str) -> str | None:
-    """The host of a ``socket://host:port`` tracker port when it is not this computer, else
-    None (a device path; a loopback address: 127.0.0.0/8, ::1, ``localhost``). A host name
-    other than ``localhost`` counts as remote (it is not resolved here)."""
-    scheme, sep, rest = port.partition("://")
-    if not sep or scheme.lower() != "socket":
-        return None
-    host = rest.rpartition(":")[0].strip("[]")
-    if host.lower().rstrip(".") == "localhost" or host.lower().endswith(".localhost"):
-        return None
-    try:
-        if ipaddress.ip_address(host).is_loopback:
-            return None
-    except ValueError:
-        pass  # a host name
-    return host
+#: how long pyserial's socket:// handler waits for the TCP connection (its POLL_TIMEOUT, s)
+_SOCKET_CONNECT_S = 5.0
 
 
 def wire_log_problem(port: str, log_file: Path) -> str | None:
@@ -83,7 +68,14 @@ def open_port(device: str, port: str, write_timeout_s: float, log_file: Path | N
         return serial.serial_for_url(url, baudrate=9600, bytesize=8, parity="N", stopbits=1,
                                      timeout=_READ_SLICE_S, write_timeout=write_timeout_s)
     except (serial.SerialException, OSError, ValueError) as e:
-        raise ConnectionLost(f"{device}: cannot open {port}: {e}", device=device) from e
+        scheme, _, rest = port.partition("://")
+        why = None
+        if scheme.lower() == "socket":
+            host, _, num = rest.rpartition(":")
+            why = connect_problem(e, host.strip("[]"), num, "tracker.port",
+                                  _SOCKET_CONNECT_S, service="the tracker's API; on a Vega "
+                                  f"port {VEGA_API_PORT}")
+        raise ConnectionLost(f"{device}: cannot open {port}: {why or e}", device=device) from e
 
 
 def silence_message(device: str, port: str, baud: int, broke: bool) -> str:

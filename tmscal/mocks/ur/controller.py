@@ -187,6 +187,9 @@ class URController:
     def _link_down(self) -> None:
         """The network link fails (filled by the servers; nothing to drop here)."""
 
+    def _motion_started(self) -> None:
+        """A move began (filled by the servers: the script loop ticks while one runs)."""
+
     # --- status -------------------------------------------------------------------------------
 
     @property
@@ -556,6 +559,7 @@ class URController:
         elif not resumed and self.faults.power_off_at_move == self.move_count:
             m.stop_fraction, m.stop_kind = 0.5, "power_off"
         self._motion = m
+        self._motion_started()
         self.trajectory.append(m)
         self.last_motion_s = m.modelled_s
         self.motion_log.append(m.modelled_s)

@@ -155,6 +155,9 @@ class URMock(URController, MockDevice):
                          robot_mode=robot_mode, remote_control=remote_control,
                          tcp_offset=tcp_offset)
         self._stop = threading.Event()
+        #: wakes the idle script loop: a client connected, a move began, the mock stops
+        self._wake = threading.Event()
+        self._clients = 0
         self.urcap = ExternalControl(self, urcap_host, urcap_port, play_when_ready,
                                      self._stop) if urcap_port is not None else None
         self.host = host
@@ -185,7 +188,7 @@ class URMock(URController, MockDevice):
             for port, handler, what in ((RTDE_PORT, self._serve_rtde, "UR RTDE"),
                                         (DASHBOARD_PORT, self._serve_dashboard, "UR dashboard"),
                                         (SCRIPT_PORT, self._serve_script, "UR script")):
-                listener = TCPListener(self.host, port, handler, what)
+                listener = TCPListener(self.host, port, self._served(handler), what)
                 self._listeners.append(listener)
                 listener.start()
         except OSError:
@@ -203,6 +206,7 @@ class URMock(URController, MockDevice):
     def _close(self) -> None:
         """Stop every thread and close every socket (safe to call twice)."""
         self._stop.set()
+        self._wake.set()
         for listener in self._listeners:
             listener.close()
         t = self._script_thread
@@ -220,10 +224,40 @@ class URMock(URController, MockDevice):
         for listener in self._listeners:
             listener.close(join_s=0.0)
 
+    def _motion_started(self) -> None:
+        self._wake.set()
+
+    def _busy(self) -> bool:
+        """True while the script loop must tick: a client is connected (it commands and
+        reads the registers) or a move runs (it ends on a tick, a client or not)."""
+        return self._clients > 0 or self._motion is not None
+
+    def _served(self, handler: Callable[[socket.socket], None]
+                ) -> Callable[[socket.socket], None]:
+        """``handler`` counted as a connected client for as long as it runs."""
+        def serve(conn: socket.socket) -> None:
+            with self._lock:
+                self._clients += 1
+            self._wake.set()
+            try:
+                handler(conn)
+            finally:
+                with self._lock:
+                    self._clients -= 1
+        return serve
+
     def _script_loop(self) -> None:
-        """The control script's main loop: one ``_tick`` every ``SCRIPT_PERIOD_S``."""
+        """The control script's main loop: one ``_tick`` every ``SCRIPT_PERIOD_S`` while a
+        client is connected or a move runs; otherwise it sleeps until one connects or a move
+        begins (``_wake``), so that an idle mock takes no CPU (250 wake-ups a second did)."""
         nxt = time.monotonic()
         while self._alive():
+            if not self._busy():
+                self._wake.clear()
+                if not self._busy() and self._alive():  # nothing was missed since the check
+                    self._wake.wait()
+                nxt = time.monotonic()
+                continue
             self._tick()
             nxt += SCRIPT_PERIOD_S
             delay = nxt - time.monotonic()
