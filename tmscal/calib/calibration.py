@@ -164,14 +164,14 @@ class Calibration:
                                    "recomputed from the joints, which are missing")
         return self.arm.robot_poses(joints)
 
-    def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
-               ) -> dict[str, Any]:
-        """Hold-out errors of Wang et al. (2018) on the poses given (n, 4, 4), as defined in
-        docs/methods.md: per body "trans_mm", "rot_deg";
-        with a ``distortion`` the measured poses are undistorted first (positions by D⁻¹,
-        orientations as the tracker's rigid fit of the tool distorted them, with the tool
-        moments when the solver had them) and Z is applied without the G it carries;
-        "e_t_mm", "theta_t_deg"; "e_z_mm", "theta_z_deg" for QR24 on two bodies."""
+    def holdout_frames(self, B: np.ndarray, C: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray | None]]:
+        """(B, C, matrices) as :meth:`errors` compares them: the measured tracker poses B, C
+        (n, 4, 4) mm and the applied matrices {"X", "Y", "Z", "Z_probe"} (:meth:`used`);
+        with a tracker ``distortion`` the poses undistorted (positions by D⁻¹, orientations
+        as the tracker's rigid fit of the tool distorted them, with the tool moments when the
+        solver had them) and Z without the G it carries, so that E = (A X)⁻¹ Z B compares
+        like with like."""
         u = self.used()
         d = self.distortion
         if d is not None and d.get("matrix") is not None and d.get("model") != "none":
@@ -184,6 +184,17 @@ class Calibration:
             C = None if C is None else undistort(C, G, "affine", M.get("probe"))
             u = {k: v @ G4 if k in ("Z", "Z_probe") and v is not None else v
                  for k, v in u.items()}  # Z without the G it carries
+        return B, C, u
+
+    def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None
+               ) -> dict[str, Any]:
+        """Hold-out errors of Wang et al. (2018) on the poses given (n, 4, 4), as defined in
+        docs/methods.md: per body "trans_mm", "rot_deg";
+        with a ``distortion`` the measured poses are undistorted first (positions by D⁻¹,
+        orientations as the tracker's rigid fit of the tool distorted them, with the tool
+        moments when the solver had them) and Z is applied without the G it carries;
+        "e_t_mm", "theta_t_deg"; "e_z_mm", "theta_z_deg" for QR24 on two bodies."""
+        B, C, u = self.holdout_frames(B, C)
         bodies = {"marker": B}
         X_of = {"marker": u["X"]}
         Z_of = {"marker": u["Z"]}

@@ -12,7 +12,7 @@ from typing import Any
 
 import click
 
-from .app import EXIT_CHECK_FAILED, print_json, read_session_file
+from .app import EXIT_CHECK_FAILED, check_outputs, print_json, read_session_file, write_atomic
 
 __all__ = ["check_stored"]
 
@@ -30,19 +30,33 @@ def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
 def check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bool,
                  output: Path | None, plot: Path | None, fitting: bool,
                  kin_file: Path | None = None, tolerance_mm: float | None = None,
-                 tolerance_deg: float | None = None) -> None:
+                 tolerance_deg: float | None = None, update: list[str] | None = None,
+                 force: bool = False) -> None:
     """``solve SESSION --calib CALIB``: the stored calibration on the session, no fitting;
-    exits ``EXIT_CHECK_FAILED`` after printing when the verdict is FAIL."""
+    exits ``EXIT_CHECK_FAILED`` after printing when the verdict is FAIL. With ``update``
+    (``--update`` names) the partial re-registration instead (:func:`_update`)."""
     from ..exports.calibfile import read_calibration
     from ..exports.check import check_calibration, format_check
     from ..session import sha256_of
 
+    if update:
+        for opt, given in (("--plot", plot is not None),
+                           ("--tolerance-mm/--tolerance-deg",
+                            tolerance_mm is not None or tolerance_deg is not None),
+                           ("--kinematics", kin_file is not None)):
+            if given:
+                raise click.BadParameter("not with --update (it re-registers the named "
+                                         "transforms and checks the result itself)",
+                                         param_hint=opt)
+        _update(session_file, calib_file, update, as_json, strict, output, fitting, force)
+        return
     for opt, given in (("--output", output is not None), ("--plot", plot is not None),
                        ("--method/--option/--train/--in-sample/--orthonormal/--handheld-pose",
                         fitting)):
         if given:
             raise click.BadParameter(f"{opt} solves or writes a calibration; --calib only "
-                                     "checks a stored one (leave it out)", param_hint="--calib")
+                                     "checks a stored one (leave it out, or re-register with "
+                                     "--update)", param_hint="--calib")
     cf = read_calibration(calib_file)
     if kin_file is not None and cf.calibration.arm is not None:
         raise click.BadParameter(f"{calib_file} carries its own identified arm, with which "
@@ -57,3 +71,49 @@ def check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bo
         click.echo(format_check(res))
     if res["verdict"] is not None and res["verdict"]["result"] == "FAIL":
         sys.exit(EXIT_CHECK_FAILED)
+
+
+def _update(session_file: Path, calib_file: Path, names: list[str], as_json: bool,
+            strict: bool, output: Path | None, fitting: bool, force: bool) -> None:
+    """``solve SESSION --calib CALIB --update NAME…``: re-register the named transforms
+    (``exports.check.update_calibration``); ``-o`` writes the updated calibration with its
+    lineage. A refused update prints the refusal and the diagnosis, writes nothing and exits
+    ``EXIT_CHECK_FAILED``."""
+    from ..calib.diagnose import UpdateRefused
+    from ..exports.calibfile import provenance, read_calibration, updated_calibration_yaml
+    from ..exports.check import format_diagnosis, format_update, next_command, update_calibration
+    from ..session import plain, sha256_of
+
+    if fitting:
+        raise click.BadParameter("--method/--option/--train/--in-sample/--orthonormal/"
+                                 "--handheld-pose solve anew; --update keeps the stored "
+                                 "calibration's method and re-registers only the named "
+                                 "transforms (leave them out)", param_hint="--update")
+    check_outputs({"--output": output}, [session_file, calib_file], force)
+    cf = read_calibration(calib_file)
+    session = read_session_file(session_file, strict)
+    try:
+        res = update_calibration(session, cf, names)
+    except UpdateRefused as e:
+        d = e.diagnosis.to_json() if e.diagnosis is not None else None
+        if d is not None:
+            d["next_command"] = next_command(d["changed"], str(session_file), str(calib_file))
+            d["noise_model"] = getattr(e, "noise_source", None)
+        if as_json:
+            print_json({"refused": str(e), "diagnosis": d})
+        else:
+            click.echo(f"REFUSED: {e}")
+            if d is not None:
+                click.echo("\n".join(format_diagnosis(d)))
+        sys.exit(EXIT_CHECK_FAILED)
+    if output is not None:
+        write_atomic(output, updated_calibration_yaml(
+            cf, sha256_of(calib_file), res["calibration"], plain(res["update"]),
+            str(session_file), sha256_of(session_file), res["n_poses"], res["errors"],
+            provenance(session.header), res["noise_model"]), force)
+    if as_json:
+        print_json({"update": res["update"], "errors": res["errors"], "truth": res["truth"],
+                    "output": None if output is None else str(output)})
+    else:
+        click.echo(format_update(res, str(calib_file), None if output is None
+                                 else str(output)))

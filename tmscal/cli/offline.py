@@ -274,6 +274,15 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "exit status 0 or 3 (docs/exports.md, \"The daily check\").")
 @click.option("--tolerance-deg", type=Finite(0, lo_open=True), default=None, metavar="DEG",
               help="With --calib: likewise for the total rotation error θ_t (degrees).")
+@click.option("--update", "update", multiple=True, metavar="z|x|y|coil",
+              type=click.Choice(["z", "x", "y", "coil"]),
+              help="With --calib: re-register only this transform from the session's poses "
+                   "(z: the tracker moved, x: the marker moved on the coil, y: the coil's "
+                   "centre, coil: the coil re-seated, X and Y together), everything else and "
+                   "any identified arm kept; repeatable (z with x or y). Refused, nothing "
+                   "written, when the result still does not explain the session (a second "
+                   "change). -o writes the updated calibration, its parent named by SHA-256 "
+                   "(docs/lab-day.md).")
 @click.option("--kinematics", "kinematics", type=_KINEMATICS, default=None,
               metavar="estimate|KIN",
               help="'estimate': estimate the arm's kinematic deviations together with X, Y, "
@@ -307,18 +316,19 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
           train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
           output: Path | None, plot: Path | None, calib_file: Path | None,
           tolerance_mm: float | None, tolerance_deg: float | None,
-          kinematics: str | Path | None, arm: str | None, level: str,
+          update: tuple[str, ...], kinematics: str | Path | None, arm: str | None, level: str,
           tolerance_length: float | None, tolerance_angle: float | None, force: bool,
           strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
     docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses.
-    With --calib, check a stored calibration on the session instead (no fitting; a
-    calibration with an identified arm recomputes the session's robot poses from its joints
-    first). With --kinematics estimate, the arm's kinematics are estimated with X, Y, Z: the
-    output adds the level chosen and why (the held-out table), the identified combinations
-    of deviations with their σ, the weakly identified and what could not be identified and
-    why (docs/kinematics.md, "Using it"). With --kinematics KIN, the robot poses come from the
-    recorded joints and the arm's calibrated kinematics."""
+    With --calib, check a stored calibration on the session instead (no fitting; a calibration
+    with an identified arm recomputes the session's robot poses from its joints first) and say
+    what moved since it was solved (docs/lab-day.md); with --calib and --update, re-register
+    only the named transforms. With --kinematics estimate, the arm's kinematics are estimated
+    with X, Y, Z: the output adds the level chosen and why (the held-out table), the identified
+    combinations of deviations with their σ, the weakly identified and what could not be
+    identified and why (docs/kinematics.md, "Using it"). With --kinematics KIN, the robot poses
+    come from the recorded joints and the arm's calibrated kinematics."""
     from ..exports.calibfile import calibration_yaml
     from ..report.text import format_result, plot_residuals
     from ..session import sha256_of
@@ -340,8 +350,12 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
         check_stored(session_file, calib_file, as_json, strict, output=output, plot=plot,
                      fitting=bool(options or handheld_pose is not None or train is not None
                                   or in_sample or orthonormal or method.lower() != "qr36"),
-                     kin_file=kin_file, tolerance_mm=tolerance_mm, tolerance_deg=tolerance_deg)
+                     kin_file=kin_file, tolerance_mm=tolerance_mm, tolerance_deg=tolerance_deg,
+                     update=list(update), force=force)
         return
+    if update:
+        raise click.BadParameter("only with --calib CALIB (the calibration to update)",
+                                 param_hint="--update")
     for opt, tol in (("--tolerance-mm", tolerance_mm), ("--tolerance-deg", tolerance_deg)):
         if tol is not None:
             raise click.BadParameter("only with --calib CALIB (the daily check's verdict)",

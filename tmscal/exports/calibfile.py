@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from ..calib import Applied, Calibration
+from ..calib.diagnose import COMPONENTS, NoiseModel
 from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..geometry import orthonormalize
@@ -39,6 +40,7 @@ if TYPE_CHECKING:
     from ..solving.solve import SolveResult
 
 __all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "calibration_yaml",
+           "updated_calibration_yaml", "parse_noise_model",
            "read_calibration", "parse_calibration", "load_calibration", "provenance"]
 
 FORMAT = "tmscal-calibration"
@@ -60,6 +62,13 @@ class CalibrationFile:
         """{"path", "sha256"} of the session the calibration was solved on ({} if unknown)."""
         s = self.doc.get("session")
         return dict(s) if isinstance(s, dict) else {}
+
+    @property
+    def noise_model(self) -> NoiseModel | None:
+        """The calibration's noise model (``noise_model``, docs/lab-day.md), or None in a
+        file written before it was stored."""
+        d = self.doc.get("noise_model")
+        return None if d is None else NoiseModel.from_json(d)
 
     @property
     def created(self) -> str | None:
@@ -124,6 +133,51 @@ def _uncertainty(u: Any, src: str) -> dict[str, Any] | None:
     return out
 
 
+def _spd(v: Any, src: str, key: str, size: int) -> np.ndarray:
+    M = _number_matrix(v, src, key, (size, size))
+    if not np.allclose(M, M.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(M).max()))):
+        raise _bad(src, key, "expected a symmetric matrix")
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise _bad(src, key, "expected a positive definite covariance") from None
+    return M
+
+
+def parse_noise_model(d: Any, src: str) -> NoiseModel:
+    """The ``noise_model`` section (docs/lab-day.md): ``bodies`` (marker, then probe), the
+    residual ``covariance`` ((6·bodies)², mm and deg), ``poses``, ``source`` and optionally
+    ``calibration`` ({blocks, covariance}: the calibration's own uncertainty, per block
+    [v mm; ω rad]). CalibrationError naming ``src`` and the key."""
+    d = _mapping(d, src, "noise_model")
+    assert d is not None
+    bodies = d.get("bodies")
+    if bodies not in (["marker"], ["marker", "probe"]):
+        raise _bad(src, "noise_model.bodies", "expected [marker] or [marker, probe]")
+    q = 6 * len(bodies)
+    comps = d.get("components", list(COMPONENTS) * len(bodies))
+    if not isinstance(comps, list) or len(comps) not in (6, q):
+        raise _bad(src, "noise_model.components", f"expected the {6} component names")
+    cov = _spd(d.get("covariance"), src, "noise_model.covariance", q)
+    n = d.get("poses", 0)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise _bad(src, "noise_model.poses", "expected the number of poses (≥ 0)")
+    out = {"bodies": bodies, "covariance": cov.tolist(), "poses": n,
+           "source": str(d.get("source", "residuals"))}
+    c = d.get("calibration")
+    if c is not None:
+        c = _mapping(c, src, "noise_model.calibration")
+        assert c is not None
+        blocks = c.get("blocks")
+        if not isinstance(blocks, list) or not blocks or \
+                any(b not in ("z", "x", "y") for b in blocks) or len(set(blocks)) != len(blocks):
+            raise _bad(src, "noise_model.calibration.blocks", "expected blocks of z, x, y")
+        cc = _spd(c.get("covariance"), src, "noise_model.calibration.covariance",
+                  6 * len(blocks))
+        out["calibration"] = {"blocks": blocks, "covariance": cc.tolist()}
+    return NoiseModel.from_json(out)
+
+
 def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
                      covariance: Any = None, parameters: list[str] | None = None,
                      provenance: dict[str, Any] | None = None,
@@ -158,7 +212,7 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
     }
     if res.truth is not None:
         doc["truth_errors"] = res.truth
-    for k in ("uncertainty", "distortion", "options"):
+    for k in ("uncertainty", "distortion", "options", "noise_model"):
         if k in j:
             doc[k] = j[k]
     if covariance is not None:
@@ -250,6 +304,8 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     src = str(p)
     doc = _load_text(read_text_file(p, "calibration file", "calibration"), src)
     cal = parse_calibration(doc, src)
+    if doc.get("noise_model") is not None:
+        parse_noise_model(doc["noise_model"], src)
     cal.extra.setdefault("source", src)
     return CalibrationFile(calibration=cal, path=p, doc=doc)
 
@@ -279,3 +335,52 @@ def provenance(header: dict[str, Any] | None = None) -> dict[str, Any]:
         out["config"] = header.get("config") or {}
         out["devices"] = header.get("devices") or {}
     return out
+
+
+#: what an updated calibration does not inherit from its parent: figures of the parent's
+#: solve that no longer describe the updated matrices
+_NOT_INHERITED = ("created", "X", "Y", "Z", "Z_probe", "raw", "errors", "errors_sd",
+                  "cross_validation", "outlier_poses", "truth_errors", "uncertainty",
+                  "covariance", "parameters", "provenance")
+
+
+def updated_calibration_yaml(parent: CalibrationFile, parent_sha256: str, cal: Calibration,
+                             update: dict[str, Any], session_path: str, session_sha256: str,
+                             n_poses: int, errors: dict[str, Any],
+                             provenance: dict[str, Any] | None = None,
+                             noise_model: dict[str, Any] | None = None) -> str:
+    """The calibration YAML of a partial re-registration (``tmscal solve TODAY --calib CAL
+    --update z -o NEW``, docs/lab-day.md): the parent's document with the updated matrices
+    ``cal`` (4×4 mm, orthonormal at the top, raw under ``raw``), ``errors`` of the updated
+    calibration on the update's session (in-sample: the poses it was fitted on), the
+    ``update`` record (blocks, Δ sizes, σ, the predicted placement spread), and
+    ``provenance.lineage``: the parent (path, SHA-256, what it was updated from) before the
+    parent's own lineage. The parent's arm, distortion and method are kept, its noise model
+    replaced by ``noise_model`` when given (the update's uncertainty added); its solver
+    covariance and predicted uncertainty are dropped (they were of other matrices)."""
+    doc = {k: v for k, v in parent.doc.items() if k not in _NOT_INHERITED}
+    used = cal.exported()
+    mats: dict[str, Any] = {k: np.asarray(v, dtype=float).tolist()
+                            for k, v in used.items() if v is not None}
+    raw = {"X": cal.X_raw, "Y": cal.Y_raw, "Z": cal.Z_raw, "Z_probe": cal.Z_probe_raw}
+    pprov = parent.doc.get("provenance") or {}
+    lineage = [{"path": str(parent.path), "sha256": parent_sha256,
+                "created": parent.created, "method": parent.calibration.method,
+                "session": parent.session}] + list(pprov.get("lineage") or [])
+    prov = dict(provenance or {})
+    prov["lineage"] = lineage
+    out = {"format": FORMAT, "version": VERSION,
+           "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+           **{k: v for k, v in doc.items() if k not in ("format", "version")}}
+    out.update(mats)
+    out["raw"] = {k: np.asarray(v, dtype=float).tolist() for k, v in raw.items()
+                  if v is not None}
+    out["session"] = {"path": session_path, "sha256": session_sha256}
+    out["poses"] = {"solve": int(parent.calibration.n_poses), "test": int(n_poses),
+                    "errors_on": f"in-sample (the {n_poses} poses of the update)"}
+    out["errors"] = errors
+    if noise_model is not None:
+        out["noise_model"] = noise_model
+    out["update"] = update
+    out["provenance"] = prov
+    return yaml.safe_dump(out, sort_keys=False, default_flow_style=None, width=120)

@@ -15,23 +15,29 @@ degrees.
 
 from __future__ import annotations
 
+import shlex
 import textwrap
 from typing import Any
 
 import numpy as np
 
+from ..calib import diagnose as dg
 from ..calib.kinematics.calibrated import controller_frame
 from ..errors import CalibrationError
 from ..escape import visible
 from ..geometry import rotation_angle
 from ..session import Session
-from ..solving.kinematics import applied_arrays
+from ..solving.kinematics import applied_arrays, arm_forward
 from ..solving.outliers import find_outliers
 from ..solving.solve import pose_residuals, truth_errors_of
 from .calibfile import CalibrationFile
 
 __all__ = ["check_calibration", "format_check", "verdict", "verdict_line", "FRAME_MOVED_MM",
-           "FRAME_MOVED_DEG"]
+           "FRAME_MOVED_DEG", "UPDATE_OF", "session_frames", "noise_of", "next_command",
+           "format_diagnosis", "update_calibration", "format_update"]
+
+#: the ``--update`` that repairs each diagnosed change
+UPDATE_OF = {"tracker": "z", "marker": "x", "coil_centre": "y", "coil": "coil"}
 
 #: the controller's frame on the checked session this far from the calibration's is reported
 #: as moved (mm, deg): a tenth of what ``controller_frame`` tolerates within one session
@@ -110,6 +116,19 @@ def check_calibration(session: Session, cf: CalibrationFile,
                "frame_change_deg": float(np.degrees(rotation_angle(D[None])[0]))}
     stored = cf.session
     errors = _errors(cal.errors(A, B, C))
+    fr = session_frames(session, cf)
+    noise = noise_of(cf, fr.bodies)
+    try:
+        dx = dg.diagnose(fr, noise)
+        diagnosis = dict(dx.to_json(), noise_model=noise.source,
+                         next_command=next_command(dx.changed, str(session.path),
+                                                   str(cf.path)))
+    except (CalibrationError, np.linalg.LinAlgError) as e:
+        diagnosis = {"changed": None, "error": str(e), "noise_model": noise.source}
+    suggested = None
+    if tolerance_mm is None and tolerance_deg is None:
+        suggested = dg.suggested_tolerances(noise, len(A))
+        suggested["from"] = noise.source
     return {
         "calibration": {"file": str(cf.path), "method": cal.method, "n_poses": cal.n_poses,
                         "applied": str(cal.applied), "created": cf.created,
@@ -125,7 +144,47 @@ def check_calibration(session: Session, cf: CalibrationFile,
         "truth": truth_errors_of(session, cf.calibration, C, q),
         "arm": arm,
         "verdict": verdict(errors, tolerance_mm, tolerance_deg),
+        "diagnosis": diagnosis,
+        "suggested_tolerances": suggested,
     }
+
+
+def session_frames(session: Session, cf: CalibrationFile) -> dg.Frames:
+    """The session's usable poses as the stored calibration applies them (its arm, its
+    distortion; ``calib.diagnose.frames``), with the joints and the arm's forward
+    kinematics where the arm hypothesis can be tested (``solving.kinematics.arm_forward``).
+    CalibrationError as ``applied_arrays`` raises it."""
+    cal = cf.calibration
+    with_probe = cal.Y is not None and "probe" in session.bodies
+    A, B, C, idx, q = applied_arrays(session, cal, need_probe=with_probe)
+    if len(A) == 0:
+        raise CalibrationError(f"{session.path}: no usable poses in the session")
+    fk = arm_forward(session, cal, A, q)
+    return dg.frames(cal, A, B, C if with_probe else None, q if fk else None, fk, idx)
+
+
+def noise_of(cf: CalibrationFile, bodies: tuple[str, ...]) -> dg.NoiseModel:
+    """The calibration's noise model for ``bodies``: the stored one (``noise_model``), else
+    an isotropic one from its stored errors (``calib.diagnose.noise_from_errors``; files
+    written before the noise model was stored). CalibrationError when neither exists."""
+    nm = cf.noise_model
+    if nm is not None and set(bodies) <= set(nm.bodies):
+        return nm
+    return dg.noise_from_errors(cf.doc.get("errors") or {}, bodies)
+
+
+def next_command(changed: str | None, session_path: str, calib_path: str) -> str | None:
+    """The one command that repairs a diagnosed change (None when nothing changed)."""
+    s, c = shlex.quote(session_path), shlex.quote(calib_path)
+    if changed in UPDATE_OF:
+        new = shlex.quote(str(calib_path).rsplit(".", 1)[0] + "-updated.yaml")
+        return f"tmscal solve {s} --calib {c} --update {UPDATE_OF[changed]} -o {new}"
+    if changed == "arm":
+        return (f"tmscal solve SESSION --method ml --kinematics estimate -o {c} (a full "
+                "acquisition: the arm is re-identified with X, Y, Z; docs/kinematics.md)")
+    if changed == "unexplained":
+        return f"tmscal acquire CONFIG -o SESSION && tmscal solve SESSION -o {c} (recalibrate)"
+    return None
 
 
 def _row(label: str, t: float, r: float, stored: tuple[float, float] | None = None) -> str:
@@ -210,9 +269,129 @@ def format_check(res: dict[str, Any]) -> str:
                            "matrices on every pose of this session; e_trans = ‖t(E)‖ mm, θ its "
                            "rotation angle in degrees, averaged over the poses (Wang et al. "
                            "2018; docs/methods.md). A check error well above the stored one "
-                           "means the rig moved: recalibrate.", 98, subsequent_indent="  ")
+                           "means the rig moved: 'what moved' below says what.", 98,
+                           subsequent_indent="  ")
+    if res.get("diagnosis"):
+        lines += [""] + format_diagnosis(res["diagnosis"])
+    sug = res.get("suggested_tolerances")
+    if sug:
+        lines += textwrap.wrap(
+            f"  suggested tolerances for {sug['n_poses']} poses: --tolerance-mm "
+            f"{sug['tolerance_mm']:.3g} --tolerance-deg {sug['tolerance_deg']:.3g} (an "
+            f"unchanged rig fails {100 * (1 - sug['level']):.0f} % of checks; from the "
+            f"calibration's {sug['from']})", 98, subsequent_indent="    ")
     if res.get("verdict"):
         lines += ["", verdict_line(res["verdict"])]
+    return "\n".join(lines)
+
+
+def _size_text(d: dict[str, Any]) -> str:
+    if d.get("delta_mm") is None and d.get("delta_deg") is None:
+        return ""
+    sg = d.get("sigma") or {}
+    if d.get("joint"):
+        return f"joint {d['joint']} offset {d['delta_deg']:.3f}° ± {sg.get('deg') or 0:.3f}"
+    return (f"{d['delta_mm']:.3f} mm ± {sg.get('mm') or 0:.3f}, "
+            f"{d['delta_deg']:.3f}° ± {sg.get('deg') or 0:.3f}")
+
+
+def format_diagnosis(d: dict[str, Any]) -> list[str]:
+    """The diagnosis lines of the daily check (what moved, its size with σ, the runner-up's
+    evidence ratio, the command that repairs it; docs/lab-day.md)."""
+    if d.get("changed") is None:
+        return [visible(f"  what moved: not diagnosed ({d.get('error')})")]
+    head = f"  what moved: {d['label']}"
+    size = _size_text(d)
+    if size and d["changed"] != "none":
+        head += f": {size}"
+    if d["changed"] == "unexplained" and d.get("winner") not in (None, "none"):
+        head += f" (the best single change, {d['winner']}, leaves too much: {size})"
+    out = [head]
+    alts = {a["changed"]: a for a in d.get("alternatives") or []}
+    if d["changed"] == "none" and d.get("runner_up") in alts:
+        a = alts[d["runner_up"]]
+        pv = a.get("p_value")
+        out.append(f"    closest change: {d['runner_up']}"
+                   + (f" ({_size_text(a)})" if a.get("delta_mm") is not None else "")
+                   + (f", p = {pv:.2g} against nothing changed, not significant at "
+                      f"{d['test']['alpha']:g} over the hypotheses" if pv is not None else ""))
+    elif d.get("runner_up") and d.get("evidence_ratio") is not None:
+        out.append(f"    runner-up: {d['runner_up']}, evidence ratio "
+                   f"{d['evidence_ratio']:.3g} (AICc)")
+    for n in d.get("notes") or []:
+        out.append(f"    note: {n}")
+    if d.get("next_command"):
+        out.append(f"    repair: {d['next_command']}")
+    out.append(f"    (noise model: {d.get('noise_model')}; docs/lab-day.md)")
+    return [w for ln in out for w in textwrap.wrap(visible(ln), 98, subsequent_indent="      ")]
+
+
+def update_calibration(session: Session, cf: CalibrationFile, names: list[str]
+                       ) -> dict[str, Any]:
+    """``--update NAMES`` (z, x, y, coil; ``calib.diagnose.update``): the stored calibration with
+    only the named transforms re-registered on ``session``, everything else (and the arm) kept.
+    Returns {"calibration": the updated Calibration, "noise_model" (its noise model,
+    ``calib.diagnose.noise_after``; None without a stored one), "update": the record (blocks,
+    changed, Δ per block {mm, deg, sigma}, covariance, placement spread, noise ratio), "errors"
+    (in-sample, on the update's poses), "truth" (None without one), "n_poses"}. CalibrationError
+    when the session cannot determine the update; ``calib.diagnose.UpdateRefused`` (with its
+    diagnosis) when it does not explain the session."""
+    fr = session_frames(session, cf)
+    noise = noise_of(cf, fr.bodies)
+    try:
+        ft = dg.update(fr, noise, names)
+    except dg.UpdateRefused as e:
+        e.noise_source = noise.source  # type: ignore[attr-defined]
+        raise
+    cal = dg.updated(cf.calibration, ft)
+    stored = cf.noise_model
+    after = dg.noise_after(stored, ft) if stored is not None else None
+    with_probe = "probe" in fr.bodies
+    A, B, C, _, q = applied_arrays(session, cal, need_probe=with_probe)
+    deltas = {}
+    for b in ft.blocks:
+        sz = ft.size(b)
+        D = ft.delta(b)
+        deltas[b] = {"changed": dg.HYPOTHESIS_OF[b], "mm": sz["mm"], "deg": sz["deg"],
+                     "sigma": {"mm": sz["sigma_mm"], "deg": sz["sigma_deg"]},
+                     "matrix": D.tolist()}
+    spread = dg.placement_spread(ft)
+    record = {"blocks": list(ft.blocks), "deltas": deltas, "n_poses": fr.n,
+              "covariance": ft.cov.tolist(), "parameters": "per block [v mm (3), ω rad (3)]",
+              "noise_ratio": ft.noise_ratio, "noise_model": noise.source,
+              "predicted_coil_placement": spread,
+              "kept": [k for k in ("z", "x", "y") if k not in ft.blocks
+                       and not (k in "xy" and "coil" in ft.blocks)]
+              + (["arm"] if cal.arm is not None else [])}
+    return {"calibration": cal, "update": record,
+            "noise_model": None if after is None else after.to_json(),
+            "errors": _errors(cal.errors(A, B, C if with_probe else None)),
+            "truth": truth_errors_of(session, cal, C if with_probe else None, q),
+            "n_poses": fr.n}
+
+
+def format_update(res: dict[str, Any], calib_file: str, output: str | None) -> str:
+    """The human output of ``--update`` (mm, degrees)."""
+    u = res["update"]
+    lines = [visible(f"updated {calib_file} on {u['n_poses']} poses: "
+                     f"{', '.join(u['blocks'])} re-registered, "
+                     f"{', '.join(u['kept']) or 'nothing else'} kept")]
+    for b, d in u["deltas"].items():
+        lines.append(f"  {b} ({d['changed']}): {d['mm']:.3f} mm ± {d['sigma']['mm']:.3f}, "
+                     f"{d['deg']:.3f}° ± {d['sigma']['deg']:.3f}")
+    e = res["errors"]
+    lines.append(f"  residuals after the update (in-sample): e_t {e['e_t_mm']:.4f} mm, θ_t "
+                 f"{e['theta_t_deg']:.4f}°, {u['noise_ratio']:.2f}× the calibration's noise")
+    sp = u.get("predicted_coil_placement")
+    if sp:
+        lines.append(f"  predicted coil-placement error from the update's own uncertainty: "
+                     f"mean {sp['mean_mm']:.4f} mm, 95 % {sp['p95_mm']:.4f} mm")
+    t = res.get("truth")
+    if t and "coil_placement_mm" in t:
+        lines.append(f"  coil placement against the truth: mean {t['coil_placement_mm']:.4f} "
+                     f"mm, max {t['coil_placement_max_mm']:.4f} mm")
+    lines.append(visible(f"  written to {output}" if output else
+                         "  (nothing written: give -o FILE to write the updated calibration)"))
     return "\n".join(lines)
 
 
@@ -224,6 +403,6 @@ def verdict_line(v: dict[str, Any]) -> str:
         if tol is not None:
             op = ">" if key in v["failed"] else "≤"
             parts.append(f"{label} {v[key]:.4f}{unit} {op} {tol:g}{unit}")
-    tail = (": recalibrate (tracker, coil mount or robot moved, or a bad session: see the "
-            "outlier poses)" if v["result"] == "FAIL" else " (every pose held out)")
+    tail = (": the rig moved or a bad session: see 'what moved' and the outlier poses above"
+            if v["result"] == "FAIL" else " (every pose held out)")
     return f"{v['result']}: " + ", ".join(parts) + tail

@@ -27,7 +27,7 @@ from ..errors import CalibrationError, ConfigError, SessionError
 from ..session import Session
 
 __all__ = ["JOINTS_HINT", "recorded_arm", "choose_arm", "session_joints", "usable_joints",
-           "applied_arrays", "given_arm", "truth_arm_of", "truth_controller",
+           "applied_arrays", "arm_forward", "given_arm", "truth_arm_of", "truth_controller",
            "coil_placement"]
 
 #: what to do about a pose without joints
@@ -102,6 +102,30 @@ def applied_arrays(session: Session, cal: Calibration, need_probe: bool
                        "arm (it recomputes the robot poses from the joints)")
     _check_dof(q, cal.arm.nominal, str(session.path or "session"))
     return cal.robot_poses(A, q), B, C, idx, q
+
+
+def arm_forward(session: Session, cal: Calibration, A: np.ndarray, q: np.ndarray | None
+                ) -> Callable[[np.ndarray], np.ndarray] | None:
+    """joints (n, dof) rad → robot poses (n, 4, 4) mm in the frame of ``A`` (the poses as
+    ``applied_arrays`` gives them): the calibration's identified arm, else the arm the
+    session's driver reported when the recorded poses A are its nominal kinematics in one
+    fixed frame; None without joints or such an arm (the arm hypothesis of the daily
+    check's diagnosis then cannot be tested, docs/lab-day.md)."""
+    if q is None or len(A) == 0:
+        return None
+    if cal.arm is not None:
+        return cal.arm.robot_poses
+    name = recorded_arm(session)
+    if name is None or name not in ARMS:
+        return None
+    nominal = arm_by_name(name)
+    if q.shape[1] != nominal.n_joints:
+        return None
+    try:
+        M = controller_frame(nominal, A, q, str(session.path or "session"))
+    except CalibrationError:
+        return None
+    return lambda qq: M @ base_from_flange(nominal, np.atleast_2d(qq))
 
 
 def given_arm(session: Session, model: Arm, source: str

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..calib import Calibration, solve, truth_errors
+from ..calib.diagnose import calibration_noise
 from ..calib.kinematics.calibrated import ArmCalibration
 from ..calib.kinematics.estimate import Tolerances
 from ..calib.kinematics.model import Arm
@@ -131,6 +132,10 @@ class SolveResult:
     #: the predicted coil-placement error of the session (``predict.session_prediction``:
     #: coil_placement_mm at confidence, over region, the same region as the truth's)
     prediction: dict[str, Any] | None = None
+    #: the calibration's noise model (``calib.diagnose.calibration_noise`` on the poses it
+    #: was solved on, ``NoiseModel.to_json``): what the daily check's diagnosis and
+    #: ``--update`` test against (docs/lab-day.md); None when it could not be estimated
+    noise_model: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
@@ -146,7 +151,8 @@ class SolveResult:
             out["Z_probe"] = _mat(self.Z_probe)
         if self.truth is not None:
             out["truth"] = self.truth
-        for k in ("uncertainty", "distortion", "options", "arm", "nominal", "prediction"):
+        for k in ("uncertainty", "distortion", "options", "arm", "nominal", "prediction",
+                  "noise_model"):
             if getattr(self, k) is not None:
                 out[k] = plain(getattr(self, k))
         return out
@@ -320,8 +326,21 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         errors_sd=sd, cv=cv, outliers=find_outliers(residuals), residuals=residuals,
         uncertainty=cal.uncertainty, distortion=cal.distortion, options=opts_shown or None,
         arm=None if cal.arm is None else arm_summary(cal.arm, named_by),
-        nominal=as_recorded, prediction=session_prediction(session))
+        nominal=as_recorded, prediction=session_prediction(session),
+        noise_model=_noise_model(cal, A_eval[:n_solve], B[:n_solve],
+                                 None if C is None else C[:n_solve]))
     return cal, res
+
+
+def _noise_model(cal: Calibration, A: np.ndarray, B: np.ndarray, C: np.ndarray | None
+                 ) -> dict[str, Any] | None:
+    """The calibration's noise model on the poses it was solved on (A, B, C (n, 4, 4) mm, A
+    as the calibration applies them), or None when these poses cannot give one."""
+    try:
+        return calibration_noise(cal, A, B, C, f"residuals of the {len(A)} poses solved "
+                                 "on").to_json()
+    except (CalibrationError, np.linalg.LinAlgError, ValueError):
+        return None
 
 
 def truth_errors_of(session: Session, cal: Calibration, C: np.ndarray | None,
