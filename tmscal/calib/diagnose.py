@@ -262,6 +262,19 @@ def noise_from_errors(errors: dict[str, Any], bodies: Sequence[str]) -> NoiseMod
     return NoiseModel(np.diag(np.square(d)), tuple(bodies), "stored errors (isotropic)", 0)
 
 
+def _cal_jacobian(fr: Frames, blocks: Sequence[str]) -> np.ndarray:
+    """d(stacked residuals)/d(calibration blocks' 6-vectors) at zero, (m, 6·blocks)."""
+    r0 = residuals(fr).ravel()
+    cols = []
+    h = 1e-6
+    for b in blocks:
+        for j in range(6):
+            p = {bb: np.zeros(6) for bb in blocks}
+            p[b][j] = h
+            cols.append((residuals(_apply(fr, blocks, p)).ravel() - r0) / h)
+    return np.stack(cols, axis=1)
+
+
 def _whitening(fr: Frames, noise: NoiseModel) -> Callable[[np.ndarray], np.ndarray]:
     """w(r) ~ N(0, I) for the residuals r (n, q) of an unchanged rig, stacked pose-major:
     Cov r = I ⊗ Σ + J_c C_c J_cᵀ, the noise of each pose and the calibration's own error
@@ -276,15 +289,7 @@ def _whitening(fr: Frames, noise: NoiseModel) -> Callable[[np.ndarray], np.ndarr
         fr.whiten = lambda r: (r @ Wp.T).ravel()
         return fr.whiten
     blocks, C = cc
-    r0 = residuals(fr).ravel()
-    cols = []
-    h = 1e-6
-    for b in blocks:
-        for j in range(6):
-            p = {bb: np.zeros(6) for bb in blocks}
-            p[b][j] = h
-            cols.append((residuals(_apply(fr, blocks, p)).ravel() - r0) / h)
-    J = np.stack(cols, axis=1)
+    J = _cal_jacobian(fr, blocks)
     S = np.kron(np.eye(fr.n), Sp) + J @ C @ J.T
     W = np.linalg.solve(np.linalg.cholesky(S), np.eye(len(S)))
     fr.whiten = lambda r: W @ r.ravel()
@@ -472,6 +477,11 @@ def _f_p(small: Fit, big: Fit) -> float:
     dk = big.k - small.k
     if big.dof <= 0 or dk <= 0:
         return 1.0
+    floor = 1e-10 * big.m  # whitened units: far below any noise, above rounding
+    if small.rss <= floor:
+        return 1.0  # nothing left to explain
+    if big.rss <= floor:
+        return 0.0  # the larger model explains what is left exactly
     F = max(small.rss - big.rss, 0.0) / dk / (big.rss / big.dof)
     return float(f_dist.sf(F, dk, big.dof))
 
@@ -850,22 +860,44 @@ def _apply_blocks_only(ft: Fit) -> Frames:
 
 
 def suggested_tolerances(noise: NoiseModel, n_poses: int, level: float = 0.99,
-                         sessions: int = 4000, seed: int = 0) -> dict[str, Any]:
+                         sessions: int = 4000, seed: int = 0,
+                         fr: Frames | None = None,
+                         stored: dict[str, Any] | None = None) -> dict[str, Any]:
     """Tolerances for the daily check's totals from the noise model: the ``level`` quantile
     of e_t (mm, the sum of the bodies' mean ‖t(E)‖) and θ_t (deg) over ``sessions``
-    simulated unchanged sessions of ``n_poses`` poses drawn from the model; a check on an
-    unchanged rig then fails in about 1 − level of days. {"tolerance_mm", "tolerance_deg",
-    "level", "n_poses"}."""
+    simulated unchanged sessions of ``n_poses`` poses: each pose's noise drawn from the
+    model and, given the session's frames ``fr`` and a model with the calibration's own
+    uncertainty, that error too (one draw per session, shared by its poses, through the
+    residuals' Jacobian at these poses). A check on an unchanged rig then fails in about
+    1 − level of days. ``stored``: the calibration's own held-out errors (e_t_mm,
+    theta_t_deg: cross-validated, every pose held out once): where they are larger than the
+    simulated sessions' mean (a closed-form solver is less efficient than the likelihood the
+    model assumes), the quantiles are scaled up by that ratio. {"tolerance_mm",
+    "tolerance_deg", "level", "n_poses", "scaled": the two ratios applied}."""
     rng = np.random.default_rng(seed)
-    q = len(noise.cov)
-    K = np.linalg.cholesky(noise.cov)
-    n = max(int(n_poses), 1)
+    nm = noise if fr is None else noise.for_bodies(fr.bodies)
+    q = len(nm.cov)
+    K = np.linalg.cholesky(nm.cov)
+    n = max(int(n_poses) if fr is None else fr.n, 1)
     r = rng.standard_normal((sessions, n, q)) @ K.T
+    cc = None if fr is None else nm.calibration_for(fr)
+    if cc is not None:
+        blocks, C = cc
+        J = _cal_jacobian(fr, blocks)  # type: ignore[arg-type]
+        Lc = np.linalg.cholesky(C + 1e-18 * np.eye(len(C)))
+        shared = rng.standard_normal((sessions, len(C))) @ Lc.T @ J.T
+        r = r + shared.reshape(sessions, n, q)
     et = np.zeros(sessions)
     th = np.zeros(sessions)
-    for i in range(len(noise.bodies)):
+    for i in range(len(nm.bodies)):
         et += np.linalg.norm(r[:, :, 6 * i:6 * i + 3], axis=2).mean(axis=1)
         th += np.linalg.norm(r[:, :, 6 * i + 3:6 * i + 6], axis=2).mean(axis=1)
-    return {"tolerance_mm": float(np.quantile(et, level)),
-            "tolerance_deg": float(np.quantile(th, level)), "level": level, "n_poses": n}
-
+    f_t = f_r = 1.0
+    if stored:
+        if np.isfinite(stored.get("e_t_mm", np.nan)):
+            f_t = max(1.0, float(stored["e_t_mm"]) / float(et.mean()))
+        if np.isfinite(stored.get("theta_t_deg", np.nan)):
+            f_r = max(1.0, float(stored["theta_t_deg"]) / float(th.mean()))
+    return {"tolerance_mm": f_t * float(np.quantile(et, level)),
+            "tolerance_deg": f_r * float(np.quantile(th, level)), "level": level,
+            "n_poses": n, "scaled": [f_t, f_r]}

@@ -150,7 +150,8 @@ def parse_noise_model(d: Any, src: str) -> NoiseModel:
     ``calibration`` ({blocks, covariance}: the calibration's own uncertainty, per block
     [v mm; ω rad]). CalibrationError naming ``src`` and the key."""
     d = _mapping(d, src, "noise_model")
-    assert d is not None
+    if d is None:
+        raise _bad(src, "noise_model", "expected a mapping (bodies, covariance, poses)")
     bodies = d.get("bodies")
     if bodies not in (["marker"], ["marker", "probe"]):
         raise _bad(src, "noise_model.bodies", "expected [marker] or [marker, probe]")
@@ -167,7 +168,9 @@ def parse_noise_model(d: Any, src: str) -> NoiseModel:
     c = d.get("calibration")
     if c is not None:
         c = _mapping(c, src, "noise_model.calibration")
-        assert c is not None
+        if c is None:
+            raise _bad(src, "noise_model.calibration", "expected a mapping (blocks, "
+                       "covariance)")
         blocks = c.get("blocks")
         if not isinstance(blocks, list) or not blocks or \
                 any(b not in ("z", "x", "y") for b in blocks) or len(set(blocks)) != len(blocks):

@@ -127,7 +127,12 @@ def check_calibration(session: Session, cf: CalibrationFile,
         diagnosis = {"changed": None, "error": str(e), "noise_model": noise.source}
     suggested = None
     if tolerance_mm is None and tolerance_deg is None:
-        suggested = dg.suggested_tolerances(noise, len(A))
+        st = cf.doc.get("errors") or {}
+        on = str((cf.doc.get("poses") or {}).get("errors_on", ""))
+        stored_e = ({k: float(st[k]) for k in ("e_t_mm", "theta_t_deg") if k in st}
+                    if on.startswith("cross-validated") and fr.bodies == ("marker", "probe")
+                    and "e_z_mm" not in st else None)
+        suggested = dg.suggested_tolerances(noise, len(A), fr=fr, stored=stored_e)
         suggested["from"] = noise.source
     return {
         "calibration": {"file": str(cf.path), "method": cal.method, "n_poses": cal.n_poses,
