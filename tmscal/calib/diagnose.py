@@ -47,7 +47,7 @@ from scipy.stats import f as f_dist
 
 from ..errors import CalibrationError
 from ..geometry import make_pose, matrix_from_rotvec, orthonormalize, pose_mean, rotvec_from_matrix
-from .calibration import Calibration
+from .calibration import Applied, Calibration
 
 __all__ = ["HYPOTHESES", "BLOCK_OF", "UPDATES", "ALPHA", "ALLOWANCE", "CHI2_LEVEL",
            "NoiseModel", "Frames", "frames", "residuals", "noise_from_residuals",
@@ -178,10 +178,14 @@ def frames(cal: Calibration, A: np.ndarray, B: np.ndarray, C: np.ndarray | None 
            joints: np.ndarray | None = None,
            fk: Callable[[np.ndarray], np.ndarray] | None = None,
            indices: list[int] | None = None) -> Frames:
-    """The :class:`Frames` of poses A, B, C (n, 4, 4) mm under ``cal`` (its applied
-    matrices, ``Calibration.holdout_frames``); C ignored for a marker-only calibration."""
-    B, C, u = cal.holdout_frames(np.asarray(B, float), None if C is None else
-                                 np.asarray(C, float))
+    """The :class:`Frames` of poses A, B, C (n, 4, 4) mm under ``cal``: its orthonormal
+    matrices (``Calibration.holdout_frames`` as if applied orthonormal: a tracker
+    distortion undone), whichever set it applies — the changes told apart are rigid, and
+    the raw linear solution's small non-rigid error would grow with a large move (a tracker
+    250 mm away from where it was calibrated); C ignored for a marker-only calibration."""
+    rigid = replace(cal, applied=Applied.ORTHONORMAL)
+    B, C, u = rigid.holdout_frames(np.asarray(B, float),
+                                   None if C is None else np.asarray(C, float))
     N = {"marker": B}
     X = {"marker": u["X"]}
     Z = {"marker": u["Z"]}
@@ -223,20 +227,74 @@ def noise_from_residuals(r: np.ndarray, bodies: Sequence[str], fitted: int,
     return NoiseModel(S, tuple(bodies), source, n)
 
 
+#: closed-form methods whose own sampling error :func:`calibration_noise` measures by a
+#: parametric bootstrap (cheap to re-solve); others use the likelihood's covariance
+BOOTSTRAP_METHODS = ("qr36", "qr24")
+BOOTSTRAP_REPS = 60
+
+
 def calibration_noise(cal: Calibration, A: np.ndarray, B: np.ndarray,
-                      C: np.ndarray | None = None, source: str = "residuals") -> NoiseModel:
+                      C: np.ndarray | None = None, source: str = "residuals",
+                      seed: int = 0) -> NoiseModel:
     """The noise model of a calibration from the poses it was solved on (A, B, C: (n, 4, 4)
     mm): the residual covariance (:func:`noise_from_residuals`, 6 parameters per solved
-    transform) and the calibration's own uncertainty, the covariance of its blocks z, x (y)
-    by the whitened Jacobian on these poses (:attr:`NoiseModel.cal_cov`)."""
+    transform) and the calibration's own uncertainty (:attr:`NoiseModel.cal_cov`, blocks z,
+    x (y)): for QR24/QR36 a parametric bootstrap — the poses' tracker readings perturbed by
+    draws of that residual noise, re-solved ``BOOTSTRAP_REPS`` times by the same method, the
+    covariance of the re-solved blocks — since these linear solvers are less efficient than
+    the likelihood and the likelihood's covariance understates their error; for other
+    methods the likelihood's, (JᵀJ)⁻¹ of the whitened Jacobian on these poses."""
     fr = frames(cal, A, B, C)
     bodies = fr.bodies
     nm = noise_from_residuals(residuals(fr), bodies, 6 * (len(bodies) + 1), source)
     blocks = ("z", "x", "y") if "probe" in bodies else ("z", "x")
+    if cal.method in BOOTSTRAP_METHODS and cal.distortion is None and cal.arm is None:
+        cov = _bootstrap(cal, A, B, C if "probe" in bodies else None, nm, blocks, seed)
+        if cov is not None:
+            return replace(nm, cal_cov=cov, cal_blocks=blocks)
     ft = fit(fr, nm, blocks)
     if not ft.rank_ok or not np.all(np.isfinite(ft.cov)):
         return nm
     return replace(nm, cal_cov=ft.cov, cal_blocks=blocks)
+
+
+def _bootstrap(cal: Calibration, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
+               nm: NoiseModel, blocks: tuple[str, ...], seed: int) -> np.ndarray | None:
+    from .methods import solve
+
+    rng = np.random.default_rng(seed)
+    n = len(A)
+    ref = {"z": cal.Z, "x": cal.X, "y": cal.Y}
+    draws = []
+    q6 = len(nm.cov)
+    Km = np.linalg.cholesky(nm.cov[:6, :6] / 2)
+    Kh = np.linalg.cholesky(nm.cov / 2)
+    for _ in range(BOOTSTRAP_REPS):
+        # half the residual variance as the robot's (in the flange frame, shared by both
+        # bodies: errors in A bias a linear solver, errors in N do not), half the tracker's
+        f = rng.standard_normal((n, 6)) @ Km.T
+        F = np.stack([cal.X @ make_pose(matrix_from_rotvec(np.radians(f[j, 3:])), f[j, :3])
+                      @ np.linalg.inv(cal.X) for j in range(n)])
+        e = rng.standard_normal((n, q6)) @ Kh.T
+        bodies = [B] + ([] if C is None else [C])
+        pert = []
+        for i, N in enumerate(bodies):
+            d = e[:, 6 * i:6 * i + 6]
+            D = np.stack([make_pose(matrix_from_rotvec(np.radians(d[j, 3:])), d[j, :3])
+                          for j in range(n)])
+            pert.append(N @ D)
+        A_p = A @ F
+        try:
+            c2 = solve(A_p, pert[0], pert[1] if C is not None else None, method=cal.method,
+                       orthonormal=cal.applied == Applied.ORTHONORMAL)
+        except (CalibrationError, np.linalg.LinAlgError, ValueError):
+            return None
+        new = {"z": c2.Z, "x": c2.X, "y": c2.Y}
+        draws.append(np.concatenate([_xi(np.linalg.inv(ref[b]) @ new[b]) for b in blocks]))
+    X = np.asarray(draws)
+    S = np.cov(X, rowvar=False)
+    S = (S + S.T) / 2 + 1e-12 * np.eye(len(S))
+    return S if np.all(np.isfinite(S)) else None
 
 
 #: E‖t‖ of an isotropic 3-D Gaussian of σ per axis is 2·√(2/π)·σ
@@ -273,6 +331,24 @@ def _cal_jacobian(fr: Frames, blocks: Sequence[str]) -> np.ndarray:
             p[b][j] = h
             cols.append((residuals(_apply(fr, blocks, p)).ravel() - r0) / h)
     return np.stack(cols, axis=1)
+
+
+def _anchor(fr: Frames, noise: NoiseModel, candidates: Sequence[tuple[str, ...]]) -> None:
+    """Fix ``fr``'s whitening at the frames of the best of ``candidates`` (block tuples, ()
+    = nothing changed) fitted with each pose's noise alone: the calibration's error enters
+    through the residuals' Jacobian, which must be taken near the solution (a tracker
+    turned by 30° turns it too). One whitening for every model then compared."""
+    if noise.cal_cov is None:
+        return
+    plain = replace(noise, cal_cov=None, cal_blocks=())
+    f0 = replace(fr, whiten=None)
+    best = None
+    for c in candidates:
+        ft = fit(f0, plain, c)
+        if ft.rank_ok and (best is None or ft.aicc < best.aicc):
+            best = ft
+    at = best.frames if best is not None else fr
+    fr.whiten = _whitening(replace(at, whiten=None), noise)
 
 
 def _whitening(fr: Frames, noise: NoiseModel) -> Callable[[np.ndarray], np.ndarray]:
@@ -570,10 +646,11 @@ def _num(x: float | None) -> float | None:
 def diagnose(fr: Frames, noise: NoiseModel, alpha: float = ALPHA,
              allowance: float = ALLOWANCE) -> Diagnosis:
     """Which single change explains the session (module docstring; docs/lab-day.md)."""
+    hs = _hypotheses(fr)
+    _anchor(fr, noise, [()] + [(BLOCK_OF[h],) for h in hs])
     none = fit(fr, noise)
     fits = {"none": none}
     notes: list[str] = []
-    hs = _hypotheses(fr)
     if "probe" not in fr.N:
         notes.append("marker only: a marker moved on the coil and a coil re-seated on the "
                      "flange are one X change without the probe (both reported as 'coil')")
@@ -698,6 +775,7 @@ def update(fr: Frames, noise: NoiseModel, names: Sequence[str], alpha: float = A
             f"{'' if 'probe' in fr.N else ' of a marker-only session'}, the session has "
             f"{fr.n}: {need} is the fewest that determine the update and still leave the "
             "check for a second change its redundancy (docs/lab-day.md)")
+    _anchor(fr, noise, [blocks])
     ft = fit(fr, noise, blocks)
     if not ft.rank_ok:
         raise CalibrationError(f"--update {' '.join(blocks)}: the session's {fr.n} poses do "
@@ -738,7 +816,8 @@ def updated(cal: Calibration, ft: Fit) -> Calibration:
     of ``cal``): Z' = Z Δ (raw: through the tracker distortion, Z_raw D Δ D⁻¹), X' = X Δ,
     Y' = Y Δ, coil: X' = Δ X, Y' = Δ Y, raw and orthonormal alike; every other matrix, the
     distortion and the arm are the same objects. The solver's covariance and predicted
-    uncertainty no longer apply and are dropped."""
+    uncertainty no longer apply and are dropped; the result applies the orthonormal matrices
+    (the update was fitted on them, :func:`frames`)."""
     ch: dict[str, Any] = {}
     d = cal.distortion
     D4 = np.eye(4)
@@ -767,7 +846,8 @@ def updated(cal: Calibration, ft: Fit) -> Calibration:
             ch[k] = orthonormalize(ch[k])  # rigid to rounding
     extra = dict(cal.extra, updated=list(ft.blocks))
     extra.pop("parameters", None)
-    return replace(cal, **ch, covariance=None, uncertainty=None, extra=extra)
+    return replace(cal, **ch, covariance=None, uncertainty=None, extra=extra,
+                   applied=Applied.ORTHONORMAL)
 
 
 def noise_after(noise: NoiseModel, ft: Fit) -> NoiseModel:
