@@ -246,7 +246,8 @@ def predict_calibration(session: Session, cal: Any, n_solve: int | None = None,
               f"the robot poses of the {arm['source']} {arm['nominal']} arm, its deviations "
               "taken as exact (their own uncertainty is not counted)")
         own = ("it has no error model of its own" if cal.method != "ml" else
-               "ml with an arm has no coil-placement prediction of its own")
+               "ml with an arm has no coil-placement prediction of its own" if arm else
+               "this ml calibration carries no error model of its own")
         how = (f"{name}: {own}; ml's prediction (distortion {PREDICTION_DISTORTION}) on "
                f"{on}, plus where the {name} calibration places the coil relative to ml's "
                "estimate")
