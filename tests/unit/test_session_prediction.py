@@ -1,6 +1,6 @@
-"""``tmscal solve`` predicts the coil-placement error of every session
-(tmscal.solving.predict.session_prediction) over the region its truth's coil placement is
-measured on: the plan's first poses when the header records a plan, else the session's own
+"""``tmscal solve`` predicts the coil-placement error of the calibration it solves
+(tmscal.solving.predict.calibration_prediction) over the region its truth's coil placement
+is measured on: the plan's first poses when the header records a plan, else the session's own
 poses (issue 21). Sessions from ``tmscal simulate`` (the truth in the header)."""
 
 from __future__ import annotations

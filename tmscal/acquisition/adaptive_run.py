@@ -51,6 +51,7 @@ from ..session import PoseRecord, Session
 from ..solving.predict import (
     adaptive_header,
     arm_error_counts,
+    model_error_hint,
     prediction_inputs,
     robot_time_of,
     settings_from_header,
@@ -316,10 +317,14 @@ class AdaptiveStrategy(PlanStrategy):
     def result_fields(self, session: Session) -> dict[str, Any]:
         assert self.adaptive is not None
         s = _State.of(session.poses, self.p0)
+        message = stop_message(self.reason, self.pred, self.adaptive, len(s.records))
+        if self.reason in ("max_poses", "pool") and self.pred is not None:
+            hint = model_error_hint(session, self.pred, self.adaptive)
+            if hint:
+                message += f"; the cause is model error, {hint}"
         return {"recorded": s.used, "skipped": len(s.records) - s.used,
                 "total": self.adaptive.max_poses, "stop": self.reason,
-                "message": stop_message(self.reason, self.pred, self.adaptive,
-                                        len(s.records)),
+                "message": message,
                 "prediction": self.pred, "robot_time_s": robot_time_of(session.poses),
                 "settings": self.adaptive}
 

@@ -24,6 +24,7 @@ The pieces:
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 from dataclasses import dataclass
@@ -31,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import CalibrationError
 from ..geometry import angle_between, invert, skew
 from ..motion import trapezoid_duration
 from .calibration import Calibration
@@ -50,7 +52,7 @@ from .ml_model import (
 __all__ = ["AdaptiveSettings", "SettingError", "MAX_TARGET_MM", "MAX_POOL", "Prediction",
            "minimum_poses", "bootstrap_indices", "predict", "placement_jacobians",
            "residual_jacobians", "candidate_information", "choose_next", "stop_reason",
-           "candidate_cost_s", "true_coil_error", "MC_DRAWS",
+           "candidate_cost_s", "true_coil_error", "placement_offsets", "MC_DRAWS",
            "PREDICTION_DISTORTION"]
 
 #: Monte Carlo draws of the parameter error behind the predicted quantile (fixed seed 0)
@@ -149,7 +151,10 @@ class Prediction:
 
     ``coil_mm``: the ``confidence`` quantile of the mean over the region of the coil-centre
     placement error (mm); ``sigma_mm``: its RMS over the region and the parameter error (mm);
-    ``n_poses``; ``calibration``: the ``ml`` Calibration. For :func:`choose_next`:
+    ``n_poses``; ``calibration``: the Calibration whose placement is predicted (the ``ml``
+    one, or the ``placed`` one of :func:`predict`); ``reference``: the ``ml`` Calibration
+    whose covariance the prediction propagates when it is not ``calibration`` (else None).
+    For :func:`choose_next`:
     ``problem`` (ml's Problem at the estimate), ``covariance`` (unscaled, the inverse of the
     whitened information), ``variance_factor`` and ``dof`` (its scale and degrees of
     freedom), ``region_q`` (Q = mean_r J_rᵀ J_r, the region's placement Jacobians J_r (3×k)),
@@ -171,6 +176,7 @@ class Prediction:
     noise: tuple[float, float, np.ndarray]
     draws_mm: np.ndarray
     model_error_mm: float = 0.0
+    reference: Calibration | None = None
 
     def quantile(self, q: float) -> float:
         """The predicted mean coil-placement error over the region (mm) at confidence q."""
@@ -302,6 +308,7 @@ def _factor_draws(cal: Calibration, rng: np.random.Generator, n: int
 
 def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarray,
             settings: AdaptiveSettings, model_error: bool = False,
+            calibration: Calibration | None = None, placed: Calibration | None = None,
             **ml_options: Any) -> Prediction:
     """Solve QR36 then ``ml`` on the poses so far (A, B, C: (n, 4, 4) mm; C None for a
     marker-only rig, then the marker is the body placed) and predict the coil-placement error
@@ -324,9 +331,27 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     σ_t, σ_r the robot's estimated translation (mm) and rotation (rad per axis) noise.
     ``coil_mm`` is the ``settings.confidence`` quantile of mean_r ‖e_r‖ over
     :data:`MC_DRAWS` draws with a fixed seed, ``sigma_mm`` the RMS of e_r. CalibrationError
-    when the poses do not determine the calibration."""
+    when the poses do not determine the calibration.
+
+    ``calibration``: an ``ml`` Calibration already solved on these poses with these
+    ``ml_options`` (it is not solved again; its own distortion model is the prediction's).
+    ``placed``: predict the placement of this calibration instead (any method, e.g. QR36,
+    which has no error model of its own): its placement offset from the ml estimate,
+    :func:`placement_offsets` d_r (where ``placed`` puts the coil if ml's estimate were the
+    truth), is added to every draw, e_r = d_r + J_r δθ (+ the model error): the error of
+    ``placed`` is its difference from ml's estimate plus ml's own error. ``placed`` with an
+    identified arm is taken in the frame of A (its commands before the arm's conversion to
+    the controller's, so A must be the poses of that arm)."""
     opts = {"distortion": PREDICTION_DISTORTION, **ml_options}
-    cal = solve(A, B, C, method="ml", **opts)
+    if calibration is None:
+        cal = solve(A, B, C, method="ml", **opts)
+    elif (calibration.method != "ml" or calibration.arm is not None
+          or "covariance_parts" not in calibration.extra):
+        raise CalibrationError(f"predict: calibration must be an ml solve without an arm, got "
+                               f"{calibration.method}"
+                               f"{' with an arm' if calibration.arm is not None else ''}")
+    else:
+        cal = calibration
     bodies = [np.asarray(B, dtype=float)] + ([] if C is None else [np.asarray(C, dtype=float)])
     A = np.asarray(A, dtype=float)
     prob = _problem_of(cal, A, bodies)
@@ -350,6 +375,11 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
         d += f[c][:, None] * (rng.standard_normal((MC_DRAWS, k)) @ root.T)
     e = (J.reshape(-1, k) @ d.T).reshape(len(region), 3, -1)
     v = vf if scaled else 1.0
+    var_offset = 0.0
+    if placed is not None and placed is not cal:
+        off = placement_offsets(placed, cal, region)
+        e = e + off[:, :, None]
+        var_offset = float(np.mean(np.sum(off ** 2, axis=1)))
     sig_t = float(nz["robot_sigma_mm"])
     sig_r = float(np.radians(nz["robot_sigma_deg"]))
     var_model = 0.0
@@ -366,12 +396,39 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     o = {**_ml_defaults(), **opts}
     tracker = tracker_covs(len(A), names, o).mean(axis=0) * float(nz["tracker_factor"])
     noise = (sig_t, sig_r, tracker)
+    other = placed is not None and placed is not cal
     return Prediction(coil_mm=coil,
-                      sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q) + var_model)),
-                      confidence=settings.confidence, n_poses=len(A), calibration=cal,
+                      sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q) + var_model
+                                             + var_offset)),
+                      confidence=settings.confidence, n_poses=len(A),
+                      calibration=placed if other else cal,
                       problem=prob, covariance=P, variance_factor=v, dof=dof, region_q=Q,
                       noise=noise, draws_mm=draws,
-                      model_error_mm=float(np.sqrt(var_model)))
+                      model_error_mm=float(np.sqrt(var_model)),
+                      reference=cal if other else None)
+
+
+def placement_offsets(placed: Calibration, reference: Calibration, region: np.ndarray
+                      ) -> np.ndarray:
+    """Where ``placed`` puts the coil centre, minus where it was wanted, if ``reference``'s
+    estimate (its Y, Z and tracker distortion D) were the truth: (R, 3) mm in the robot's
+    base frame, one row per flange pose of ``region`` (R, 4, 4 base_from_flange mm). The
+    targets are the tracker poses the reference gives there, N_r = Ẑ⁻¹ P_r Ŷ, as its tracker
+    measures them (D applied, as :func:`true_coil_error` does); ``placed`` commands them
+    (``Calibration.flange_command``; an identified arm of ``placed`` is left out: the offsets
+    are in the frame of the poses both were solved on) and the coil lands at A_cmd Ŷ where
+    P_r Ŷ was wanted. CalibrationError for a marker-only calibration."""
+    if placed.Y is None or reference.Y is None:
+        raise CalibrationError("a marker-only calibration has no coil (Y): it cannot place "
+                               "the coil")
+    P = np.asarray(region, dtype=float).reshape(-1, 4, 4)
+    Yr, Zr = np.asarray(reference.Y, dtype=float), np.asarray(reference.Z, dtype=float)
+    N = invert(Zr)[None] @ P @ Yr[None]
+    D = (reference.distortion or {}).get("matrix")
+    N_meas = N if D is None else undistort(N, np.asarray(D, dtype=float), "affine")
+    flat = placed if placed.arm is None else dataclasses.replace(placed, arm=None)
+    landed = flat.flange_command(N_meas) @ Yr[None]
+    return landed[:, :3, 3] - (P @ Yr[None])[:, :3, 3]
 
 
 def residual_jacobians(prob: Problem, poses: np.ndarray) -> np.ndarray:

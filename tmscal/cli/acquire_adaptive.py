@@ -136,7 +136,10 @@ def summary(res: Any, config: Path | None, output: Path, tracker_port: str | Non
     click.echo("  " + format_robot_time(res.robot_time_s))
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
-    click.echo(f"next: tmscal solve {output} --method ml --option distortion=scale -o "
+    from ..solving.predict import RUN_METHOD
+
+    opts = "".join(f" --option {k}={v}" for k, v in RUN_METHOD["options"].items())
+    click.echo(f"next: tmscal solve {output} --method {RUN_METHOD['method']}{opts} -o "
                f"{output.with_suffix('.yaml')}   (the calibration the prediction is about)")
 
 
@@ -147,21 +150,16 @@ def _region(settings: Any) -> str:
 def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | None,
          overrides: dict[str, Any], as_json: bool, replace: bool = False) -> None:
     """``tmscal demo --adaptive``: the adaptive run on the mock rig (mocks in a child), then
-    the prediction beside the true coil-placement error against the rig's truth (over the
-    same region), and QR36 on the session as ``demo`` prints it."""
+    the session solved with the method whose prediction stopped the run
+    (``solving.predict.RUN_METHOD``: ml, distortion scale), its prediction beside its true
+    coil-placement error against the rig's truth (over the same region), as ``demo``
+    prints a solve."""
 
-    from ..calib.prediction import true_coil_error
     from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..net import split_endpoint
-    from ..poses import PlanSpec
-    from ..report.text import (
-        format_prediction,
-        format_result,
-        format_robot_time,
-        format_truth,
-    )
+    from ..report.text import format_result, format_robot_time, format_truth
     from ..session import read_session
-    from ..solving.kinematics import truth_arm_of, truth_controller
+    from ..solving.predict import RUN_METHOD
     from ..solving.solve import solve_session
     from .app import print_json
 
@@ -176,27 +174,23 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
                   quiet=as_json, replace=replace)
     session = read_session(output)
     session.header["truth"] = truth.as_dict()
-    region = PlanSpec.from_header(session.header).with_n(res.settings.region).poses()
-    true_mm = None
-    if res.prediction is not None and truth.Y is not None:
-        arm = truth_arm_of(session)  # the rig's arm: its controller executes the commands
-        true_mm = true_coil_error(res.prediction.calibration, truth.Y, truth.Z, region,
-                                  None if arm is None else truth_controller(arm, None))
-    _, result = solve_session(session, "qr36")
+    _, result = solve_session(session, RUN_METHOD["method"],
+                              options=dict(RUN_METHOD["options"]))
+    true_mm = (result.truth or {}).get("coil_placement_mm")
     if as_json:
         out = result.to_json()
         out.update(robot_time_s=res.robot_time_s, poses_used=res.recorded,
                    predicted_coil_mm=None if res.prediction is None else res.prediction.coil_mm,
                    confidence=res.settings.confidence, true_coil_mm=true_mm,
-                   stop_reason=res.stop, adaptive_method="ml")
+                   stop_reason=res.stop, adaptive_method=RUN_METHOD["method"])
         print_json(out)
         return
     click.echo(f"{res.message}; poses used {res.recorded} ({res.skipped} skipped)")
     click.echo(format_robot_time(res.robot_time_s))
-    if res.prediction is not None:
-        click.echo(format_prediction(res.prediction, _region(res.settings)))
     if true_mm is not None:
-        click.echo(f"true coil-placement error {true_mm:.3g} mm (the ml calibration against the "
-                   "mock rig's truth, mean over the same region)\n")
+        click.echo(f"true coil-placement error {true_mm:.3g} mm (the {RUN_METHOD['method']} "
+                   "calibration below, the one that prediction is about, against the mock "
+                   "rig's truth, mean over the same region)")
+    click.echo("")
     click.echo(format_result(result))
     click.echo(format_truth(truth))

@@ -386,7 +386,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
             run_plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
                      tmp["plot"], f"{session_file.name}: {res.method.upper()} per-pose errors",
                      outliers=res.outliers)
-    pred = _adaptive_prediction(session)
+    pred = _adaptive_prediction(session, res)
     if as_json:
         out = res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]}
         print_json(out if kin_file is None else {**out, "kinematics": str(kin_file)})
@@ -421,21 +421,30 @@ def _kinematics_args(kinematics: str | Path | None) -> dict[str, Any]:
     return {"kinematics": load_arm(kinematics), "kinematics_source": str(kinematics)}
 
 
-def _adaptive_prediction(session: Any) -> tuple[dict[str, Any], str] | None:
+def _adaptive_prediction(session: Any, res: Any) -> tuple[dict[str, Any], str] | None:
     """For a session recorded by ``acquire --adaptive``: the prediction that run stopped on,
     recomputed from the session (``solving.predict.predict_session``; docs/adaptive.md), as
-    ({predicted_coil_mm, confidence, sigma_mm, n_poses, …, region, robot_time_s}, its text);
-    None for other sessions."""
+    ({method, options, predicted_coil_mm, confidence, sigma_mm, n_poses, …, region,
+    robot_time_s}, its text); None for other sessions. The text names the calibration that
+    prediction is about and prints no second number: the solve result ``res``'s own
+    prediction is the written calibration's (the same one when ``res`` is solved with the
+    run's method, ``solving.predict.RUN_METHOD``)."""
     if not isinstance(session.header.get("adaptive"), dict):
         return None
-    from ..report.text import format_prediction, format_robot_time
-    from ..solving.predict import predict_session
+    from ..report.text import format_robot_time
+    from ..solving.predict import RUN_METHOD, predict_session
 
     pred, info = predict_session(session)
-    text = ("adaptive acquisition (docs/adaptive.md), recomputed from the session:\n  "
-            + format_prediction(pred, info["region"]) + "\n  "
-            + format_robot_time(info["robot_time_s"]))
-    return ({**pred.as_dict(), "region": info["region"],
+    opts = " ".join(f"--option {k}={v}" for k, v in RUN_METHOD["options"].items())
+    same = (res.method == RUN_METHOD["method"] and res.arm is None
+            and (res.distortion or {}).get("model", "none")
+            == RUN_METHOD["options"]["distortion"])
+    about = ("this calibration" if same else f"the calibration tmscal solve {session.path} "
+             f"--method {RUN_METHOD['method']} {opts} writes")
+    text = ("adaptive acquisition (docs/adaptive.md): the run stopped on the prediction of "
+            f"{about}\n  " + format_robot_time(info["robot_time_s"]))
+    return ({"method": RUN_METHOD["method"], "options": dict(RUN_METHOD["options"]),
+             **pred.as_dict(), "region": info["region"],
              "robot_time_s": info["robot_time_s"]}, text)
 
 

@@ -19,7 +19,6 @@ C = tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_
 from __future__ import annotations
 
 import base64
-import dataclasses
 import datetime as _dt
 import os
 import tempfile
@@ -31,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..calib import Calibration, solve
+from ..calib import Calibration
 from ..errors import CalibrationError
 from ..escape import html_text
 from ..session import Session, skip_cause
@@ -259,25 +258,6 @@ def _stored_result(session: Session, cal: Calibration, doc: dict[str, Any],
         arm=None if cal.arm is None else arm_summary(cal.arm))
 
 
-def _ml_uncertainty(session: Session, res: SolveResult) -> tuple[SolveResult | None, str]:
-    """The ml solver's predicted uncertainty on the same poses, for a method without one:
-    (a SolveResult carrying it, a note) or (None, why not)."""
-    A, B, C, _ = session.arrays(need_probe="probe" in session.bodies)
-    try:
-        ml = solve(A, B, C if "probe" in session.bodies else None, method="ml")
-    except CalibrationError as e:
-        return None, f"ml could not be solved on this session ({e})"
-    if not ml.uncertainty:
-        return None, "ml gave no uncertainty on this session"
-    note = (f"{res.method.upper()} gives no uncertainty of its own; shown is the prediction "
-            "of the maximum-likelihood solver (ml) for its own solution on the same poses, "
-            "which reaches the Cramér–Rao bound on the simulated rig (docs/methods.md): a "
-            f"lower limit for {res.method.upper()}'s error, and about its size where "
-            f"{res.method.upper()} is near the bound (tmscal compare shows how near)")
-    return dataclasses.replace(res, method="ml", uncertainty=ml.uncertainty,
-                               distortion=ml.distortion), note
-
-
 def _calibration(cal: Calibration, res: SolveResult, source: str,
                  unc: tuple[SolveResult | None, str]) -> str:
     out = [f"<p>{_e(source)}</p>"]
@@ -287,11 +267,10 @@ def _calibration(cal: Calibration, res: SolveResult, source: str,
         M = getattr(cal, k)
         if M is not None:
             out.append(f"<h3>{k} = {name} (orthonormal, mm)</h3>{_pre(text.format_matrix(M))}")
-    has_own = bool(res.uncertainty)
-    shown, note = (res, "") if has_own else unc
+    shown, note = unc
     out.append("<h3>Uncertainty</h3>")
-    if shown is not None:
-        rows = text.uncertainty_rows(shown)
+    if shown is not None:  # the solver's own, and the calibration's predicted placement
+        rows = text.uncertainty_rows(shown) + text.prediction_rows(shown)
         out.append(_pre("\n".join(rows)) if rows else "")
     if note:
         out.append(f'<p class="note">{_e(note)}</p>')
@@ -359,7 +338,7 @@ def html_report(session: Session, sha256: str, *, method: str = "qr36",
         cal, res = solve_session(session, method=method, folds=folds)
         source = (f"{res.method.upper()} solved on the {res.n_solve} usable poses of this "
                   "session (tmscal solve).")
-        unc = (None, "") if res.uncertainty else _ml_uncertainty(session, res)
+        unc = (res, "")  # res.prediction: this calibration's (the solve service's)
     else:
         cal = calib.calibration
         res = _stored_result(session, cal, calib.doc, sha256)

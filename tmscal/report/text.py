@@ -253,15 +253,26 @@ def truth_rows(res: SolveResult) -> list[str]:
 
 
 def prediction_rows(res: SolveResult) -> list[str]:
-    """The predicted coil-placement error of the session (``SolveResult.prediction``)."""
+    """The predicted coil-placement error of the calibration solved
+    (``SolveResult.prediction``: its method and arm, how it was obtained; the solve service
+    decides which prediction it is, docs/methods.md)."""
     p = res.prediction or {}
+    if not p:
+        return []
+    whose = f"{visible(str(p.get('method', res.method)).upper())} calibration"
+    arm = p.get("arm")
+    if arm:
+        whose += f" with the {visible(str(arm['source']))} {visible(str(arm['nominal']))} arm"
     if p.get("coil_placement_mm") is None:
-        return [f"  predicted coil-placement error: none ({p['reason']})"] if p else []
-    return [f"  predicted coil-placement error of ml's calibration {p['coil_placement_mm']:.3g}"
-            f" mm at {p['confidence'] * 100:g} % (RMS {p['sigma_mm']:.3g} mm)",
-            f"    robot noise from the residuals {p['robot_sigma_mm']:.3g} mm, "
-            f"{p['robot_sigma_deg']:.3g}° per axis; model error: {p['model_error']}",
-            f"    mean over {p['region']}"]
+        return _wrap(f"predicted coil-placement error of the {whose}: none ({p['reason']})")
+    lines = [f"  predicted coil-placement error of the {whose}: {p['coil_placement_mm']:.3g} mm"
+             f" at {p['confidence'] * 100:g} % (RMS {p['sigma_mm']:.3g} mm)"]
+    lines += _wrap(f"how: {p['how']}", "    ")
+    lines += _wrap(f"robot noise from the residuals {p['robot_sigma_mm']:.3g} mm, "
+                   f"{p['robot_sigma_deg']:.3g}° per axis; model error: {p['model_error']}",
+                   "    ")
+    lines += _wrap(f"mean over {p['region']}", "    ")
+    return lines
 
 
 def _pct(v: float) -> str:
@@ -289,11 +300,15 @@ def distortion_text(d: dict[str, Any]) -> str:
 
 
 def uncertainty_rows(res: SolveResult) -> list[str]:
-    """The predicted uncertainty (1-σ and 95 %) of a statistical solver, and the distortion."""
+    """The predicted uncertainty (1-σ and 95 %) of a statistical solver, and the distortion.
+    The coil centre's row is left out when the result has a predicted coil-placement error
+    (``prediction_rows``): the coil centre's error is stated once, there."""
     lines: list[str] = []
     u = res.uncertainty or {}
+    placed = (res.prediction or {}).get("coil_placement_mm") is not None
     rows = [(k, v) for k, v in u.items()
-            if isinstance(v, dict) and "sigma" in v and "p95" in v]
+            if isinstance(v, dict) and "sigma" in v and "p95" in v
+            and not (placed and k == "coil_centre_mm")]
     if rows:
         where = u.get("target_note")
         lines.append(f"  {'predicted uncertainty (' + visible(res.method) + ')':<{_W}}"

@@ -12,15 +12,20 @@ from typing import Any
 
 import numpy as np
 
-from ..calib.prediction import AdaptiveSettings, predict
+from ..calib.methods import solve
+from ..calib.prediction import PREDICTION_DISTORTION, AdaptiveSettings, predict
 from ..errors import CalibrationError, SessionError
 from ..poses import JOINTS_KIND, PlanSpec
 from ..session import Session
 
 __all__ = ["PHASES", "ADAPTIVE_OVERRIDES", "adaptive_header", "settings_from_header",
            "prediction_inputs", "robot_time_of", "predict_session", "placement_region",
-           "arm_error_counts", "session_prediction"]
+           "arm_error_counts", "predict_calibration", "calibration_prediction",
+           "RUN_METHOD", "model_error_hint"]
 
+#: the calibration an adaptive run's prediction is about, and so the one ``demo --adaptive``
+#: solves and ``acquire --adaptive`` tells to solve: ml with its distortion fixed
+RUN_METHOD = {"method": "ml", "options": {"distortion": PREDICTION_DISTORTION}}
 #: the phases of a pose that count as robot time (docs/adaptive.md)
 PHASES = ("moving", "settling", "sampling")
 _ADAPTIVE_KEYS = ("target_mm", "confidence", "max_poses", "bootstrap", "pool", "region")
@@ -166,22 +171,150 @@ def predict_session(session: Session, settings: Any = None) -> tuple[Any, dict[s
     return pred, info
 
 
-def session_prediction(session: Session, settings: Any = None) -> dict[str, Any]:
-    """What ``tmscal solve --json`` reports as ``prediction`` for any session: the
-    predicted coil-placement error (mean over the region, mm) at the confidence, the
-    region, its RMS, the robot's noise estimated from the residuals and the model error
-    (:func:`predict_session`); ``coil_placement_mm`` None and a ``reason`` when the session
-    does not allow one (fewer than 3 poses with marker and probe)."""
-    conf = (settings or AdaptiveSettings()).confidence
+def _settings_of(session: Session, settings: Any) -> Any:
+    default = settings or AdaptiveSettings()
+    if isinstance(session.header.get("adaptive"), dict):
+        return settings_from_header(session.header, default)[0]
+    return default
+
+
+def _arm_of(cal: Any) -> dict[str, Any] | None:
+    """The arm a calibration applies, as ``arm_summary`` names it: {nominal, source}
+    ("estimated" or the kinematics file); None for the controller's poses as recorded."""
+    if cal.arm is None:
+        return None
+    rep = cal.arm.report or {}
+    return {"nominal": cal.arm.nominal.name,
+            "source": "estimated" if "deviations" in rep else rep.get("source", "given")}
+
+
+def predict_calibration(session: Session, cal: Any, n_solve: int | None = None,
+                        options: dict[str, Any] | None = None, settings: Any = None
+                        ) -> tuple[Any, dict[str, Any]]:
+    """The predicted coil-placement error of the calibration ``cal`` solved on the first
+    ``n_solve`` usable poses (marker and probe seen; default all) of ``session`` with the
+    method ``options``: the one place that decides which prediction belongs to which
+    calibration (docs/methods.md, "Which prediction"). Over :func:`placement_region`, at the
+    settings' confidence (the header's adaptive settings, else ``settings``, else the
+    defaults). Returns (Prediction, info: region, how, arm, model_error, settings).
+
+    * ``ml`` without an arm: its own (``calib.prediction.predict`` with ``calibration=cal``:
+      its covariance, its distortion model, its noise).
+    * any other method (QR36, QR24, the classic ones; they have no error model of their own):
+      ml's prediction (distortion scale, the poses' sample spreads) on the same poses with
+      ``placed=cal``: ml's error plus where ``cal`` places the coil relative to ml's estimate.
+    * a calibration with an arm (``--kinematics estimate`` or a kinematics file): as the
+      previous, on the robot poses that arm gives (A recomputed from the joints), its
+      deviations taken as exact; the arm's kinematic error counts as model error only for a
+      calibration on the controller's poses as recorded (:func:`arm_error_counts`).
+
+    CalibrationError with fewer than 3 usable poses or a marker-only calibration."""
+    settings = _settings_of(session, settings)
+    region, where, _ = placement_region(session, settings)
+    if cal.Y is None:
+        raise CalibrationError("a marker-only calibration has no coil (Y): nothing to place")
+    use = [p for p in sorted(session.poses, key=lambda p: p.index)
+           if p.skipped is None and p.A is not None and p.B is not None and p.C is not None]
+    A, B, C, opts = prediction_inputs(use, session.bodies)
+    n = len(A) if n_solve is None else min(n_solve, len(A))
+    if n < 3:
+        raise CalibrationError(f"{session.path}: {n} usable poses with marker and probe; "
+                               "the prediction needs at least 3")
+    A, B, C = A[:n], B[:n], C[:n]
+    if "spreads" in opts:
+        opts["spreads"] = opts["spreads"][:n]
+    arm = _arm_of(cal)
+    model_error = arm is None and arm_error_counts(session)
+    name = cal.method.upper()
+    if arm is not None and arm["source"] == "estimated":
+        from .kinematics import usable_joints
+        q = usable_joints(session, [p.index for p in use][:n])
+        A = cal.robot_poses(A, q)
+    if cal.method == "ml" and cal.arm is None and "covariance_parts" in cal.extra:
+        ml_opts = {k: v for k, v in (options or {}).items()
+                   if k in ("tracker_cov", "spreads", "tracker_sigma_mm",
+                            "tracker_sigma_deg")}
+        pred = predict(A, B, C, region, settings, model_error=model_error, calibration=cal,
+                       **ml_opts)
+        model = (cal.distortion or {}).get("model", "none")
+        how = (f"ML's own: its covariance (distortion {model}, the noise estimated from the "
+               "residuals) propagated to the coil centre at every target, Monte Carlo")
+    else:
+        pred = predict(A, B, C, region, settings, model_error=model_error, placed=cal,
+                       **opts)
+        on = ("the same poses" if arm is None else
+              f"the robot poses of the {arm['source']} {arm['nominal']} arm, its deviations "
+              "taken as exact (their own uncertainty is not counted)")
+        own = ("it has no error model of its own" if cal.method != "ml" else
+               "ml with an arm has no coil-placement prediction of its own" if arm else
+               "this ml calibration carries no error model of its own")
+        how = (f"{name}: {own}; ml's prediction (distortion {PREDICTION_DISTORTION}) on "
+               f"{on}, plus where the {name} calibration places the coil relative to ml's "
+               "estimate")
+    return pred, {"region": where, "how": how, "arm": arm, "model_error": model_error,
+                  "settings": settings}
+
+
+def calibration_prediction(session: Session, cal: Any, n_solve: int | None = None,
+                           options: dict[str, Any] | None = None,
+                           settings: Any = None) -> dict[str, Any]:
+    """What ``tmscal solve --json`` reports as ``prediction``: :func:`predict_calibration`
+    of the calibration it writes, as {method, arm (None or {nominal, source}),
+    coil_placement_mm (the mean over the region at the confidence), confidence, region,
+    how (how it was obtained), sigma_mm (RMS), n_poses, robot_sigma_mm, robot_sigma_deg (the
+    robot's noise from the residuals), model_error_mm, model_error}; ``coil_placement_mm``
+    None and a ``reason`` when there is none (a marker-only calibration, fewer than 3 poses
+    with marker and probe)."""
+    settings = _settings_of(session, settings)
+    head = {"method": cal.method, "arm": _arm_of(cal)}
     try:
-        pred, info = predict_session(session, settings)
+        pred, info = predict_calibration(session, cal, n_solve, options, settings)
     except CalibrationError as e:
-        return {"coil_placement_mm": None, "confidence": conf,
+        return {**head, "coil_placement_mm": None, "confidence": settings.confidence,
                 "region": placement_region(session, settings)[1], "reason": str(e)}
     d = pred.as_dict()
-    return {"coil_placement_mm": pred.coil_mm, "confidence": pred.confidence,
-            "region": info["region"], "sigma_mm": pred.sigma_mm, "n_poses": pred.n_poses,
-            "robot_sigma_mm": d["robot_sigma_mm"], "robot_sigma_deg": d["robot_sigma_deg"],
-            "model_error_mm": pred.model_error_mm,
+    return {**head, "coil_placement_mm": pred.coil_mm, "confidence": pred.confidence,
+            "region": info["region"], "how": info["how"], "sigma_mm": pred.sigma_mm,
+            "n_poses": pred.n_poses, "robot_sigma_mm": d["robot_sigma_mm"],
+            "robot_sigma_deg": d["robot_sigma_deg"], "model_error_mm": pred.model_error_mm,
             "model_error": "the arm's kinematic error (not estimated) counts" if
-            info["model_error"] else "none (no arm whose joints follow its kinematics)"}
+            info["model_error"] else ("none (the calibration's arm)" if head["arm"] else
+                                      "none (no arm whose joints follow its kinematics)")}
+
+
+#: the mean norm of an isotropic 3-D Gaussian error per its RMS norm, √(8 / 3π): the part of
+#: a prediction (mean over the region) that the model error alone accounts for
+_MEAN_PER_RMS = float(np.sqrt(8.0 / (3.0 * np.pi)))
+
+
+def model_error_hint(session: Session, pred: Any, settings: Any) -> str | None:
+    """Why an adaptive run that stopped above its target (max_poses, the pool tried) could
+    not reach it, when the cause is model error that more poses do not remove, and the
+    command that models it (docs/adaptive.md, "When the target is out of reach"); None when
+    the prediction is above the target for want of poses only.
+
+    * the arm: the robot's per-pose error counts as model error (:func:`arm_error_counts`)
+      and alone accounts for at least half the target (the mean norm of that error over the
+      region, √(8/3π) × its RMS ``pred.model_error_mm``): ``tmscal solve S --kinematics
+      estimate`` estimates the arm with X, Y, Z (docs/kinematics.md);
+    * a tracker distortion the prediction does not fit: ml's test (distortion "auto") on
+      the poses prefers an axis or affine model to the prediction's scale: ``tmscal solve S
+      --method ml --option distortion=MODEL``."""
+    path = session.path or "SESSION"
+    floor = _MEAN_PER_RMS * float(pred.model_error_mm)
+    if pred.model_error_mm > 0 and floor >= 0.5 * settings.target_mm:
+        return (f"the arm's kinematic error, which more poses do not reduce, alone accounts "
+                f"for {floor:.3g} mm of the prediction (the prediction's ml does not estimate "
+                f"the arm): estimate it with tmscal solve {path} --kinematics estimate "
+                "(docs/kinematics.md)")
+    A, B, C, opts = prediction_inputs(session.poses, session.bodies)
+    try:
+        model = (solve(A, B, C, method="ml", distortion="auto", **opts).distortion
+                 or {}).get("model", "none")
+    except (CalibrationError, np.linalg.LinAlgError):
+        return None
+    if model in ("none", PREDICTION_DISTORTION):
+        return None
+    return (f"the tracker's distortion: ml's test on these poses finds an {model} distortion, "
+            f"which the prediction (distortion {PREDICTION_DISTORTION}) does not model: solve "
+            f"with tmscal solve {path} --method ml --option distortion={model}")

@@ -35,7 +35,7 @@ from .kinematics import (
 )
 from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
-from .predict import placement_region, session_prediction
+from .predict import calibration_prediction, placement_region
 
 __all__ = ["SolveResult", "solve_session", "session_arrays", "pose_residuals",
            "with_kinematics", "truth_errors_of", "flat_errors", "arm_summary"]
@@ -129,8 +129,9 @@ class SolveResult:
     #: the per-pose residuals the outliers were found on (``pose_residuals`` of the poses as
     #: solved, e.g. recomputed from a kinematics file); not part of ``to_json``
     residuals: dict[str, Any] | None = field(default=None, repr=False)
-    #: the predicted coil-placement error of the session (``predict.session_prediction``:
-    #: coil_placement_mm at confidence, over region, the same region as the truth's)
+    #: the predicted coil-placement error of this calibration (its method, its arm;
+    #: ``predict.calibration_prediction``: coil_placement_mm at confidence, over region, the
+    #: same region as the truth's, and how it was obtained)
     prediction: dict[str, Any] | None = None
     #: the calibration's noise model (``calib.diagnose.calibration_noise`` on the poses it
     #: was solved on, ``NoiseModel.to_json``): what the daily check's diagnosis and
@@ -189,6 +190,10 @@ def with_kinematics(session: Session, model: Any, source: str = "the kinematics"
             p = replace(p, A=A)
         poses.append(p)
     return replace(session, poses=poses)
+
+
+#: ml options that set the tracker's noise (then the poses' spreads are not used)
+_TRACKER_NOISE = ("tracker_cov", "spreads", "tracker_sigma_mm", "tracker_sigma_deg")
 
 
 def _spreads(session: Session, indices: list[int], bodies: list[str]
@@ -272,6 +277,12 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         raise CalibrationError(f"--train {train}: the session has only {n} usable poses")
     q = None
     named_by = None
+    if method == "ml" and not any(k in options for k in _TRACKER_NOISE):
+        # ml's tracker noise from the poses' sample spreads when every pose recorded them
+        # (as the adaptive run's prediction takes it)
+        sp = _spreads(session, idx, ["marker"] + ([] if C is None else ["probe"]))
+        if sp is not None:
+            options["spreads"] = sp
     if estimate:
         q = session_joints(session, idx, "--kinematics estimate")
         nominal, named_by = choose_arm(session, arm)
@@ -282,9 +293,6 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         options.update(kinematics="estimate", joints=q, arm=nominal, level=level, folds=folds)
         if tolerances is not None:
             options["tolerances"] = tolerances
-        sp = _spreads(session, idx, ["marker"] + ([] if C is None else ["probe"]))
-        if sp is not None and options.get("tracker_cov") is None:
-            options.setdefault("spreads", sp)
         ws = session.wrenches(idx)
         if ws is not None and "wrench" not in options:  # the wrench rows (every pose has one)
             options["wrench"] = ws[0]
@@ -326,7 +334,9 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         errors_sd=sd, cv=cv, outliers=find_outliers(residuals), residuals=residuals,
         uncertainty=cal.uncertainty, distortion=cal.distortion, options=opts_shown or None,
         arm=None if cal.arm is None else arm_summary(cal.arm, named_by),
-        nominal=as_recorded, prediction=session_prediction(session),
+        nominal=as_recorded,
+        prediction=calibration_prediction(session, cal, int(n_solve),
+                                          per_pose_options(options, slice(0, n_solve), n)),
         noise_model=_noise_model(cal, A_eval[:n_solve], B[:n_solve],
                                  None if C is None else C[:n_solve]))
     return cal, res
