@@ -1,23 +1,39 @@
-# make demo   -- build .venv from nothing and run the demo on the built-in mock rig
+# make demo   -- build .venv-demo (what the demo needs, no test tools) and run the demo on the
+#                built-in mock rig
 # make test   -- build .venv from nothing and run the linters and the whole test suite
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# the demo's own environment: tmscal's dependencies and nothing else (ur_rtde is one of them
+# where PyPI has a wheel of it; elsewhere the demo runs on the mock DENSO). The full one adds
+# the test tools, the third-party clients and simulators the tests run against, matplotlib
+# and ur_rtde. benchmarks/install_size.py reads these two lines and measures both.
+DEMO_EXTRAS :=
+TEST_EXTRAS := test,plot,ur
+DEMO_VENV   := .venv-demo
+DEMO_STAMP  := $(DEMO_VENV)/.installed
 
 .PHONY: demo test lint bench clean venv
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,plot,ur]'
+	$(BIN)/python -m pip install --quiet -e '.[$(TEST_EXTRAS)]'
 	touch $(STAMP)
 	@echo 'environment ready in $(VENV); put it on your PATH with:  . $(BIN)/activate'
 
+$(DEMO_STAMP): pyproject.toml
+	$(PYTHON) -m venv $(DEMO_VENV)
+	$(DEMO_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(DEMO_VENV)/bin/python -m pip install --quiet -e '.$(if $(DEMO_EXTRAS),[$(DEMO_EXTRAS)])'
+	touch $(DEMO_STAMP)
+	@echo 'demo environment ready in $(DEMO_VENV) (make test builds the full $(VENV))'
+
 venv: $(STAMP)
 
-demo: $(STAMP)
-	$(BIN)/tmscal demo
+demo: $(DEMO_STAMP)
+	$(DEMO_VENV)/bin/tmscal demo
 
 # ruff, then the layers of docs/architecture.md ([tool.importlinter] in pyproject.toml)
 lint: $(STAMP)
@@ -57,7 +73,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/kinematics_ratio.py
 	$(BIN)/python benchmarks/ml_selection.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5
+	$(BIN)/python benchmarks/install_size.py
 	$(BIN)/python benchmarks/check_figures.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) $(DEMO_VENV) build *.egg-info

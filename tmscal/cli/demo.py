@@ -74,12 +74,15 @@ def demo_config_name(kinematics: bool = False) -> str:
                    "total), poses_used, predicted_coil_mm, true_coil_mm and stop_reason; with "
                    "--kinematics estimate it adds the arm, true_coil_mm and nominal "
                    "{method, true_coil_mm}.")
+@click.option("-v", "--verbose", is_flag=True,
+              help="With --kinematics estimate: list every combination of deviations, as "
+                   "tmscal solve -v does.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @adaptive_options
 @handle_errors
 def demo(config: Path | None, kinematics: str | None, poses: int | None, samples: int | None,
-         output: Path | None, transport: str, as_json: bool, force: bool, adaptive: bool,
-         **overrides: Any) -> None:
+         output: Path | None, transport: str, as_json: bool, verbose: bool, force: bool,
+         adaptive: bool, **overrides: Any) -> None:
     """The whole job on the built-in mock rig: start the mock robot and tracker, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth.
 
@@ -130,7 +133,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
         session.header["truth"] = truth.as_dict()
         if kinematics is not None:
             from .kinematics import demo_report
-            demo_report(session, res, as_json)
+            demo_report(session, res, as_json, verbose)
             return
         _, result = solve_session(session, "qr36")
         if as_json:

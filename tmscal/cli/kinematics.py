@@ -11,12 +11,13 @@ from typing import Any
 import click
 
 
-def demo_report(session: Any, acquired: Any, as_json: bool) -> None:
+def demo_report(session: Any, acquired: Any, as_json: bool, verbose: bool = False) -> None:
     """Solve ``session`` (its header carrying the mock rig's truth) with --kinematics
     estimate and with QR36, and print the result: the ``tmscal solve`` text with the arm,
     then the two true coil placements (mm); or with ``as_json`` the solve JSON plus
     ``true_coil_mm`` and ``nominal`` {method, true_coil_mm}. ``acquired``: the acquisition's
-    result (poses recorded, skipped, seconds)."""
+    result (poses recorded, skipped, seconds). ``verbose``: list every combination of
+    deviations (``report.text.format_result``)."""
     from ..report.text import format_result
     from ..solving.solve import solve_session
     from .app import print_json
@@ -34,7 +35,7 @@ def demo_report(session: Any, acquired: Any, as_json: bool) -> None:
         return
     click.echo(f"acquired {acquired.recorded} poses ({acquired.skipped} skipped) in "
                f"{acquired.elapsed_s:.1f} s through the wire protocols\n")
-    click.echo(format_result(result))
+    click.echo(format_result(result, verbose=verbose))
     ours, theirs = coil(result), coil(nominal)
     if ours is not None and theirs is not None:
         click.echo(f"\ntrue coil placement, mean over the session's {result.n_test} probe "

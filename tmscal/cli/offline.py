@@ -309,6 +309,10 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
               metavar="DEG",
               help="With --kinematics estimate: the prior σ of each angle deviation, degrees "
                    "(default 0.1).")
+@click.option("-v", "--verbose", is_flag=True,
+              help="With --kinematics estimate: list every combination of deviations "
+                   "(identified, weak, not identifiable) with its estimate and σ; without it "
+                   "they are counted under a short summary (--json always carries them).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
@@ -317,18 +321,20 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
           output: Path | None, plot: Path | None, calib_file: Path | None,
           tolerance_mm: float | None, tolerance_deg: float | None,
           update: tuple[str, ...], kinematics: str | Path | None, arm: str | None, level: str,
-          tolerance_length: float | None, tolerance_angle: float | None, force: bool,
-          strict: bool) -> None:
+          tolerance_length: float | None, tolerance_angle: float | None, verbose: bool,
+          force: bool, strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
     docs/methods.md): by default cross-validated, mean ± SD over folds. Names outlier poses.
     With --calib, check a stored calibration on the session instead (no fitting; a calibration
     with an identified arm recomputes the session's robot poses from its joints first) and say
     what moved since it was solved (docs/lab-day.md); with --calib and --update, re-register
     only the named transforms. With --kinematics estimate, the arm's kinematics are estimated
-    with X, Y, Z: the output adds the level chosen and why (the held-out table), the identified
-    combinations of deviations with their σ, the weakly identified and what could not be
-    identified and why (docs/kinematics.md, "Using it"). With --kinematics KIN, the robot poses
-    come from the recorded joints and the arm's calibrated kinematics."""
+    with X, Y, Z: the output opens with a short summary (the level, the held-out error and the
+    coil placement before and after, the three largest deviations), then the level chosen and
+    why (the held-out table); -v lists every identified combination of deviations with its σ,
+    the weakly identified and what could not be identified and why (docs/kinematics.md, "Using
+    it"). With --kinematics KIN, the robot poses come from the recorded joints and the arm's
+    calibrated kinematics."""
     from ..exports.calibfile import calibration_yaml
     from ..report.text import format_result, plot_residuals
     from ..session import sha256_of
@@ -393,7 +399,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     else:
         if kin_file is not None:
             click.echo(f"robot poses A recomputed from the recorded joints with {kin_file}\n")
-        click.echo(format_result(res))
+        click.echo(format_result(res, verbose=verbose))
         if pred is not None:
             click.echo("\n" + pred[1])
         for f in (output, plot):

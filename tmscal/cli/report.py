@@ -12,6 +12,7 @@ from .app import (
     FORCE_HELP,
     INPUT_FILE,
     STRICT_HELP,
+    Finite,
     check_outputs,
     handle_errors,
     main,
@@ -34,12 +35,23 @@ from .offline import MethodChoice
 @click.option("--folds", type=click.IntRange(2, 100), default=5, show_default=True,
               help="Without --calib: k-fold cross-validation of the held-out errors, as "
                    "tmscal solve.")
+@click.option("--tolerance-mm", type=Finite(0, lo_open=True), default=None, metavar="MM",
+              help="The verdict at the top of the page: PASS when the total held-out error "
+                   "e_t (mm) is at most MM, else FAIL (the daily check's rule, tmscal solve "
+                   "--calib; docs/first-day.md says how to choose it). The exit status stays "
+                   "0: tmscal solve --calib --tolerance-mm is the scripted check.")
+@click.option("--tolerance-deg", type=Finite(0, lo_open=True), default=None, metavar="DEG",
+              help="Likewise for the total rotation error θ_t (degrees).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 @handle_errors
 def report(session_file: Path, output: Path, calib_file: Path | None, method: str, folds: int,
-           force: bool, strict: bool) -> None:
-    """Write an HTML report of a session for the lab notebook: the rig and its devices, the
+           tolerance_mm: float | None, tolerance_deg: float | None, force: bool,
+           strict: bool) -> None:
+    """Write an HTML report of a session for the lab notebook. It opens with a verdict (the
+    held-out errors against --tolerance-mm/--tolerance-deg, the predicted coil-placement
+    error, whether an adaptive run recorded the session, the calibration's arm), then: the
+    rig and its devices, the
     plan and its spread, the sample spreads and skipped poses, the calibration with its
     uncertainty, the held-out errors, the convergence curve (error against the number of
     poses) and the residuals by pose with the outlier poses named (docs/report.md).
@@ -50,6 +62,7 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
 
     from ..errors import MissingExtraError
     from ..exports.calibfile import read_calibration
+    from ..exports.check import verdict
     from ..report.html import html_report
     from ..session import sha256_of
 
@@ -64,7 +77,8 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
 
         try:
             page = html_report(session, sha256_of(session_file), method=method.lower(),
-                               calib=calib, folds=folds, progress=stage, solves=bar.update)
+                               calib=calib, folds=folds, progress=stage, solves=bar.update,
+                               judge=lambda e: verdict(e, tolerance_mm, tolerance_deg))
         except ImportError as e:
             raise MissingExtraError("tmscal report", "plot", str(e)) from None
     write_atomic(output, page, force)

@@ -48,11 +48,13 @@ from ..solving.study import study_session
 from . import text
 from .plots import agg_pyplot, plot_residuals, plot_study
 from .text import number, plain_value
+from .verdict import verdict_rows
 
 __all__ = ["SECTIONS", "html_report"]
 
 #: section id → heading, in page order (the ids are the page's anchors)
 SECTIONS: dict[str, str] = {
+    "verdict": "Verdict",
     "rig": "Rig and devices",
     "plan": "Plan and its spread",
     "samples": "Samples per pose",
@@ -277,9 +279,19 @@ def _calibration(cal: Calibration, res: SolveResult, source: str,
     return "\n".join(out)
 
 
+def _verdict(res: SolveResult, judged: dict[str, Any] | None, session: Session,
+             stored: bool) -> str:
+    """The verdict section: ``verdict_rows`` as a list, the PASS/FAIL line in bold."""
+    rows = verdict_rows(res, judged, session, stored)
+    items = "".join(f"<li>{'<strong>' if i == 0 and judged else ''}{_e(r)}"
+                    f"{'</strong>' if i == 0 and judged else ''}</li>"
+                    for i, r in enumerate(rows))
+    return f"<ul>{items}</ul>"
+
+
 def _errors(res: SolveResult, stored: bool) -> str:
     if not stored:
-        return _pre(text.format_result(res, show_matrices=False))
+        return _pre(text.format_result(res, show_matrices=False, verbose=True))
     head = ("errors: IN-SAMPLE: the calibration file was solved on this session"
             if res.errors_on == "in-sample" else
             f"errors: the stored {res.method.upper()} calibration applied to the {res.n_test} "
@@ -323,11 +335,14 @@ def _residuals(session: Session, cal: Calibration, res: SolveResult, stored: boo
 
 def html_report(session: Session, sha256: str, *, method: str = "qr36",
                 calib: Any = None, folds: int = 5, progress: Progress | None = None,
-                solves: Callable[[int], None] | None = None) -> str:
+                solves: Callable[[int], None] | None = None,
+                judge: Callable[[dict[str, Any]], dict[str, Any] | None] | None = None) -> str:
     """The whole page (str) for ``session`` (its file's ``sha256``). The calibration is
     solved with ``method`` (errors ``folds``-fold cross-validated, as ``tmscal solve``), or
     is ``calib``, a :class:`tmscal.exports.calibfile.CalibrationFile` evaluated on the
-    session. ``progress(stage)`` is called before each slow stage, ``solves(n)`` after n more
+    session. ``judge(errors)``: the decision on the held-out errors (e_t_mm, theta_t_deg) for
+    the verdict, ``tmscal.exports.check.verdict`` with the tolerances (None: none given).
+    ``progress(stage)`` is called before each slow stage, ``solves(n)`` after n more
     solves of the convergence study. Raises CalibrationError for a session that cannot be
     solved; MissingExtraError without matplotlib."""
     say = progress or (lambda s: None)
@@ -346,6 +361,8 @@ def html_report(session: Session, sha256: str, *, method: str = "qr36",
         source = (f"Stored in {calib.path}: {cal.method.upper()} solved on {cal.n_poses} poses "
                   f"of {origin}" + (f", written {calib.created}" if calib.created else "") + ".")
         unc = (None, "the calibration file stores no uncertainty")
+    judged = None if judge is None else judge(res.errors)
+    parts.insert(0, _section("verdict", _verdict(res, judged, session, calib is not None)))
     parts += [_section("calibration", _calibration(cal, res, source, unc)),
               _section("errors", _errors(res, calib is not None))]
     say("convergence")

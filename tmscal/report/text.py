@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 
 __all__ = ["format_result", "format_study", "plot_study", "plot_residuals",
            "format_matrix", "format_truth", "distortion_text", "arm_rows", "wrench_fit_rows",
-           "before_after_rows", "error_rows", "truth_rows",
+           "before_after_rows", "error_rows", "truth_rows", "arm_summary_rows",
+           "largest_deviations",
            "uncertainty_rows", "outlier_lines", "legend_lines", "number", "plain_value"]
 
 
@@ -133,11 +134,12 @@ def _wrap(text: str, indent: str = "  ", more: str = "      ") -> list[str]:
         or [indent]
 
 
-def arm_rows(arm: dict[str, Any]) -> list[str]:
+def arm_rows(arm: dict[str, Any], verbose: bool = True) -> list[str]:
     """The arm of a calibration (``solving.solve.arm_summary``) as text: which arm and where it
     came from; for an estimated one the level chosen and why (the held-out table), the prior,
     the identified combinations of deviations with their σ, the weakly identified ones and
-    what could not be identified and why (docs/kinematics.md)."""
+    what could not be identified and why (docs/kinematics.md). Without ``verbose`` the
+    combinations are counted, not listed (``tmscal solve -v`` lists them)."""
     named = f", named by {arm['named_by']}" if arm.get("named_by") else ""
     if arm.get("source") != "estimated":
         return _wrap(f"arm: {arm['nominal']}{named}: robot poses recomputed from the joints "
@@ -169,8 +171,81 @@ def arm_rows(arm: dict[str, Any]) -> list[str]:
         if not combos:
             continue
         lines.append(f"  {head}: {len(combos)}")
-        lines += [w for c in combos for w in _wrap(c.get("text", "?"), "    ", "        ")]
+        if verbose:
+            lines += [w for c in combos for w in _wrap(c.get("text", "?"), "    ", "        ")]
+    if not verbose and any(arm.get(k) for k in ("identified", "weak", "unidentified")):
+        lines.append("    (-v lists each combination with its estimate and σ; --json carries "
+                     "them as arm)")
     return lines + wrench_fit_rows(arm.get("wrench"))
+
+
+def _deviation_text(name: str, value: float, sd: float, tol: dict[str, Any]) -> str:
+    """"a_1 -0.197 ± 0.196 mm (0.39 τ)": one deviation (rad or mm) with its posterior SD,
+    angles in degrees, and its size in tolerance units τ."""
+    length = str(name).rpartition("_")[0] in ("d", "a")
+    if length:
+        v, s, unit, t = value, sd, " mm", tol.get("length_mm")
+    else:
+        v, s, unit, t = math.degrees(value), math.degrees(sd), "°", tol.get("angle_deg")
+    rel = f" ({abs(v) / float(t):.2g} τ)" if t else ""
+    return f"{visible(name)} {number(v, '+.3g')} ± {number(s, '.2g')}{unit}{rel}"
+
+
+def largest_deviations(arm: dict[str, Any], k: int = 3) -> list[tuple[str, float, float]]:
+    """The ``k`` deviations (name, estimate, posterior SD; rad or mm) of an estimated arm
+    largest in tolerance units (|δ| / τ, τ the prior's length or angle tolerance), largest
+    first; empty for an arm without deviations."""
+    dev, sd = arm.get("deviations") or {}, arm.get("sd") or {}
+    tol = arm.get("tolerances") or {}
+    t_len = float(tol.get("length_mm") or 1.0)
+    t_ang = math.radians(float(tol.get("angle_deg") or math.degrees(1.0)))
+
+    def size(n: str) -> float:
+        length = str(n).rpartition("_")[0] in ("d", "a")
+        return abs(float(dev[n])) / (t_len if length else t_ang)
+
+    names = sorted(dev, key=size, reverse=True)[:k]
+    return [(n, float(dev[n]), float(sd.get(n, float("nan")))) for n in names]
+
+
+def arm_summary_rows(res: SolveResult) -> list[str]:
+    """The first lines of ``tmscal solve --kinematics estimate``, for a reader at the rig
+    (docs/kinematics.md, "Solving"): the arm and the level chosen; the held-out total e_t
+    before (the controller's poses, nominal kinematics) and after (with the estimated arm);
+    the coil placement: the session's prediction (``SolveResult.prediction``, whose
+    calibration does not estimate the arm) and, for a simulated session, against the truth
+    before and after; the three largest deviations in tolerance units. mm and degrees. Empty
+    unless the result's arm was estimated."""
+    arm = res.arm
+    if not arm or arm.get("source") != "estimated":
+        return []
+    lines = _wrap(f"summary: arm {arm['nominal']} estimated with X, Y, Z; level "
+                  f"{arm.get('level')} ({arm.get('reason', '')})", "", "    ")
+    b = res.nominal or {}
+    e0, e1 = (b.get("errors") or {}).get("e_t_mm"), res.errors.get("e_t_mm")
+    if e0 is not None and e1 is not None:
+        lines += _wrap(f"held-out total e_t ({res.errors_on}): {e0:.4f} mm on the "
+                       f"controller's poses → {e1:.4f} mm with the estimated arm", "    ",
+                       "        ")
+    p = res.prediction or {}
+    if p.get("coil_placement_mm") is not None:
+        lines += _wrap(f"coil placement predicted {p['coil_placement_mm']:.3g} mm at "
+                       f"{p['confidence'] * 100:g} % for ml's calibration on the controller's "
+                       f"poses, the arm not estimated (model error: "
+                       f"{p.get('model_error', '?')}); none is predicted yet with the "
+                       "estimated arm", "    ", "        ")
+    t0, t1 = b.get("truth") or {}, res.truth or {}
+    if "coil_placement_mm" in t0 and "coil_placement_mm" in t1:
+        lines.append(f"    coil placement against the truth (simulated): "
+                     f"{t0['coil_placement_mm']:.4f} mm before → "
+                     f"{t1['coil_placement_mm']:.4f} mm after")
+    top = largest_deviations(arm)
+    if top:
+        tol = arm.get("tolerances") or {}
+        lines += _wrap("largest deviations (estimate ± σ, τ: the prior's tolerance): "
+                       + ", ".join(_deviation_text(n, v, s, tol) for n, v, s in top),
+                       "    ", "        ")
+    return lines
 
 
 def wrench_fit_rows(w: dict[str, Any] | None) -> list[str]:
@@ -381,12 +456,17 @@ def legend_lines(res: SolveResult) -> list[str]:
                                                     break_on_hyphens=False) or [""]]
 
 
-def format_result(res: SolveResult, show_matrices: bool = True) -> str:
+def format_result(res: SolveResult, show_matrices: bool = True, verbose: bool = False) -> str:
     """The ``tmscal solve`` human output: what was solved, the error table (mean ± SD over
     folds when cross-validated), the errors against the truth (simulated sessions), the
-    outlier poses, a legend defining each number, and the calibration matrices."""
-    lines = [f"{visible(res.method.upper())} calibration solved on {res.n_solve} poses "
-             f"({res.applied} matrices applied; see legend)", _errors_on_text(res)]
+    outlier poses, a legend defining each number, and the calibration matrices. With an
+    estimated arm it opens with :func:`arm_summary_rows` and counts the combinations of
+    deviations; ``verbose`` lists them (:func:`arm_rows`)."""
+    lines = arm_summary_rows(res)
+    if lines:
+        lines.append("")
+    lines += [f"{visible(res.method.upper())} calibration solved on {res.n_solve} poses "
+              f"({res.applied} matrices applied; see legend)", _errors_on_text(res)]
     if res.n_skipped:
         lines.append(f"({res.n_skipped} poses of the session were skipped at acquisition "
                      "and are not used)")
@@ -395,7 +475,7 @@ def format_result(res: SolveResult, show_matrices: bool = True) -> str:
     if extra:
         lines += [""] + extra
     if res.arm is not None:
-        lines += [""] + arm_rows(res.arm)
+        lines += [""] + arm_rows(res.arm, verbose)
     extra = before_after_rows(res)
     if extra:
         lines += [""] + extra
