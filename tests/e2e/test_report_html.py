@@ -17,8 +17,9 @@ from tmscal.cli import main
 pytestmark = pytest.mark.e2e
 
 #: the section ids and headings docs/report.md lists, in page order
-SECTIONS = [("rig", "Rig and devices"), ("plan", "Plan and its spread"),
-            ("samples", "Samples per pose"), ("calibration", "Calibration"),
+SECTIONS = [("verdict", "Verdict"), ("rig", "Rig and devices"),
+            ("plan", "Plan and its spread"), ("samples", "Samples per pose"),
+            ("calibration", "Calibration"),
             ("errors", "Held-out errors"), ("convergence", "Convergence"),
             ("residuals", "Residuals by pose")]
 

@@ -20,7 +20,8 @@ from tmscal.sim import Noise, simulate
 pytest.importorskip("matplotlib")
 
 #: the section ids docs/report.md lists, in page order
-SECTION_IDS = ["rig", "plan", "samples", "calibration", "errors", "convergence", "residuals"]
+SECTION_IDS = ["verdict", "rig", "plan", "samples", "calibration", "errors", "convergence",
+               "residuals"]
 
 HOSTILE = '<script>alert("x")</script>&amp;'
 REASON = '<img src=x onerror=alert(1)> probe usable in 3 of 100 frames'
