@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import re
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -21,8 +20,8 @@ from tmscal.solving.predict import (
     calibration_prediction,
     model_error_hint,
     placement_region,
-    prediction_inputs,
     predict_session,
+    prediction_inputs,
 )
 
 _LINE = re.compile(r"predicted coil-placement error of the (.+?) calibration(?: with the "
