@@ -97,6 +97,12 @@ def test_very_noisy_rig_stops_at_max_poses_and_says_so(mock_config, tmp_path):
     assert pred["method"] == "ml" and pred["options"] == {"distortion": "scale"}
     # the calibration the report's last line names is the one that prediction is about
     assert f"next: tmscal solve {out} --method ml --option distortion=scale" in r.stdout
+    t = _cli("solve", str(out))  # QR36: its own prediction, once; the run's named, no number
+    assert t.returncode == 0, t.stderr[-2000:]
+    assert t.stdout.count("predicted coil-placement error") == 1
+    assert "predicted coil-placement error of the QR36 calibration: " in t.stdout
+    assert (f"the run stopped on the prediction of the calibration tmscal solve {out} "
+            "--method ml --option distortion=scale writes") in t.stdout
     ml = _cli("solve", str(out), "--method", "ml", "--option", "distortion=scale", "--json")
     assert ml.returncode == 0, ml.stderr[-2000:]
     assert json.loads(ml.stdout)["prediction"]["coil_placement_mm"] == pytest.approx(
