@@ -298,8 +298,9 @@ def model_error_hint(session: Session, pred: Any, settings: Any) -> str | None:
       region, √(8/3π) × its RMS ``pred.model_error_mm``): ``tmscal solve S --kinematics
       estimate`` estimates the arm with X, Y, Z (docs/kinematics.md);
     * a tracker distortion the prediction does not fit: ml's test (distortion "auto") on
-      the poses prefers an axis or affine model to the prediction's scale: ``tmscal solve S
-      --method ml --option distortion=MODEL``."""
+      the poses prefers an axis or affine model to the prediction's scale, and what a scale
+      cannot fit of it (the anisotropy of D times the region's RMS extent, mm) is at least
+      half the target: ``tmscal solve S --method ml --option distortion=MODEL``."""
     path = session.path or "SESSION"
     floor = _MEAN_PER_RMS * float(pred.model_error_mm)
     if pred.model_error_mm > 0 and floor >= 0.5 * settings.target_mm:
@@ -309,12 +310,21 @@ def model_error_hint(session: Session, pred: Any, settings: Any) -> str | None:
                 "(docs/kinematics.md)")
     A, B, C, opts = prediction_inputs(session.poses, session.bodies)
     try:
-        model = (solve(A, B, C, method="ml", distortion="auto", **opts).distortion
-                 or {}).get("model", "none")
+        d = solve(A, B, C, method="ml", distortion="auto", **opts).distortion or {}
     except (CalibrationError, np.linalg.LinAlgError):
         return None
-    if model in ("none", PREDICTION_DISTORTION):
+    model = d.get("model", "none")
+    if model in ("none", PREDICTION_DISTORTION) or d.get("matrix") is None:
         return None
-    return (f"the tracker's distortion: ml's test on these poses finds an {model} distortion, "
+    # what the scale cannot fit, across the region: the anisotropy of D (its spectral
+    # distance from the nearest isotropic scale) times the region's RMS extent (mm)
+    D = np.asarray(d["matrix"], dtype=float)
+    aniso = float(np.linalg.norm(D / np.cbrt(np.linalg.det(D)) - np.eye(3), 2))
+    t = placement_region(session, settings)[0][:, :3, 3]
+    extent = float(np.sqrt(np.mean(np.sum((t - t.mean(0)) ** 2, axis=1))))
+    if aniso * extent < 0.5 * settings.target_mm:
+        return None
+    return (f"the tracker's distortion: ml's test on these poses finds an {model} distortion "
+            f"({aniso * 100:.2g} % beyond a scale, {aniso * extent:.2g} mm across the region), "
             f"which the prediction (distortion {PREDICTION_DISTORTION}) does not model: solve "
             f"with tmscal solve {path} --method ml --option distortion={model}")
