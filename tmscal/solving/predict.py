@@ -17,6 +17,7 @@ from ..calib.prediction import PREDICTION_DISTORTION, AdaptiveSettings, predict
 from ..errors import CalibrationError, SessionError
 from ..poses import JOINTS_KIND, PlanSpec
 from ..session import Session
+from .kinematics import usable_joints
 
 __all__ = ["PHASES", "ADAPTIVE_OVERRIDES", "adaptive_header", "settings_from_header",
            "prediction_inputs", "robot_time_of", "predict_session", "placement_region",
@@ -227,7 +228,6 @@ def predict_calibration(session: Session, cal: Any, n_solve: int | None = None,
     model_error = arm is None and arm_error_counts(session)
     name = cal.method.upper()
     if arm is not None and arm["source"] == "estimated":
-        from .kinematics import usable_joints
         q = usable_joints(session, [p.index for p in use][:n])
         A = cal.robot_poses(A, q)
     if cal.method == "ml" and cal.arm is None and "covariance_parts" in cal.extra:
@@ -269,7 +269,7 @@ def calibration_prediction(session: Session, cal: Any, n_solve: int | None = Non
     head = {"method": cal.method, "arm": _arm_of(cal)}
     try:
         pred, info = predict_calibration(session, cal, n_solve, options, settings)
-    except CalibrationError as e:
+    except (CalibrationError, np.linalg.LinAlgError) as e:
         return {**head, "coil_placement_mm": None, "confidence": settings.confidence,
                 "region": placement_region(session, settings)[1], "reason": str(e)}
     d = pred.as_dict()
