@@ -237,8 +237,10 @@ def predict_calibration(session: Session, cal: Any, n_solve: int | None = None,
         pred = predict(A, B, C, region, settings, model_error=model_error, calibration=cal,
                        **ml_opts)
         model = (cal.distortion or {}).get("model", "none")
-        how = (f"ML's own: its covariance (distortion {model}, the noise estimated from the "
-               "residuals) propagated to the coil centre at every target, Monte Carlo")
+        noise = ("estimated from the residuals" if cal.extra["noise"].get("mode") == "estimate"
+                 else "as given")
+        how = (f"ML's own: its covariance (distortion {model}, the noise {noise}) "
+               "propagated to the coil centre at every target, Monte Carlo")
     else:
         pred = predict(A, B, C, region, settings, model_error=model_error, placed=cal,
                        **opts)
