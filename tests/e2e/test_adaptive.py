@@ -94,6 +94,19 @@ def test_very_noisy_rig_stops_at_max_poses_and_says_so(mock_config, tmp_path):
     pred = json.loads(s.stdout)["adaptive"]
     assert pred["n_poses"] == 7 and pred["predicted_coil_mm"] > 0.05
     assert f"predicted {pred['predicted_coil_mm']:.3g} mm" in r.stdout
+    assert pred["method"] == "ml" and pred["options"] == {"distortion": "scale"}
+    # the calibration the report's last line names is the one that prediction is about
+    assert f"next: tmscal solve {out} --method ml --option distortion=scale" in r.stdout
+    t = _cli("solve", str(out))  # QR36: its own prediction, once; the run's named, no number
+    assert t.returncode == 0, t.stderr[-2000:]
+    assert t.stdout.count("predicted coil-placement error") == 1
+    assert "predicted coil-placement error of the QR36 calibration: " in t.stdout
+    assert (f"the run stopped on the prediction of the calibration tmscal solve {out} "
+            "--method ml --option distortion=scale writes") in t.stdout
+    ml = _cli("solve", str(out), "--method", "ml", "--option", "distortion=scale", "--json")
+    assert ml.returncode == 0, ml.stderr[-2000:]
+    assert json.loads(ml.stdout)["prediction"]["coil_placement_mm"] == pytest.approx(
+        pred["predicted_coil_mm"], rel=1e-9)
 
 
 @pytest.mark.e2e
@@ -175,7 +188,54 @@ def test_demo_adaptive_json_recovers_the_truth_within_the_prediction(mock_config
         sum(res["robot_time_s"][k] for k in ("moving", "settling", "sampling")))
     assert 0 < res["predicted_coil_mm"] <= 0.07
     assert 0 < res["true_coil_mm"] <= 2 * res["predicted_coil_mm"]
-    assert res["method"] == "qr36" and res["n_solve"] == res["poses_used"]
+    # the calibration reported is the one whose prediction stopped the run (issue 31)
+    assert res["method"] == res["prediction"]["method"] == res["adaptive_method"] == "ml"
+    assert res["distortion"]["model"] == "scale" and res["prediction"]["arm"] is None
+    assert res["prediction"]["coil_placement_mm"] == pytest.approx(res["predicted_coil_mm"],
+                                                                   rel=1e-9)
+    assert res["truth"]["coil_placement_mm"] == res["true_coil_mm"]
+    assert res["n_solve"] == res["poses_used"]
+
+
+@pytest.mark.e2e
+def test_demo_adaptive_reports_a_calibration_that_meets_its_target(mock_config):
+    """The demo as a user runs it (the packaged mock rig, the default target 0.05 mm): it
+    stops at the target and reports (text and --json) the calibration whose prediction
+    stopped it, whose true coil-placement error on the mock rig's truth meets the target
+    (before issue 31 it reported QR36, 0.076 mm true). The text prints that prediction once
+    for that calibration."""
+    cfg = mock_config("mock-ur-polaris.yaml")
+    r = _cli("demo", "--config", str(cfg), "--adaptive", "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = json.loads(r.stdout.strip().splitlines()[-1])
+    assert res["stop_reason"] == "target" and res["method"] == "ml"
+    assert res["prediction"]["coil_placement_mm"] == pytest.approx(res["predicted_coil_mm"],
+                                                                   rel=1e-9)
+    assert res["predicted_coil_mm"] <= 0.05
+    assert 0 < res["true_coil_mm"] <= 0.05
+    t = _cli("demo", "--config", str(cfg), "--adaptive")
+    assert t.returncode == 0, t.stderr[-2000:]
+    assert t.stdout.count("predicted coil-placement error of the ML calibration: "
+                          f"{res['predicted_coil_mm']:.3g} mm at 95 %") == 1
+    assert "QR36" not in t.stdout
+
+
+@pytest.mark.e2e
+def test_demo_adaptive_on_an_arm_with_kinematic_error_names_the_arm_and_the_command(
+        mock_config, tmp_path):
+    """A UR5e with realistic kinematic errors (the packaged -kin config): the prediction,
+    which counts the arm's error and does not estimate it, cannot reach 0.05 mm; the run
+    says that the arm is the cause and names the solve that estimates it, and its report
+    prints one predicted coil-placement error, the ml calibration's."""
+    out = tmp_path / "s.jsonl"
+    cfg = mock_config("mock-ur-polaris-kin.yaml")
+    r = _cli("demo", "--adaptive", "--config", str(cfg), "--max-poses", "12", "-o", str(out))
+    assert r.returncode == 0, r.stderr[-2000:]
+    first = r.stdout.splitlines()[1]
+    assert first.startswith("reached max_poses 12 with predicted"), r.stdout[:2000]
+    assert "the cause is model error, the arm's kinematic error" in first
+    assert f"tmscal solve {out} --kinematics estimate" in first
+    assert r.stdout.count("predicted coil-placement error of the ML calibration") == 1
 
 
 _SHRINK = st.tuples(*[st.floats(0, 330)] * 5, st.floats(0, 350))  # box sides: −x −y −z +x +y +z

@@ -70,8 +70,9 @@ def demo_config_name(kinematics: bool = False) -> str:
                    "speaks TCP only stays on TCP).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the solve result (with the mock rig's truth) as one JSON object; "
-                   "with --adaptive it adds robot_time_s (moving, settling, sampling, "
-                   "total), poses_used, predicted_coil_mm, true_coil_mm and stop_reason; with "
+                   "with --adaptive (the solve is ml's, method ml) it adds robot_time_s "
+                   "(moving, settling, sampling, total), poses_used, predicted_coil_mm, "
+                   "true_coil_mm and stop_reason; with "
                    "--kinematics estimate it adds the arm, true_coil_mm and nominal "
                    "{method, true_coil_mm}.")
 @click.option("-v", "--verbose", is_flag=True,
@@ -86,8 +87,10 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     """The whole job on the built-in mock rig: start the mock robot and tracker, acquire
     through the real drivers and wire protocols, solve with QR36, compare with the truth.
 
-    With --adaptive: the adaptive run (docs/adaptive.md), its robot time, the predicted
-    coil-placement error and the true one against the mock rig's truth over the same region.
+    With --adaptive: the adaptive run (docs/adaptive.md), its robot time, and the session
+    solved with the method whose prediction stopped the run (ml, distortion scale, not
+    QR36): that calibration, its predicted coil-placement error and the true one against the
+    mock rig's truth over the same region.
     With --kinematics estimate: ml with the arm's kinematics (docs/kinematics.md)."""
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config

@@ -535,9 +535,10 @@ def format_robot_time(rt: dict[str, float]) -> str:
 
 def format_prediction(pred: Any, region: str) -> str:
     """The adaptive prediction (``calib.prediction.Prediction``) in two lines: the predicted
-    coil-placement error (mm) at its confidence and its RMS, the poses and method it rests
-    on, and the region it is averaged over (``region``, a description)."""
-    return (f"predicted coil-placement error {pred.coil_mm:.3g} mm at "
-            f"{pred.confidence * 100:g} % (RMS {pred.sigma_mm:.3g} mm), from {pred.n_poses} "
-            f"poses ({pred.calibration.method}, distortion {pred.problem.model})\n"
+    coil-placement error (mm) at its confidence and its RMS, the calibration it is about (its
+    method and distortion) and its poses, and the region it is averaged over (``region``, a
+    description)."""
+    return (f"predicted coil-placement error of the {pred.calibration.method} calibration "
+            f"(distortion {pred.problem.model}, {pred.n_poses} poses) {pred.coil_mm:.3g} mm at "
+            f"{pred.confidence * 100:g} % (RMS {pred.sigma_mm:.3g} mm)\n"
             f"  mean over {region}")

@@ -19,7 +19,10 @@ it imports none of them (docs/architecture.md). No I/O: sessions come in as
 - :mod:`.compare`: ``compare_session`` / ``compare_arrays``, the method comparison of
   ``tmscal compare``.
 - :mod:`.predict`: the adaptive header entry (``adaptive_header``, ``settings_from_header``),
-  the prediction's inputs, robot time by phase, and ``predict_session``.
+  the prediction's inputs, robot time by phase, ``predict_session`` (the adaptive run's
+  prediction), ``predict_calibration`` / ``calibration_prediction`` (the one place that
+  decides which prediction belongs to a calibration: its method, its arm) and
+  ``model_error_hint`` (why an adaptive run cannot reach its target).
 - :mod:`.selfcal`: ``identify_session``, the self-calibration of a recorded force-torque
   session (Joubair et al. 2016; the arm written in a form that does not depend on the kept
   columns; docs/selfcal.md, "Running it").

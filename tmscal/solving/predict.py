@@ -17,6 +17,7 @@ from ..calib.prediction import PREDICTION_DISTORTION, AdaptiveSettings, predict
 from ..errors import CalibrationError, SessionError
 from ..poses import JOINTS_KIND, PlanSpec
 from ..session import Session
+from .kinematics import usable_joints
 
 __all__ = ["PHASES", "ADAPTIVE_OVERRIDES", "adaptive_header", "settings_from_header",
            "prediction_inputs", "robot_time_of", "predict_session", "placement_region",
@@ -227,7 +228,6 @@ def predict_calibration(session: Session, cal: Any, n_solve: int | None = None,
     model_error = arm is None and arm_error_counts(session)
     name = cal.method.upper()
     if arm is not None and arm["source"] == "estimated":
-        from .kinematics import usable_joints
         q = usable_joints(session, [p.index for p in use][:n])
         A = cal.robot_poses(A, q)
     if cal.method == "ml" and cal.arm is None and "covariance_parts" in cal.extra:
@@ -237,8 +237,10 @@ def predict_calibration(session: Session, cal: Any, n_solve: int | None = None,
         pred = predict(A, B, C, region, settings, model_error=model_error, calibration=cal,
                        **ml_opts)
         model = (cal.distortion or {}).get("model", "none")
-        how = (f"ML's own: its covariance (distortion {model}, the noise estimated from the "
-               "residuals) propagated to the coil centre at every target, Monte Carlo")
+        noise = ("estimated from the residuals" if cal.extra["noise"].get("mode") == "estimate"
+                 else "as given")
+        how = (f"ML's own: its covariance (distortion {model}, the noise {noise}) "
+               "propagated to the coil centre at every target, Monte Carlo")
     else:
         pred = predict(A, B, C, region, settings, model_error=model_error, placed=cal,
                        **opts)
@@ -269,7 +271,7 @@ def calibration_prediction(session: Session, cal: Any, n_solve: int | None = Non
     head = {"method": cal.method, "arm": _arm_of(cal)}
     try:
         pred, info = predict_calibration(session, cal, n_solve, options, settings)
-    except CalibrationError as e:
+    except (CalibrationError, np.linalg.LinAlgError) as e:
         return {**head, "coil_placement_mm": None, "confidence": settings.confidence,
                 "region": placement_region(session, settings)[1], "reason": str(e)}
     d = pred.as_dict()
@@ -298,8 +300,9 @@ def model_error_hint(session: Session, pred: Any, settings: Any) -> str | None:
       region, √(8/3π) × its RMS ``pred.model_error_mm``): ``tmscal solve S --kinematics
       estimate`` estimates the arm with X, Y, Z (docs/kinematics.md);
     * a tracker distortion the prediction does not fit: ml's test (distortion "auto") on
-      the poses prefers an axis or affine model to the prediction's scale: ``tmscal solve S
-      --method ml --option distortion=MODEL``."""
+      the poses prefers an axis or affine model to the prediction's scale, and what a scale
+      cannot fit of it (the anisotropy of D times the region's RMS extent, mm) is at least
+      half the target: ``tmscal solve S --method ml --option distortion=MODEL``."""
     path = session.path or "SESSION"
     floor = _MEAN_PER_RMS * float(pred.model_error_mm)
     if pred.model_error_mm > 0 and floor >= 0.5 * settings.target_mm:
@@ -309,12 +312,21 @@ def model_error_hint(session: Session, pred: Any, settings: Any) -> str | None:
                 "(docs/kinematics.md)")
     A, B, C, opts = prediction_inputs(session.poses, session.bodies)
     try:
-        model = (solve(A, B, C, method="ml", distortion="auto", **opts).distortion
-                 or {}).get("model", "none")
+        d = solve(A, B, C, method="ml", distortion="auto", **opts).distortion or {}
     except (CalibrationError, np.linalg.LinAlgError):
         return None
-    if model in ("none", PREDICTION_DISTORTION):
+    model = d.get("model", "none")
+    if model in ("none", PREDICTION_DISTORTION) or d.get("matrix") is None:
         return None
-    return (f"the tracker's distortion: ml's test on these poses finds an {model} distortion, "
+    # what the scale cannot fit, across the region: the anisotropy of D (its spectral
+    # distance from the nearest isotropic scale) times the region's RMS extent (mm)
+    D = np.asarray(d["matrix"], dtype=float)
+    aniso = float(np.linalg.norm(D / np.cbrt(np.linalg.det(D)) - np.eye(3), 2))
+    t = placement_region(session, settings)[0][:, :3, 3]
+    extent = float(np.sqrt(np.mean(np.sum((t - t.mean(0)) ** 2, axis=1))))
+    if aniso * extent < 0.5 * settings.target_mm:
+        return None
+    return (f"the tracker's distortion: ml's test on these poses finds an {model} distortion "
+            f"({aniso * 100:.2g} % beyond a scale, {aniso * extent:.2g} mm across the region), "
             f"which the prediction (distortion {PREDICTION_DISTORTION}) does not model: solve "
             f"with tmscal solve {path} --method ml --option distortion={model}")

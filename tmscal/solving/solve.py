@@ -221,7 +221,10 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     solved on (optimistic); by default, ``folds``-fold cross-validated
     (``calib.study.cross_validate``: contiguous folds, mean and SD over folds). Returns the
     Calibration and a ``SolveResult`` (also the errors against the truth when the session has
-    one, and the outlier poses). ``options`` go to the method (``calib.solve``).
+    one, the outlier poses, and the calibration's predicted coil-placement error,
+    ``predict.calibration_prediction``). ``options`` go to the method (``calib.solve``);
+    ``ml`` takes the tracker noise from the poses' sample spreads when every pose recorded
+    them and ``options`` set no tracker noise (as the adaptive run's prediction does).
 
     ``kinematics`` (docs/kinematics.md, "Using it"): ``"estimate"`` estimates the arm's
     kinematic deviations with X, Y, Z (``method`` must be "ml"): the joints of every usable
