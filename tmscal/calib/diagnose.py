@@ -394,14 +394,12 @@ def _coil_delta(fr: Frames, p: np.ndarray) -> np.ndarray:
     return T @ _delta(p) @ np.linalg.inv(T)
 
 
-def _apply(fr: Frames, blocks: Sequence[str], params: dict[str, np.ndarray]) -> Frames:
-    A, X, Z = fr.A, dict(fr.X), dict(fr.Z)
-    for b in blocks:
-        p = params[b]
-        if b == "arm":
-            A = fr.fk(fr.joints + p)  # type: ignore[misc,operator]
-            continue
-        D = _coil_delta(fr, p) if b == "coil" else _delta(p)
+def _moved(fr: Frames, deltas: dict[str, np.ndarray], A: np.ndarray | None = None) -> Frames:
+    """The frames with rigid block changes (4×4 mm Δ by block) applied: Z' = Z Δ (z),
+    X' = X Δ (x), Y' = Y Δ (y), X' = Δ X and Y' = Δ Y (coil); ``A`` replaces the robot poses
+    (the arm's)."""
+    X, Z = dict(fr.X), dict(fr.Z)
+    for b, D in deltas.items():
         if b == "z":
             Z = {k: v @ D for k, v in Z.items()}
         elif b == "x":
@@ -410,7 +408,20 @@ def _apply(fr: Frames, blocks: Sequence[str], params: dict[str, np.ndarray]) -> 
             X["probe"] = X["probe"] @ D
         elif b == "coil":
             X = {k: D @ v for k, v in X.items()}
-    return Frames(A, fr.N, X, Z, fr.joints, fr.fk, fr.indices, fr.centre)
+    return Frames(fr.A if A is None else A, fr.N, X, Z, fr.joints, fr.fk, fr.indices,
+                  fr.centre)
+
+
+def _apply(fr: Frames, blocks: Sequence[str], params: dict[str, np.ndarray]) -> Frames:
+    A = None
+    deltas = {}
+    for b in blocks:
+        p = params[b]
+        if b == "arm":
+            A = fr.fk(fr.joints + p)  # type: ignore[misc,operator]
+        else:
+            deltas[b] = _coil_delta(fr, p) if b == "coil" else _delta(p)
+    return _moved(fr, deltas, A)
 
 
 def _start(fr: Frames, block: str) -> np.ndarray:
@@ -920,23 +931,8 @@ def placement_spread(ft: Fit, samples: int = 400, seed: int = 0) -> dict[str, fl
 
 
 def _apply_blocks_only(ft: Fit) -> Frames:
-    """The frames before the fit (the fitted blocks undone), for re-sampling."""
-    fr = ft.frames
-    inv = np.linalg.inv
-    A, X, Z = fr.A, dict(fr.X), dict(fr.Z)
-    for b in ft.blocks:
-        if b == "arm":
-            continue
-        D = inv(ft.delta(b))
-        if b == "z":
-            Z = {k: v @ D for k, v in Z.items()}
-        elif b == "x":
-            X["marker"] = X["marker"] @ D
-        elif b == "y":
-            X["probe"] = X["probe"] @ D
-        elif b == "coil":
-            X = {k: D @ v for k, v in X.items()}
-    return Frames(A, fr.N, X, Z, fr.joints, fr.fk, fr.indices, fr.centre)
+    """The frames before the fit (the fitted rigid blocks undone), for re-sampling."""
+    return _moved(ft.frames, {b: np.linalg.inv(ft.delta(b)) for b in ft.blocks if b != "arm"})
 
 
 def suggested_tolerances(noise: NoiseModel, n_poses: int, level: float = 0.99,
