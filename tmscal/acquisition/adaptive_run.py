@@ -47,6 +47,7 @@ from ..config import RigConfig
 from ..drivers.base import ConfigError
 from ..errors import CalibrationError, SessionError
 from ..poses import JOINTS_KIND
+from ..safety.origin import CalibratedP0
 from ..session import PoseRecord, Session
 from ..solving.predict import (
     adaptive_header,
@@ -336,8 +337,10 @@ def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
                      tracker_port: str | None = None, robot_host: str | None = None,
                      robot_port: int | None = None, progress: Progress | None = None,
                      should_stop: Callable[[], bool] = lambda: False,
-                     sleep: Callable[[float], None] = time.sleep) -> AcquireResult:
-    """Run (or resume) an adaptive acquisition into session file ``output``.
+                     sleep: Callable[[float], None] = time.sleep,
+                     origin: CalibratedP0 | None = None) -> AcquireResult:
+    """Run (or resume) an adaptive acquisition into session file ``output``; ``origin`` as
+    for :func:`.run.acquire` (a calibration's P0 to run around).
 
     ``settings`` for a new run (default: the config's ``adaptive:`` section); on a resume the
     session header's settings, with ``overrides`` ({target_mm, confidence, max_poses,
@@ -349,4 +352,6 @@ def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
     engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
-    return engine.run(AdaptiveStrategy(cfg, settings, overrides, samples), progress)
+    strategy = AdaptiveStrategy(cfg, settings, overrides, samples)
+    strategy.origin = origin
+    return engine.run(strategy, progress)

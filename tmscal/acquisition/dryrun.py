@@ -22,6 +22,7 @@ from ..errors import ConfigError, DeviceError, SafetyError
 from ..motion import trapezoid_duration
 from ..poses import JOINTS_KIND
 from ..safety import Envelope
+from ..safety.origin import CalibratedP0
 from .devices import envelope_for, make_robot
 from .plan import (
     PlanSpec,
@@ -142,7 +143,7 @@ def _adaptive_run(cfg: RigConfig, settings: AdaptiveSettings, summary: dict[str,
 
 def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None,
             robot_host: str | None = None, adaptive: AdaptiveSettings | None = None,
-            tracker_port: str | None = None) -> DryRun:
+            tracker_port: str | None = None, origin: CalibratedP0 | None = None) -> DryRun:
     """The plan of ``cfg`` (``poses``/``samples`` override it; with ``adaptive`` the plan is
     the run's candidates, ``adaptive.pool`` poses) around P0: the robot's current flange
     pose (read through the configured driver; nothing moves) or ``plan.start``; a joints
@@ -155,7 +156,10 @@ def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None
     for what does not depend on it (offsets and rotations against the limits from P0,
     travel, duration) and ``not_checked`` says what needs P0 (the workspace box for the
     flange and the coil points, the paths between the poses); a joints plan, whose poses
-    come from the robot's joints, is not looked at."""
+    come from the robot's joints, is not looked at.
+
+    ``origin`` (a calibration's P0, ``acquire --calib``): with ``plan.start: current`` the
+    plan is around it, as the run will be, and a pose plan needs no robot for that."""
     checks = tracker_checks(cfg, tracker_port)
     if adaptive is not None:
         poses = adaptive.pool
@@ -163,19 +167,24 @@ def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None
     offline: str | None = None
     p0: np.ndarray | None = None
     src = "plan.start"
-    if isinstance(cfg.plan.start, str) or cfg.plan.kind == JOINTS_KIND:
+    current = isinstance(cfg.plan.start, str)
+    fixed = None if current else np.asarray(cfg.plan.start, dtype=float)
+    if current and origin is not None:
+        fixed, current = np.array(origin.pose, dtype=float), False
+        src = "the calibration's, --calib"
+    if current or cfg.plan.kind == JOINTS_KIND:
         try:
             with make_robot(cfg, envelope_for(cfg, None), robot_host) as rb:
-                if isinstance(cfg.plan.start, str):
+                if current:
                     p0, src = rb.flange_pose(), "current flange pose"
                 else:
-                    p0 = np.asarray(cfg.plan.start, dtype=float)
+                    p0 = fixed
                 if cfg.plan.kind == JOINTS_KIND:
                     joints = joints_spec(cfg, rb, p0)
         except DeviceError as e:
             offline = str(e)
     else:
-        p0 = np.asarray(cfg.plan.start, dtype=float)
+        p0 = fixed
     speed = cfg.robot.speed_mm_s if cfg.robot else 100.0
     rate = cfg.tracker.frame_rate_hz if cfg.tracker else 60.0
     n_samples = samples or cfg.sampling.samples

@@ -226,7 +226,7 @@ class Engine:
             if blocked:
                 raise SafetyError(f"the plan was checked before the run: {blocked[0]}")
         dev.robot.envelope = envelope
-        notes = strategy.settings(None)
+        notes = strategy.start_notes + strategy.settings(None)
         if strategy.where_at_start:
             self._check_where(dev, envelope, strategy, None, None)
         return envelope, notes
@@ -266,7 +266,7 @@ class Engine:
         if v:
             raise SafetyError(f"the robot is at {np.round(here[:3, 3], 1).tolist()} mm, "
                               f"outside the safety envelope around P0 ({'; '.join(v)}); "
-                              "move it near P0 first. Nothing was moved.")
+                              f"{strategy.where_hint}. Nothing was moved.")
 
     # --- the loop -------------------------------------------------------------------------
 

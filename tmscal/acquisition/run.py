@@ -34,6 +34,7 @@ from ..config import RigConfig
 from ..drivers.base import ConfigError
 from ..errors import SessionError
 from ..poses import JOINTS_KIND
+from ..safety.origin import CalibratedP0
 from ..session import PoseRecord, Session
 from .devices import Devices, Endpoints, envelope_for
 from .engine import AcquireResult, AcquisitionStopped, Engine, valid_or_skipped
@@ -135,6 +136,8 @@ class PlanStrategy(Strategy):
         self.samples = samples
         self.spec: PlanSpec | None = None
         self.st: SamplingSettings | None = None
+        #: the calibration's P0 the run is made around (``acquire --calib``), or None
+        self.origin: CalibratedP0 | None = None
 
     def check(self) -> None:
         cfg = self.cfg
@@ -143,10 +146,32 @@ class PlanStrategy(Strategy):
                               "(and the probe 'probe')")
 
     def start_pose(self, dev: Devices) -> np.ndarray:
-        """``plan.start``, or the flange pose when it says "current"."""
-        if isinstance(self.cfg.plan.start, str):
-            return super().start_pose(dev)
-        return np.asarray(self.cfg.plan.start, dtype=float)
+        """P0 of a new run (base_from_flange 4×4 mm): ``plan.start`` when the config fixes it
+        (with a warning and the distance when ``origin``, the calibration's P0, is
+        elsewhere); with "current", ``origin`` when given (``tmscal acquire --calib``, so
+        that P0 does not walk from session to session: ``safety.origin``), else the flange
+        pose, which the run's notes then state."""
+        o, cfg = self.origin, self.cfg
+        if not isinstance(cfg.plan.start, str):
+            p0 = np.asarray(cfg.plan.start, dtype=float)
+            warning = None if o is None else o.elsewhere(p0, f"{cfg.path}'s plan.start",
+                                                         "leave plan.start 'current' to run "
+                                                         "around the calibration's P0")
+            if warning:
+                self.start_notes.append("WARNING: " + warning)
+            return p0
+        if o is not None:
+            self.start_notes.append(f"P0 is the calibration's, {o.where()} (--calib), not "
+                                    "where the arm was left")
+            self.where_hint = ("move it back with: tmscal robot CONFIG --calib CAL --move-to "
+                               "p0")
+            return np.array(o.pose, dtype=float)
+        here = super().start_pose(dev)
+        x, y, z = (float(v) for v in here[:3, 3])
+        self.start_notes.append(f"P0 is where the flange was at the start, ({x:.1f}, {y:.1f}, "
+                                f"{z:.1f}) mm (plan.start: current); give --calib CAL to run "
+                                "around the calibration's P0 instead")
+        return here
 
     def _poses(self, spec: PlanSpec) -> np.ndarray:
         """The plan's poses (``plan.plan_poses``; a joints plan inside the config's envelope
@@ -217,8 +242,12 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False, replace
             tracker_port: str | None = None, robot_host: str | None = None,
             robot_port: int | None = None, progress: Progress | None = None,
             should_stop: Callable[[], bool] = lambda: False,
-            sleep: Callable[[float], None] = time.sleep) -> AcquireResult:
+            sleep: Callable[[float], None] = time.sleep,
+            origin: CalibratedP0 | None = None) -> AcquireResult:
     """Run (or resume) an acquisition of the config's plan into session file ``output``.
+
+    ``origin``: a calibration's P0 (``CalibrationFile.p0``) that a new run with
+    ``plan.start: current`` is made around instead of the flange's pose (docs/safety.md).
 
     ``poses``/``samples`` override the config (on a resume, the session header's settings
     are used unless overridden; ``AcquireResult.notes`` says so). ``progress`` hears the
@@ -229,4 +258,6 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False, replace
     engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
-    return engine.run(PlanStrategy(cfg, poses, samples), progress)
+    strategy = PlanStrategy(cfg, poses, samples)
+    strategy.origin = origin
+    return engine.run(strategy, progress)

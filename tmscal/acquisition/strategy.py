@@ -63,6 +63,10 @@ class Strategy:
         self.p0: np.ndarray = np.eye(4)
         self.poses: np.ndarray = np.zeros((0, 4, 4))
         self.plan: Any = None
+        #: what the run says about where its P0 came from (notes of the result)
+        self.start_notes: list[str] = []
+        #: the end of the refusal when the arm is outside the envelope at the start
+        self.where_hint = "move it near P0 first"
         self._done: set[int] = set()
         self._next = 0
 

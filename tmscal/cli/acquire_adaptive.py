@@ -102,7 +102,7 @@ class PredictionLines(Progress):
 def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         samples: int | None, tracker_port: str | None, robot_host: str | None,
         robot_port: int | None = None, should_stop: Any = lambda: False,
-        quiet: bool = False, replace: bool = False) -> Any:
+        quiet: bool = False, replace: bool = False, origin: Any = None) -> Any:
     """``acquire_adaptive`` with the progress display (the bars and a line per prediction on
     stderr unless ``quiet``); returns its AcquireResult."""
     from ..acquisition.adaptive_run import acquire_adaptive, settings_for
@@ -114,7 +114,7 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
         return acquire_adaptive(
             cfg, output, settings=settings, resume=resume, replace=replace, overrides=overrides,
             samples=samples, tracker_port=tracker_port, robot_host=robot_host,
-            robot_port=robot_port, should_stop=should_stop,
+            robot_port=robot_port, should_stop=should_stop, origin=origin,
             progress=bar if quiet else ProgressGroup(bar, PredictionLines()))
 
 

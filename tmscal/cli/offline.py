@@ -382,11 +382,11 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
                                                     estimate),
                              **_kinematics_args(kinematics))
     if output is not None:
-        from ..exports.calibfile import provenance
+        from ..exports.calibfile import calibration_p0, provenance
         write_atomic(output, calibration_yaml(
             res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
             parameters=cal.extra.get("parameters"), provenance=provenance(session.header),
-            arm=cal.arm), force)
+            arm=cal.arm, p0=calibration_p0(session)), force)
     if plot is not None:
         with output_files({"plot": plot}, force) as tmp:
             run_plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,

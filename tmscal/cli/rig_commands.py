@@ -215,21 +215,33 @@ def close_quietly(dev: Any) -> None:
                    "roll, pitch, yaw in degrees with R = Rz(yaw)·Ry(pitch)·Rx(roll) about the "
                    "fixed base axes (DENSO's P-type; NOT a UR pendant's rotation vector), in "
                    "the robot base frame. The config's safety envelope applies around the "
-                   "current pose.")
+                   "current pose (with --calib: around the calibration's P0). 'p0' with "
+                   "--calib: back to the P0 where the calibration was made, always allowed "
+                   "inside the workspace box at the speed caps.")
+@click.option("--calib", "calib_file", type=INPUT_FILE, default=None, metavar="CALIB",
+              help="The calibration whose P0 --move-to p0 goes back to (docs/safety.md).")
 @click.option("--speed", type=Finite(0, lo_open=True), default=None,
               help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
 @click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
 @handle_errors
 def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: str | None,
-          speed: float | None, yes: bool) -> None:
+          calib_file: Path | None, speed: float | None, yes: bool) -> None:
     """Connect to the robot, report its identity and flange pose; optionally jog."""
     from ..acquisition.devices import envelope_for, make_robot
     from ..config import load_config
     from ..geometry import matrix_from_denso_p
+    from ..safety.origin import return_envelope
 
     host = old_spelling(robot_host, old_host, "--robot-host", "--host")
     target = None
-    if move_to is not None:  # parsed before anything connects
+    origin = calibration_origin(calib_file)
+    back = move_to is not None and move_to.strip().lower() == "p0"
+    if back:
+        if origin is None:
+            raise click.BadParameter("'p0' is the calibration's P0: give --calib CALIB",
+                                     param_hint="--move-to")
+        target = np.array(origin.pose, dtype=float)
+    elif move_to is not None:  # parsed before anything connects
         try:
             vals = [float(v) for v in move_to.split(",")]
             if len(vals) != 6 or not np.isfinite(vals).all():
@@ -248,7 +260,12 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
         click.echo(_matrix_text(here))
         if target is None:
             return
-        rb.envelope = envelope_for(cfg, here)
+        if origin is None:
+            rb.envelope = envelope_for(cfg, here)
+        elif back:  # the way back: the box and the caps only
+            rb.envelope = return_envelope(envelope_for(cfg, origin.pose), origin.pose, here)
+        else:
+            rb.envelope = envelope_for(cfg, origin.pose)
         rb.envelope.check_pose(target, "--move-to target")
         v = speed if speed is not None else rb.speed_mm_s
         _echo_pose("target", target, rb)
@@ -280,11 +297,19 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
                    "new run's header is written, after the devices answered and the plan was "
                    "checked (a run that cannot start leaves it as it was), never one another "
                    "tmscal is recording; not with --resume.")
+@click.option("--calib", "calib_file", type=INPUT_FILE, default=None, metavar="CALIB",
+              help="Run around the P0 where this calibration was made (with plan.start: "
+                   "current), not wherever the arm was left, so that the daily check and a "
+                   "re-registration are measured where the calibration holds; the arm must "
+                   "be inside the envelope around that P0 (tmscal robot CONFIG --calib CALIB "
+                   "--move-to p0 takes it back). A fixed plan.start elsewhere is warned about. "
+                   "docs/safety.md.")
 @adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             samples: int | None, dry_run: bool, tracker_port: str | None,
-            robot_host: str | None, force: bool, adaptive: bool, **overrides: Any) -> None:
+            robot_host: str | None, force: bool, calib_file: Path | None, adaptive: bool,
+            **overrides: Any) -> None:
     """Move the robot through the plan and record a session (A, B, C at every pose).
 
     Each pose: move, settle, average N distinct tracker frames (and the robot pose read
@@ -309,6 +334,10 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         raise click.BadParameter("--force records the session anew; --resume continues it",
                                  param_hint="--force")
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
+    if calib_file is not None and resume:
+        raise click.BadParameter("a resumed run keeps the P0 its session header records",
+                                 param_hint="--calib")
+    origin = calibration_origin(calib_file)
     cfg = load_config(config)
     if force and not dry_run:
         check_replaceable(output, config)
@@ -317,20 +346,20 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         if adaptive:  # the candidates: the plan with adaptive.pool poses
             from ..acquisition.adaptive_run import settings_for
             settings = settings_for(cfg, **overrides)
-        _dry_run(cfg, poses, samples, robot_host, settings, tracker_port)
+        _dry_run(cfg, poses, samples, robot_host, settings, tracker_port, origin)
         return
     stop = StopFlag()
     stop.install()
     if adaptive:
         _acquire_adaptive(cfg, config, output, resume, overrides, samples, tracker_port,
-                          robot_host, stop, force)
+                          robot_host, stop, force, origin)
         return
     try:
         with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
             res = run_acquire(cfg, output, resume=resume, replace=force, poses=poses,
                               samples=samples,
                               tracker_port=tracker_port, robot_host=robot_host,
-                              progress=bar, should_stop=stop)
+                              progress=bar, should_stop=stop, origin=origin)
     except AcquisitionStopped as e:
         fail(f"acquisition stopped: {e}")
         return
@@ -350,14 +379,15 @@ def check_replaceable(output: Path, config: Path) -> None:
 def _acquire_adaptive(cfg: Any, config: Path, output: Path, resume: bool,
                       overrides: dict[str, Any], samples: int | None,
                       tracker_port: str | None, robot_host: str | None, stop: Any,
-                      replace: bool = False) -> None:
+                      replace: bool = False, origin: Any = None) -> None:
     from ..acquisition.engine import AcquisitionStopped
     from . import acquire_adaptive
 
     try:
         res = acquire_adaptive.run(cfg, output, resume=resume, overrides=overrides,
                                samples=samples, tracker_port=tracker_port,
-                               robot_host=robot_host, should_stop=stop, replace=replace)
+                               robot_host=robot_host, should_stop=stop, replace=replace,
+                               origin=origin)
     except AcquisitionStopped as e:
         fail(f"acquisition stopped: {e}")
         return
@@ -381,8 +411,23 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
     click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")
 
 
+def calibration_origin(calib_file: Path | None) -> Any:
+    """The P0 where the calibration ``calib_file`` was made (``CalibrationFile.p0``), or None
+    without a file; a calibration that records none is a BadParameter naming it."""
+    if calib_file is None:
+        return None
+    from ..exports.calibfile import read_calibration
+    origin = read_calibration(calib_file).p0
+    if origin is None:
+        raise click.BadParameter(f"{calib_file} records no P0 (it was written before tmscal "
+                                 "stored where a calibration was made): solve its session "
+                                 "again with -o", param_hint="--calib")
+    return origin
+
+
 def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str | None,
-             adaptive: Any = None, tracker_port: str | None = None) -> None:
+             adaptive: Any = None, tracker_port: str | None = None,
+             origin: Any = None) -> None:
     """Print the dry run (``tmscal.acquisition.dryrun``): the tracker's offline checks, the
     run that will happen (an adaptive run's bootstrap, pose limit, target and robot time at
     most, then its candidates), the plan's extent and the envelope check, and what could not
@@ -390,7 +435,7 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
     from ..acquisition.dryrun import dry_run
     from ..errors import SafetyError
 
-    d = dry_run(cfg, poses, samples, robot_host, adaptive, tracker_port)
+    d = dry_run(cfg, poses, samples, robot_host, adaptive, tracker_port, origin)
     if d.tracker:
         click.echo("tracker (checked offline; nothing opened):")
         for line in d.tracker:

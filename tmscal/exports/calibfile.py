@@ -29,6 +29,7 @@ from ..calib.diagnose import COMPONENTS, NoiseModel
 from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..geometry import orthonormalize
+from ..safety.origin import CalibratedP0
 from .armfile import arm_section, parse_arm_section
 from .textfile import MAX_BYTES, read_text_file
 from .textfile import bad as _bad
@@ -41,7 +42,8 @@ if TYPE_CHECKING:
 
 __all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "calibration_yaml",
            "updated_calibration_yaml", "parse_noise_model",
-           "read_calibration", "parse_calibration", "load_calibration", "provenance"]
+           "read_calibration", "parse_calibration", "load_calibration", "provenance",
+           "calibration_p0"]
 
 FORMAT = "tmscal-calibration"
 VERSION = 1
@@ -69,6 +71,14 @@ class CalibrationFile:
         file written before it was stored."""
         d = self.doc.get("noise_model")
         return None if d is None else NoiseModel.from_json(d)
+
+    @property
+    def p0(self) -> CalibratedP0 | None:
+        """Where the calibration was made (``p0``: its session's P0, base_from_flange 4×4 mm,
+        and the region of its poses; docs/safety.md), or None in a file written before it
+        was stored."""
+        d = self.doc.get("p0")
+        return None if d is None else CalibratedP0.from_doc(d)
 
     @property
     def created(self) -> str | None:
@@ -184,14 +194,16 @@ def parse_noise_model(d: Any, src: str) -> NoiseModel:
 def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
                      covariance: Any = None, parameters: list[str] | None = None,
                      provenance: dict[str, Any] | None = None,
-                     arm: ArmCalibration | None = None) -> str:
+                     arm: ArmCalibration | None = None,
+                     p0: CalibratedP0 | None = None) -> str:
     """The calibration YAML (docs/conventions.md, docs/exports.md): X, Y, Z orthonormal (and
     QR24's Z_probe), raw matrices, method, poses used, the errors (cross-validated by default,
     with their SD over folds), the outlier poses, the session's SHA-256; a statistical
     solver's parameter ``covariance`` with the ``parameters`` it is ordered by; the
     ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices); the
     identified ``arm`` (``Calibration.arm``: the ``arm`` section of :mod:`.armfile`, in the
-    kinematics format). Units mm. :func:`load_calibration` reads it back."""
+    kinematics format); where it was made, ``p0`` (the session's P0 and region, base_from_flange
+    mm; ``CalibrationFile.p0``). Units mm. :func:`load_calibration` reads it back."""
     j = res.to_json()
     doc = {
         "format": "tmscal-calibration",
@@ -226,6 +238,8 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
         doc["provenance"] = provenance
     if arm is not None:
         doc["arm"] = arm_section(arm)
+    if p0 is not None:
+        doc["p0"] = p0.to_doc()
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
 
 
@@ -309,6 +323,12 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     cal = parse_calibration(doc, src)
     if doc.get("noise_model") is not None:
         parse_noise_model(doc["noise_model"], src)
+    if doc.get("p0") is not None:
+        try:
+            CalibratedP0.from_doc(doc["p0"])
+        except ValueError as e:
+            key, _, msg = str(e).partition(": ")
+            raise _bad(src, key, msg) from None
     cal.extra.setdefault("source", src)
     return CalibrationFile(calibration=cal, path=p, doc=doc)
 
@@ -321,6 +341,21 @@ def load_calibration(path: str | Path) -> Calibration:
     :func:`read_calibration`). Raises CalibrationError naming the file and the key for a file
     that is not a calibration."""
     return read_calibration(path).calibration
+
+
+def calibration_p0(session: Any) -> CalibratedP0 | None:
+    """Where a calibration solved on ``session`` (a ``tmscal.session.Session``) is made: the
+    P0 its header's plan records and the extent of its recorded robot poses A
+    (base_from_flange 4×4 mm); None for a session without a plan (a simulated one)."""
+    plan = (session.header or {}).get("plan")
+    if not isinstance(plan, dict) or "p0" not in plan:
+        return None
+    A = [r.A for r in session.poses if r.A is not None and r.skipped is None]
+    try:
+        return CalibratedP0.from_plan(plan, np.asarray(A) if A else None)
+    except ValueError as e:
+        key, _, msg = str(e).partition(": ")
+        raise CalibrationError(f"{session.path}: header key '{key}': {msg}") from None
 
 
 def provenance(header: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -1,16 +1,16 @@
 """The daily check: a stored calibration evaluated on a new session, without fitting
 (``tmscal solve SESSION --calib CALIB``).
 
-Every usable pose of the session is a hold-out pose for the stored X, Y, Z: the errors of
-Wang et al. (2018) (docs/methods.md) as ``Calibration.errors`` computes them, the per-pose
-errors with the outlier rule of ``tmscal solve``, the coil placement error against the truth
-when the session has one (simulated sessions), and the calibration's provenance beside the
-errors it was stored with. A calibration that carries an identified arm (docs/kinematics.md,
-"Using it") recomputes the session's robot poses from its joints with that arm before
-anything is evaluated, and says how far the controller's frame is from the one it was
+Every usable pose of the session is a hold-out pose for the stored X, Y, Z: the errors of Wang
+et al. (2018) (docs/methods.md) as ``Calibration.errors`` computes them, the per-pose errors
+with the outlier rule of ``tmscal solve``, the coil placement error against the truth when the
+session has one (simulated sessions), and the calibration's provenance beside the errors it was
+stored with; a session acquired elsewhere than the calibration's P0 is warned about with the
+distance (:func:`p0_check`, docs/safety.md). A calibration that carries an identified arm
+(docs/kinematics.md, "Using it") recomputes the session's robot poses from its joints with that
+arm before anything is evaluated, and says how far the controller's frame is from the one it was
 calibrated in. Given tolerances, the check decides (:func:`verdict`): PASS when the total
-hold-out errors e_t (mm) and θ_t (degrees) are each within theirs, else FAIL. Units mm and
-degrees.
+hold-out errors e_t (mm) and θ_t (degrees) are each within theirs, else FAIL. Units mm and degrees.
 """
 
 from __future__ import annotations
@@ -26,15 +26,16 @@ from ..calib.kinematics.calibrated import controller_frame
 from ..errors import CalibrationError
 from ..escape import visible
 from ..geometry import rotation_angle
+from ..safety.origin import p0_distance
 from ..session import Session
 from ..solving.kinematics import applied_arrays, arm_forward
 from ..solving.outliers import find_outliers
 from ..solving.solve import pose_residuals, truth_errors_of
-from .calibfile import CalibrationFile
+from .calibfile import CalibrationFile, calibration_p0
 
 __all__ = ["check_calibration", "format_check", "verdict", "verdict_line", "FRAME_MOVED_MM",
            "FRAME_MOVED_DEG", "UPDATE_OF", "session_frames", "noise_of", "next_command",
-           "format_diagnosis", "update_calibration", "format_update"]
+           "format_diagnosis", "update_calibration", "format_update", "p0_check", "p0_lines"]
 
 #: the ``--update`` that repairs each diagnosed change
 UPDATE_OF = {"tracker": "z", "marker": "x", "coil_centre": "y", "coil": "coil"}
@@ -92,7 +93,8 @@ def check_calibration(session: Session, cf: CalibrationFile,
     without an identified arm): {"nominal", "source", "frame_change_mm", "frame_change_deg":
     how far the controller's frame found on this session (``controller_frame``) is from the
     stored one}, and "verdict" (:func:`verdict` with ``tolerance_mm`` / ``tolerance_deg``;
-    None without either). Raises CalibrationError when the session has no usable pose or lacks the
+    None without either), "diagnosis" and "suggested_tolerances" (docs/lab-day.md), "p0"
+    (:func:`p0_check`). Raises CalibrationError when the session has no usable pose or lacks the
     marker, and, for a calibration with an arm, when a pose has no joints or the recorded
     poses are not that arm's nominal kinematics."""
     cal = cf.calibration
@@ -151,7 +153,31 @@ def check_calibration(session: Session, cf: CalibrationFile,
         "verdict": verdict(errors, tolerance_mm, tolerance_deg),
         "diagnosis": diagnosis,
         "suggested_tolerances": suggested,
+        "p0": p0_check(session, cf),
     }
+
+
+def p0_check(session: Session, cf: CalibrationFile) -> dict[str, Any] | None:
+    """Whether ``session`` was acquired where the calibration was made
+    (``safety.origin``, docs/safety.md): {"calibration_p0", "session_p0" (flange origins,
+    base frame mm), "mm", "deg" (their distance), "same" (within ``P0_TOL_MM``/``P0_TOL_DEG``),
+    "warning" (None when the same)}; None when either does not record a P0 (a calibration
+    written before P0 was stored, a simulated session)."""
+    cp = cf.p0
+    sp = calibration_p0(session)
+    if cp is None or sp is None:
+        return None
+    mm, deg = p0_distance(cp.pose, sp.pose)
+    warning = cp.elsewhere(sp.pose, "this session's P0")
+    return {"calibration_p0": cp.pose[:3, 3].tolist(), "session_p0": sp.pose[:3, 3].tolist(),
+            "mm": mm, "deg": deg, "same": warning is None, "warning": warning}
+
+
+def p0_lines(p: dict[str, Any] | None) -> list[str]:
+    """The P0 warning of a check or an update, wrapped (none when the same place)."""
+    if not p or p["same"]:
+        return []
+    return textwrap.wrap("  WARNING: " + p["warning"], 98, subsequent_indent="    ")
 
 
 def session_frames(session: Session, cf: CalibrationFile) -> dg.Frames:
@@ -221,10 +247,12 @@ def format_check(res: dict[str, Any]) -> str:
         if arm["frame_change_mm"] > FRAME_MOVED_MM or arm["frame_change_deg"] > FRAME_MOVED_DEG:
             head.append("  WARNING: the controller's frame has moved since the calibration "
                         "(a new work coordinate system or base mounting?): recalibrate")
+    p0_warning = p0_lines(res.get("p0"))
     if res["same_session"]:
         head.append("  WARNING: this is the session the calibration was solved on: the "
                     "errors below are in-sample, not a check")
     lines = [w for ln in head for w in textwrap.wrap(ln, 98, subsequent_indent="    ")]
+    lines += p0_warning
     lines += ["", f"  {'every pose held out':<36}{'trans mm':>12}{'rot deg':>12}"
               f"{'stored mm':>14}{'stored deg':>12}"]
 
@@ -372,7 +400,7 @@ def update_calibration(session: Session, cf: CalibrationFile, names: list[str]
             "noise_model": None if after is None else after.to_json(),
             "errors": _errors(cal.errors(A, B, C if with_probe else None)),
             "truth": truth_errors_of(session, cal, C if with_probe else None, q),
-            "n_poses": fr.n}
+            "n_poses": fr.n, "p0": p0_check(session, cf)}
 
 
 def format_update(res: dict[str, Any], calib_file: str, output: str | None) -> str:
@@ -395,6 +423,7 @@ def format_update(res: dict[str, Any], calib_file: str, output: str | None) -> s
     if t and "coil_placement_mm" in t:
         lines.append(f"  coil placement against the truth: mean {t['coil_placement_mm']:.4f} "
                      f"mm, max {t['coil_placement_max_mm']:.4f} mm")
+    lines += p0_lines(res.get("p0"))
     lines.append(visible(f"  written to {output}" if output else
                          "  (nothing written: give -o FILE to write the updated calibration)"))
     return "\n".join(lines)
