@@ -189,7 +189,8 @@ class Engine:
             else:
                 envelope, notes = self._new(strategy, dev)
             for note in notes:
-                log.warning("resuming %s with %s", self.out, note)
+                log.warning("%s %s: %s", "resuming" if self.resume else "recording", self.out,
+                            note)
             if writer is None:
                 header = make_header(dev.bodies, config=self.cfg.raw,
                                      devices=dev.identities(), **strategy.header())

@@ -32,14 +32,16 @@ def adaptive_options(fn: Any) -> Any:
         click.option("--target-mm", type=Finite(0, 100, lo_open=True), default=None,
                      help="With --adaptive: stop when the predicted coil-placement error (mean "
                           "over the region, at --confidence) is at or below this, mm "
-                          "(overrides adaptive.target_mm; default 0.05)."),
+                          "(overrides adaptive.target_mm; default 0.05). With --update: the "
+                          "update's predicted coil-placement error at 95 %, mm (default "
+                          "0.1)."),
         click.option("--confidence", type=Finite(0.5, 0.9999), default=None,
                      help="With --adaptive: the confidence of the prediction, e.g. 0.95 "
                           "(overrides adaptive.confidence)."),
         click.option("--max-poses", type=click.IntRange(3, 100000), default=None,
                      help="With --adaptive: stop after this many poses whatever the "
                           "prediction; skipped poses count (overrides adaptive.max_poses; "
-                          "default 40)."),
+                          "default 40). With --update: at most this many poses (default 10)."),
         click.option("--bootstrap", type=click.IntRange(3, 100000), default=None,
                      help="With --adaptive: well-spread poses measured before the first "
                           "prediction (overrides adaptive.bootstrap; default 4: the 3 poses "

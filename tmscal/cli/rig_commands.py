@@ -304,11 +304,24 @@ def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: s
                    "be inside the envelope around that P0 (tmscal robot CONFIG --calib CALIB "
                    "--move-to p0 takes it back). A fixed plan.start elsewhere is warned about. "
                    "docs/safety.md.")
+@click.option("--update", "update", multiple=True, metavar="z|x|y|coil",
+              help="With --calib: re-register only this transform at the rig (z: the tracker "
+                   "moved, x: the marker on the coil, y: the coil's centre, coil: X and Y, the "
+                   "coil re-seated; repeatable, e.g. --update z --update x): a few well-spread "
+                   "poses around the calibration's P0, one at a time, until the update's "
+                   "predicted coil-placement error at 95 % is at or below --target-mm "
+                   "(default 0.1) or --max-poses (default 10) were measured; then writes the "
+                   "updated calibration (--update-output, default OUTPUT with .yaml) as solve "
+                   "--calib CALIB --update would, or refuses (exit 3, nothing written) when "
+                   "the session shows a second change. docs/lab-day.md.")
+@click.option("--update-output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              metavar="FILE", help="With --update: where the updated calibration is written.")
 @adaptive_options
 @handle_errors
 def acquire(config: Path, output: Path, resume: bool, poses: int | None,
             samples: int | None, dry_run: bool, tracker_port: str | None,
-            robot_host: str | None, force: bool, calib_file: Path | None, adaptive: bool,
+            robot_host: str | None, force: bool, calib_file: Path | None,
+            update: tuple[str, ...], update_output: Path | None, adaptive: bool,
             **overrides: Any) -> None:
     """Move the robot through the plan and record a session (A, B, C at every pose).
 
@@ -333,6 +346,10 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     if force and resume:
         raise click.BadParameter("--force records the session anew; --resume continues it",
                                  param_hint="--force")
+    if update or update_output is not None:
+        _acquire_update(config, output, calib_file, update, update_output, resume, poses,
+                        samples, dry_run, tracker_port, robot_host, force, adaptive, overrides)
+        return
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     if calib_file is not None and resume:
         raise click.BadParameter("a resumed run keeps the P0 its session header records",
@@ -366,6 +383,78 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
+
+
+def _acquire_update(config: Path, output: Path, calib_file: Path | None,
+                    update: tuple[str, ...], update_output: Path | None, resume: bool,
+                    poses: int | None, samples: int | None, dry_run: bool,
+                    tracker_port: str | None, robot_host: str | None, force: bool,
+                    adaptive: bool, overrides: dict[str, Any]) -> None:
+    """``acquire --calib CAL --update NAME``: the re-registration run
+    (``acquisition.reregister``), then the update of ``solve --calib --update`` on its
+    session (``daily_check._update``), written to ``update_output``. Every refusal of the
+    options comes before anything connects."""
+    from ..acquisition.engine import AcquisitionStopped
+    from ..acquisition.reregister import ReregisterSettings, reregister
+    from ..config import load_config
+    from ..errors import CalibrationError
+    from ..exports.calibfile import read_calibration
+    from ..exports.check import noise_of
+    from .daily_check import _update
+    from .live import AcquireProgress, stderr_to_log
+
+    if not update:
+        raise click.BadParameter("only with --update", param_hint="--update-output")
+    if calib_file is None:
+        raise click.BadParameter("--update re-registers a stored calibration: give --calib "
+                                 "CALIB", param_hint="--update")
+    for opt, given in (("--resume", resume), ("--adaptive", adaptive),
+                       ("--poses", poses is not None), ("--dry-run", dry_run),
+                       ("--confidence/--bootstrap", overrides.get("confidence") is not None
+                        or overrides.get("bootstrap") is not None)):
+        if given:
+            raise click.BadParameter("not with --update (it chooses its poses and stops at "
+                                     "--target-mm or --max-poses)", param_hint=opt)
+    try:
+        settings = ReregisterSettings(
+            tuple(update), **{k: v for k, v in (("target_mm", overrides.get("target_mm")),
+                                                ("max_poses", overrides.get("max_poses")))
+                              if v is not None})
+    except CalibrationError as e:
+        raise click.BadParameter(str(e), param_hint="--update") from None
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="--max-poses") from None
+    new = update_output or output.with_suffix(".yaml")
+    check_outputs({"--output": output, "--update-output": new}, [config, calib_file], force)
+    origin = calibration_origin(calib_file)
+    cf = read_calibration(calib_file)
+    cfg = load_config(config)
+    tools = cfg.tracker.tools if cfg.tracker else {}
+    bodies = ("marker", "probe") if cf.calibration.Y is not None and "probe" in tools \
+        else ("marker",)
+    noise = noise_of(cf, bodies)
+    stop = StopFlag()
+    stop.install()
+    try:
+        with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
+            res = reregister(cfg, output, cf.calibration, noise, settings, origin,
+                             replace=force, samples=samples, tracker_port=tracker_port,
+                             robot_host=robot_host, progress=bar, should_stop=stop)
+    except AcquisitionStopped as e:
+        fail(f"acquisition stopped: {e}")
+        return
+    for note in res.notes:
+        click.echo(f"note: {note}")
+    rt = (res.robot_time_s or {}).get("total")
+    click.echo(f"session {output}: {res.recorded} poses in {res.elapsed_s:.1f} s"
+               + (f" ({rt:.1f} s of robot time)" if rt is not None else "")
+               + f"; {res.message}")
+    if res.stopped:
+        click.echo(f"stopped early; re-register from what was recorded with: tmscal solve "
+                   f"{output} --calib {calib_file} --update {' --update '.join(update)} -o "
+                   f"{new}")
+        sys.exit(EXIT_INTERRUPTED)
+    _update(output, calib_file, list(update), False, False, new, False, force)
 
 
 def check_replaceable(output: Path, config: Path) -> None:

@@ -28,13 +28,13 @@ from ..escape import visible
 from ..geometry import rotation_angle
 from ..safety.origin import p0_distance
 from ..session import Session
-from ..solving.kinematics import applied_arrays, arm_forward
+from ..solving.kinematics import applied_arrays, session_frames
 from ..solving.outliers import find_outliers
 from ..solving.solve import pose_residuals, truth_errors_of
 from .calibfile import CalibrationFile, calibration_p0
 
 __all__ = ["check_calibration", "format_check", "verdict", "verdict_line", "FRAME_MOVED_MM",
-           "FRAME_MOVED_DEG", "UPDATE_OF", "session_frames", "noise_of", "next_command",
+           "FRAME_MOVED_DEG", "UPDATE_OF", "noise_of", "next_command",
            "format_diagnosis", "update_calibration", "format_update", "p0_check", "p0_lines"]
 
 #: the ``--update`` that repairs each diagnosed change
@@ -118,7 +118,7 @@ def check_calibration(session: Session, cf: CalibrationFile,
                "frame_change_deg": float(np.degrees(rotation_angle(D[None])[0]))}
     stored = cf.session
     errors = _errors(cal.errors(A, B, C))
-    fr = session_frames(session, cf)
+    fr = session_frames(session, cf.calibration)
     noise = noise_of(cf, fr.bodies)
     try:
         dx = dg.diagnose(fr, noise)
@@ -178,20 +178,6 @@ def p0_lines(p: dict[str, Any] | None) -> list[str]:
     if not p or p["same"]:
         return []
     return textwrap.wrap("  WARNING: " + p["warning"], 98, subsequent_indent="    ")
-
-
-def session_frames(session: Session, cf: CalibrationFile) -> dg.Frames:
-    """The session's usable poses as the stored calibration applies them (its arm, its
-    distortion; ``calib.diagnose.frames``), with the joints and the arm's forward
-    kinematics where the arm hypothesis can be tested (``solving.kinematics.arm_forward``).
-    CalibrationError as ``applied_arrays`` raises it."""
-    cal = cf.calibration
-    with_probe = cal.Y is not None and "probe" in session.bodies
-    A, B, C, idx, q = applied_arrays(session, cal, need_probe=with_probe)
-    if len(A) == 0:
-        raise CalibrationError(f"{session.path}: no usable poses in the session")
-    fk = arm_forward(session, cal, A, q)
-    return dg.frames(cal, A, B, C if with_probe else None, q if fk else None, fk, idx)
 
 
 def noise_of(cf: CalibrationFile, bodies: tuple[str, ...]) -> dg.NoiseModel:
@@ -369,7 +355,7 @@ def update_calibration(session: Session, cf: CalibrationFile, names: list[str]
     (in-sample, on the update's poses), "truth" (None without one), "n_poses"}. CalibrationError
     when the session cannot determine the update; ``calib.diagnose.UpdateRefused`` (with its
     diagnosis) when it does not explain the session."""
-    fr = session_frames(session, cf)
+    fr = session_frames(session, cf.calibration)
     noise = noise_of(cf, fr.bodies)
     try:
         ft = dg.update(fr, noise, names)

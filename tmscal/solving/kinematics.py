@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..calib import Calibration
+from ..calib import diagnose as dg
 from ..calib.kinematics.arms import ARMS, arm_by_name
 from ..calib.kinematics.calibrated import ArmCalibration, controller_frame, spread_seeds
 from ..calib.kinematics.ik import inverse
@@ -27,8 +28,8 @@ from ..errors import CalibrationError, ConfigError, SessionError
 from ..session import Session
 
 __all__ = ["JOINTS_HINT", "recorded_arm", "choose_arm", "session_joints", "usable_joints",
-           "applied_arrays", "arm_forward", "given_arm", "truth_arm_of", "truth_controller",
-           "coil_placement"]
+           "applied_arrays", "arm_forward", "session_frames", "given_arm", "truth_arm_of",
+           "truth_controller", "coil_placement"]
 
 #: what to do about a pose without joints
 JOINTS_HINT = "record the session with a robot driver that reports joints (docs/kinematics.md)"
@@ -126,6 +127,21 @@ def arm_forward(session: Session, cal: Calibration, A: np.ndarray, q: np.ndarray
     except CalibrationError:
         return None
     return lambda qq: M @ base_from_flange(nominal, np.atleast_2d(qq))
+
+
+def session_frames(session: Session, cal: Calibration) -> dg.Frames:
+    """The session's usable poses as the calibration ``cal`` applies them (its arm, its
+    distortion; ``calib.diagnose.frames``: the daily check's diagnosis and ``--update``,
+    docs/lab-day.md), the probe where both the calibration and the session have it, with the
+    joints and the arm's forward kinematics where the arm hypothesis can be tested
+    (:func:`arm_forward`). CalibrationError as :func:`applied_arrays` raises it, or when no
+    pose is usable."""
+    with_probe = cal.Y is not None and "probe" in session.bodies
+    A, B, C, idx, q = applied_arrays(session, cal, need_probe=with_probe)
+    if len(A) == 0:
+        raise CalibrationError(f"{session.path}: no usable poses in the session")
+    fk = arm_forward(session, cal, A, q)
+    return dg.frames(cal, A, B, C if with_probe else None, q if fk else None, fk, idx)
 
 
 def given_arm(session: Session, model: Arm, source: str
