@@ -50,6 +50,7 @@ SLOW: tuple[str, ...] = (
     "tests/unit/test_escaping.py::test_report_device_names_and_identities_are_escaped",
     "tests/unit/test_kinematics_estimate.py::test_a_tracker_scale_and_the_arms_size_are_one_direction",
     "tests/unit/test_kinematics_estimate.py::test_auto_level_prefers_full_when_the_arm_is_in_error_and_none_when_it_is_not",
+    "tests/unit/test_kinematics_summary.py",
     "tests/unit/test_kinfile.py::test_any_document_is_a_model_or_one_error",
     "tests/unit/test_kinfile.py::test_one_key_replaced_by_anything",
     "tests/unit/test_kinfile.py::test_valid_models_round_trip",
