@@ -8,12 +8,14 @@ The poses: the config's plan drawn with ``pool`` candidates around the calibrati
 run's P0, ``safety.origin``), taken in the greedy farthest-point order of
 ``calib.prediction.bootstrap_indices`` (each next pose the one farthest from those already
 taken, in position and rotation), so that any first k of them are well spread; at most
-``max_poses``. The stopping rule, checked after each pose once the update is determined
-(``calib.diagnose.min_poses``): the 95th percentile of the coil-placement error that the
-update's own uncertainty leaves (``calib.diagnose.placement_spread``, mm) is ≤ ``target_mm``;
-a refused update (a second change on top of the named one, or residuals beyond the noise
-model) stops the run at once, since more poses of a rig that changed otherwise would only
-confirm it. A marker-only run has no coil prediction and takes ``max_poses`` poses.
+``max_poses``; each pose sampled by need as the adaptive run does. The stopping rule, checked
+after each pose once the update is determined (``calib.diagnose.min_poses``): the 95th
+percentile of the coil-placement error that the update's own uncertainty leaves
+(``calib.diagnose.placement_spread``, mm) is ≤ ``target_mm``; an update refused after
+``REFUSALS_TO_STOP`` poses in a row (a second change on top of the named one, or residuals
+beyond the noise model) stops the run, since more poses of a rig that changed otherwise would
+only confirm it. A marker-only run has no coil
+prediction and takes ``max_poses`` poses.
 
 Frames and units: poses base_from_flange 4×4 mm; errors mm.
 """
@@ -35,6 +37,7 @@ from ..poses import JOINTS_KIND
 from ..session import PoseRecord, Session
 from ..solving.kinematics import session_frames
 from ..solving.predict import robot_time_of
+from .adaptive_run import SEM_FRACTION
 from .devices import Endpoints
 from .engine import AcquireResult, Engine
 from .progress import Progress
@@ -43,7 +46,12 @@ from .strategy import Step
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ReregisterSettings", "ReregisterStrategy", "reregister"]
+__all__ = ["ReregisterSettings", "ReregisterStrategy", "reregister", "REFUSALS_TO_STOP"]
+
+#: a refused update stops the run when it is refused after this many poses in a row: one
+#: refusal from the fewest poses can be noise that the next pose clears (the refusal's test has
+#: little redundancy there), two in a row is the rig (measured: benchmarks/reregister_rig.py)
+REFUSALS_TO_STOP = 2
 
 
 @dataclass(frozen=True)
@@ -83,6 +91,7 @@ class ReregisterStrategy(PlanStrategy):
         self.spread: dict[str, float] | None = None
         self.refusal: dg.UpdateRefused | None = None
         self.min_n = 0
+        self._refused = 0
 
     def check(self) -> None:
         super().check()
@@ -98,6 +107,16 @@ class ReregisterStrategy(PlanStrategy):
         with_probe = self.cal.Y is not None and "probe" in (self.cfg.tracker.tools
                                                              if self.cfg.tracker else {})
         self.min_n = dg.min_poses(dg.blocks_of_update(self.rr.names), with_probe)
+
+    def settings(self, header: dict[str, Any] | None) -> list[str]:
+        """The config's sampling, by need as in the adaptive run when the sampling section
+        sets no ``sem_mm``: each pose until every body's standard error of the mean position
+        is ≤ ``SEM_FRACTION`` × the target (docs/adaptive.md, "The robot-time model")."""
+        notes = super().settings(header)
+        st = self.st
+        if header is None and st is not None and st.sem_mm is None:
+            st.sem_mm = SEM_FRACTION * self.rr.target_mm
+        return notes
 
     def header(self) -> dict[str, Any]:
         return {**super().header(),
@@ -121,11 +140,16 @@ class ReregisterStrategy(PlanStrategy):
         try:
             ft = dg.update(session_frames(session, self.cal), self.noise, self.rr.names)
         except dg.UpdateRefused as e:
-            self.stop, self.refusal = "refused", e
-            return True
+            self._refused += 1
+            self.refusal = e
+            if self._refused >= REFUSALS_TO_STOP:
+                self.stop = "refused"
+                return True
+            return False
         except (CalibrationError, np.linalg.LinAlgError) as e:  # not determined yet
             log.info("no update from %d poses yet (%s)", len(session.poses), e)
             return False
+        self._refused, self.refusal = 0, None
         self.spread = dg.placement_spread(ft)
         if self.spread is not None and self.spread["p95_mm"] <= self.rr.target_mm:
             self.stop = "target"

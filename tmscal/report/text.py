@@ -230,10 +230,8 @@ def arm_summary_rows(res: SolveResult) -> list[str]:
     p = res.prediction or {}
     if p.get("coil_placement_mm") is not None:
         lines += _wrap(f"coil placement predicted {p['coil_placement_mm']:.3g} mm at "
-                       f"{p['confidence'] * 100:g} % for ml's calibration on the controller's "
-                       f"poses, the arm not estimated (model error: "
-                       f"{p.get('model_error', '?')}); none is predicted yet with the "
-                       "estimated arm", "    ", "        ")
+                       f"{p['confidence'] * 100:g} % for the {prediction_subject(p)} "
+                       f"(model error: {p.get('model_error', '?')})", "    ", "        ")
     t0, t1 = b.get("truth") or {}, res.truth or {}
     if "coil_placement_mm" in t0 and "coil_placement_mm" in t1:
         lines.append(f"    coil placement against the truth (simulated): "
@@ -542,3 +540,13 @@ def format_prediction(pred: Any, region: str) -> str:
             f"(distortion {pred.problem.model}, {pred.n_poses} poses) {pred.coil_mm:.3g} mm at "
             f"{pred.confidence * 100:g} % (RMS {pred.sigma_mm:.3g} mm)\n"
             f"  mean over {region}")
+
+
+def prediction_subject(p: dict[str, Any]) -> str:
+    """What a ``prediction`` (``solving.predict.calibration_prediction``) is of, for a line:
+    "QR36 calibration", "ML calibration with the estimated vs060 arm"."""
+    arm = p.get("arm")
+    out = f"{str(p.get('method', '?')).upper()} calibration"
+    if arm:
+        out += f" with the {arm.get('source', '?')} {arm.get('nominal', '?')} arm"
+    return out

@@ -20,6 +20,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..escape import visible
+from .text import prediction_subject
 
 if TYPE_CHECKING:
     from ..session import Session
@@ -113,9 +114,8 @@ def verdict_rows(res: SolveResult, judged: dict[str, Any] | None = None,
     p = res.prediction or {}
     if p.get("coil_placement_mm") is not None:
         lines.append(f"predicted coil-placement error: {float(p['coil_placement_mm']):.3g} mm at "
-                     f"{float(p['confidence']) * 100:g} % for ml's calibration of this "
-                     f"session's poses" + (", the arm not estimated" if res.arm else "")
-                     + f", mean over {p['region']}")
+                     f"{float(p['confidence']) * 100:g} % for the {prediction_subject(p)} "
+                     f"of this session's poses, mean over {p['region']}")
     elif p:
         lines.append(f"predicted coil-placement error: none ({p.get('reason', '?')})")
     elif stored:
