@@ -38,14 +38,19 @@ def _acquire(cfg_path, out) -> None:
     assert res.skipped == 0
 
 
-@pytest.mark.e2e
-def test_a_moved_tracker_is_named_repaired_and_then_passes(tmp_path, mock_config) -> None:
+def _calibrate(tmp_path, mock_config) -> None:
+    """The calibration of the unchanged mock rig: calib.jsonl (25 poses) solved to cal.yaml."""
     base = mock_config("mock-ur-polaris.yaml", plan={"poses": 25, "seed": 1},
                        sampling={"samples": 10})
     _acquire(base, tmp_path / "calib.jsonl")
     code, out = _run("solve", tmp_path / "calib.jsonl", "-o", tmp_path / "cal.yaml",
                      "--folds", 2)
     assert code == 0, out
+
+
+@pytest.mark.e2e
+def test_a_moved_tracker_is_named_repaired_and_then_passes(tmp_path, mock_config) -> None:
+    _calibrate(tmp_path, mock_config)
     moved = {"changes": {"tracker": CHANGE}}
     today = mock_config("mock-ur-polaris.yaml", plan={"poses": 10, "seed": 2},
                         sampling={"samples": 10}, mock=moved)
@@ -80,12 +85,7 @@ def test_acquire_update_re_registers_a_moved_tracker_at_the_rig(tmp_path, mock_c
     """``acquire --calib CAL --update z``: a few well-spread poses around the calibration's P0
     until the update's predicted coil placement meets the target, then the updated calibration,
     whose Z is the moved tracker's; a later session on the moved rig checks clean against it."""
-    base = mock_config("mock-ur-polaris.yaml", plan={"poses": 25, "seed": 1},
-                       sampling={"samples": 10})
-    _acquire(base, tmp_path / "calib.jsonl")
-    code, out = _run("solve", tmp_path / "calib.jsonl", "-o", tmp_path / "cal.yaml",
-                     "--folds", 2)
-    assert code == 0, out
+    _calibrate(tmp_path, mock_config)
     moved = {"changes": {"tracker": CHANGE}}
     today = mock_config("mock-ur-polaris.yaml", plan={"seed": 2}, sampling={"samples": 10},
                         mock=moved)
@@ -109,7 +109,6 @@ def test_acquire_update_re_registers_a_moved_tracker_at_the_rig(tmp_path, mock_c
     F = new.Z @ T @ np.linalg.inv(new.Y)
     got = np.linalg.inv(truth.Z) @ F @ truth.Y
     placement = np.linalg.norm(got[:, :3, 3] - T[:, :3, 3], axis=1)
-    print(placement)
     assert placement.mean() < 0.1 and placement.max() < 0.2, placement
     later = mock_config("mock-ur-polaris.yaml", plan={"poses": 10, "seed": 3},
                         sampling={"samples": 10}, mock=moved)

@@ -188,9 +188,9 @@ class Engine:
                 envelope, notes = self._resume(strategy, dev, writer.session)
             else:
                 envelope, notes = self._new(strategy, dev)
-            for note in notes:
-                log.warning("%s %s: %s", "resuming" if self.resume else "recording", self.out,
-                            note)
+            for note in notes:  # a new run's notes end its summary (the result's notes)
+                (log.warning if self.resume else log.info)(
+                    "%s %s: %s", "resuming" if self.resume else "recording", self.out, note)
             if writer is None:
                 header = make_header(dev.bodies, config=self.cfg.raw,
                                      devices=dev.identities(), **strategy.header())

@@ -127,8 +127,6 @@ def summary(res: Any, config: Path | None, output: Path, tracker_port: str | Non
     from ..acquisition.resume import resume_command
     from ..report.text import format_prediction, format_robot_time
 
-    for note in res.notes:
-        click.echo(f"note: {note}")
     state = "stopped early (resumable)" if res.stopped else f"done: {res.message}"
     click.echo(f"session {output}: {state}")
     click.echo(f"  poses used {res.recorded} ({res.skipped} skipped; {res.new_poses} new in "
@@ -136,6 +134,8 @@ def summary(res: Any, config: Path | None, output: Path, tracker_port: str | Non
     if res.prediction is not None:
         click.echo("  " + format_prediction(res.prediction, _region(res.settings)))
     click.echo("  " + format_robot_time(res.robot_time_s))
+    for note in res.notes:
+        click.echo(f"note: {note}")
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
     from ..solving.predict import RUN_METHOD

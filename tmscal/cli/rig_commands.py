@@ -443,12 +443,12 @@ def _acquire_update(config: Path, output: Path, calib_file: Path | None,
     except AcquisitionStopped as e:
         fail(f"acquisition stopped: {e}")
         return
-    for note in res.notes:
-        click.echo(f"note: {note}")
     rt = (res.robot_time_s or {}).get("total")
     click.echo(f"session {output}: {res.recorded} poses in {res.elapsed_s:.1f} s"
                + (f" ({rt:.1f} s of robot time)" if rt is not None else "")
                + f"; {res.message}")
+    for note in res.notes:
+        click.echo(f"note: {note}")
     if res.stopped:
         click.echo(f"stopped early; re-register from what was recorded with: tmscal solve "
                    f"{output} --calib {calib_file} --update {' --update '.join(update)} -o "
@@ -490,11 +490,11 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
     from ..acquisition.resume import resume_command
 
     state = "stopped early (resumable)" if res.stopped else "complete"
-    for note in res.notes:
-        click.echo(f"note: {note}")
     click.echo(f"session {output}: {state}; {res.recorded} poses recorded, {res.skipped} "
                f"skipped, of {res.total} planned; {res.new_poses} new in "
                f"{res.elapsed_s:.1f} s; device faults recovered: {res.faults}")
+    for note in res.notes:
+        click.echo(f"note: {note}")
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
     click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")
