@@ -14,8 +14,7 @@ percentile of the coil-placement error that the update's own uncertainty leaves
 (``calib.diagnose.placement_spread``, mm) is ≤ ``target_mm``; an update refused after
 ``REFUSALS_TO_STOP`` poses in a row (a second change on top of the named one, or residuals
 beyond the noise model) stops the run, since more poses of a rig that changed otherwise would
-only confirm it. A marker-only run has no coil
-prediction and takes ``max_poses`` poses.
+only confirm it. A marker-only run has no coil prediction and takes ``max_poses`` poses.
 
 Frames and units: poses base_from_flange 4×4 mm; errors mm.
 """
@@ -23,6 +22,8 @@ Frames and units: poses base_from_flange 4×4 mm; errors mm.
 from __future__ import annotations
 
 import logging
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +33,7 @@ from ..calib import Calibration
 from ..calib import diagnose as dg
 from ..calib.prediction import bootstrap_indices
 from ..config import RigConfig
+from ..drivers.base import ConfigError
 from ..errors import CalibrationError
 from ..poses import JOINTS_KIND
 from ..session import PoseRecord, Session
@@ -96,7 +98,6 @@ class ReregisterStrategy(PlanStrategy):
     def check(self) -> None:
         super().check()
         if self.cfg.plan.kind == JOINTS_KIND:
-            from ..drivers.base import ConfigError
             raise ConfigError(f"{self.cfg.path}: key 'plan.kind': a re-registration draws its "
                               "poses from an eq14 or sphere plan around the calibration's P0")
 
@@ -181,15 +182,15 @@ def reregister(cfg: RigConfig, output: Any, cal: Calibration, noise: dg.NoiseMod
                settings: ReregisterSettings, origin: Any, *, replace: bool = False,
                samples: int | None = None, tracker_port: str | None = None,
                robot_host: str | None = None, robot_port: int | None = None,
-               progress: Progress | None = None, should_stop: Any = lambda: False,
-               sleep: Any = None) -> AcquireResult:
+               progress: Progress | None = None,
+               should_stop: Callable[[], bool] = lambda: False,
+               sleep: Callable[[float], None] = time.sleep) -> AcquireResult:
     """Run a re-registration into session file ``output`` around ``origin`` (the
     calibration's P0, ``CalibrationFile.p0``); the result's ``stop``/``message``/
     ``prediction`` say how it ended. Raises as ``run.acquire`` does."""
-    import time
     engine = Engine(cfg, output, resume=False, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
-                    should_stop=should_stop, sleep=sleep or time.sleep)
+                    should_stop=should_stop, sleep=sleep)
     strategy = ReregisterStrategy(cfg, cal, noise, settings, samples)
     strategy.origin = origin
     return engine.run(strategy, progress)

@@ -14,7 +14,7 @@ import click
 
 from .app import EXIT_CHECK_FAILED, check_outputs, print_json, read_session_file, write_atomic
 
-__all__ = ["check_stored"]
+__all__ = ["check_stored", "calibration_origin"]
 
 
 def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
@@ -117,3 +117,17 @@ def _update(session_file: Path, calib_file: Path, names: list[str], as_json: boo
     else:
         click.echo(format_update(res, str(calib_file), None if output is None
                                  else str(output)))
+
+
+def calibration_origin(calib_file: Path | None) -> Any:
+    """The P0 where the calibration ``calib_file`` was made (``CalibrationFile.p0``), or None
+    without a file; a calibration that records none is a BadParameter naming it."""
+    if calib_file is None:
+        return None
+    from ..exports.calibfile import read_calibration
+    origin = read_calibration(calib_file).p0
+    if origin is None:
+        raise click.BadParameter(f"{calib_file} records no P0 (it was written before tmscal "
+                                 "stored where a calibration was made): solve its session "
+                                 "again with -o", param_hint="--calib")
+    return origin

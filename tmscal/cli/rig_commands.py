@@ -26,6 +26,7 @@ from .app import (
     old_spelling,
     same_file,
 )
+from .daily_check import calibration_origin
 
 # --- rig commands: mock, track, robot, acquire ------------------------------------------------
 
@@ -347,8 +348,10 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
         raise click.BadParameter("--force records the session anew; --resume continues it",
                                  param_hint="--force")
     if update or update_output is not None:
-        _acquire_update(config, output, calib_file, update, update_output, resume, poses,
-                        samples, dry_run, tracker_port, robot_host, force, adaptive, overrides)
+        from .reregister import acquire_update
+        acquire_update(config, output, calib_file, update, update_output, resume, poses,
+                       samples, dry_run, tracker_port, robot_host, force, adaptive, overrides,
+                       StopFlag())
         return
     adaptive = check_adaptive_flags(adaptive, resume, output, poses, overrides)
     if calib_file is not None and resume:
@@ -383,78 +386,6 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     _acquire_summary(res, config, output, tracker_port, robot_host)
     if res.stopped:
         sys.exit(EXIT_INTERRUPTED)
-
-
-def _acquire_update(config: Path, output: Path, calib_file: Path | None,
-                    update: tuple[str, ...], update_output: Path | None, resume: bool,
-                    poses: int | None, samples: int | None, dry_run: bool,
-                    tracker_port: str | None, robot_host: str | None, force: bool,
-                    adaptive: bool, overrides: dict[str, Any]) -> None:
-    """``acquire --calib CAL --update NAME``: the re-registration run
-    (``acquisition.reregister``), then the update of ``solve --calib --update`` on its
-    session (``daily_check._update``), written to ``update_output``. Every refusal of the
-    options comes before anything connects."""
-    from ..acquisition.engine import AcquisitionStopped
-    from ..acquisition.reregister import ReregisterSettings, reregister
-    from ..config import load_config
-    from ..errors import CalibrationError
-    from ..exports.calibfile import read_calibration
-    from ..exports.check import noise_of
-    from .daily_check import _update
-    from .live import AcquireProgress, stderr_to_log
-
-    if not update:
-        raise click.BadParameter("only with --update", param_hint="--update-output")
-    if calib_file is None:
-        raise click.BadParameter("--update re-registers a stored calibration: give --calib "
-                                 "CALIB", param_hint="--update")
-    for opt, given in (("--resume", resume), ("--adaptive", adaptive),
-                       ("--poses", poses is not None), ("--dry-run", dry_run),
-                       ("--confidence/--bootstrap", overrides.get("confidence") is not None
-                        or overrides.get("bootstrap") is not None)):
-        if given:
-            raise click.BadParameter("not with --update (it chooses its poses and stops at "
-                                     "--target-mm or --max-poses)", param_hint=opt)
-    try:
-        settings = ReregisterSettings(
-            tuple(update), **{k: v for k, v in (("target_mm", overrides.get("target_mm")),
-                                                ("max_poses", overrides.get("max_poses")))
-                              if v is not None})
-    except CalibrationError as e:
-        raise click.BadParameter(str(e), param_hint="--update") from None
-    except ValueError as e:
-        raise click.BadParameter(str(e), param_hint="--max-poses") from None
-    new = update_output or output.with_suffix(".yaml")
-    check_outputs({"--output": output, "--update-output": new}, [config, calib_file], force)
-    origin = calibration_origin(calib_file)
-    cf = read_calibration(calib_file)
-    cfg = load_config(config)
-    tools = cfg.tracker.tools if cfg.tracker else {}
-    bodies = ("marker", "probe") if cf.calibration.Y is not None and "probe" in tools \
-        else ("marker",)
-    noise = noise_of(cf, bodies)
-    stop = StopFlag()
-    stop.install()
-    try:
-        with stderr_to_log(), AcquireProgress(sys.stderr) as bar:
-            res = reregister(cfg, output, cf.calibration, noise, settings, origin,
-                             replace=force, samples=samples, tracker_port=tracker_port,
-                             robot_host=robot_host, progress=bar, should_stop=stop)
-    except AcquisitionStopped as e:
-        fail(f"acquisition stopped: {e}")
-        return
-    rt = (res.robot_time_s or {}).get("total")
-    click.echo(f"session {output}: {res.recorded} poses in {res.elapsed_s:.1f} s"
-               + (f" ({rt:.1f} s of robot time)" if rt is not None else "")
-               + f"; {res.message}")
-    for note in res.notes:
-        click.echo(f"note: {note}")
-    if res.stopped:
-        click.echo(f"stopped early; re-register from what was recorded with: tmscal solve "
-                   f"{output} --calib {calib_file} --update {' --update '.join(update)} -o "
-                   f"{new}")
-        sys.exit(EXIT_INTERRUPTED)
-    _update(output, calib_file, list(update), False, False, new, False, force)
 
 
 def check_replaceable(output: Path, config: Path) -> None:
@@ -498,20 +429,6 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
     click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")
-
-
-def calibration_origin(calib_file: Path | None) -> Any:
-    """The P0 where the calibration ``calib_file`` was made (``CalibrationFile.p0``), or None
-    without a file; a calibration that records none is a BadParameter naming it."""
-    if calib_file is None:
-        return None
-    from ..exports.calibfile import read_calibration
-    origin = read_calibration(calib_file).p0
-    if origin is None:
-        raise click.BadParameter(f"{calib_file} records no P0 (it was written before tmscal "
-                                 "stored where a calibration was made): solve its session "
-                                 "again with -o", param_hint="--calib")
-    return origin
 
 
 def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str | None,
