@@ -47,6 +47,7 @@ from ..geometry import (
     matrix_from_quaternion,
     matrix_from_rotvec,
     quaternion_from_matrix,
+    right_jacobian,
     skew,
 )
 from .calibration import Applied, Calibration
@@ -201,15 +202,6 @@ def quat_rotations(RA: np.ndarray, RNs: list[np.ndarray]) -> tuple[np.ndarray, l
     return matrix_from_quaternion(Vt[0]), R_Xs
 
 
-def _right_jacobian(w: np.ndarray) -> np.ndarray:
-    """Right Jacobian of SO(3) at w (3,): d exp(ŵ) = exp(ŵ) (J_r dw)^."""
-    th = float(np.linalg.norm(w))
-    W = skew(w)
-    if th < 1e-8:
-        return np.eye(3) - 0.5 * W
-    return (np.eye(3) - (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * W @ W)
-
-
 def _refine(A: np.ndarray, bodies: list[np.ndarray], Z: np.ndarray, Xs: list[np.ndarray],
             trans_scale_mm: float) -> tuple[np.ndarray, list[np.ndarray], dict[str, Any]]:
     """Nonlinear least squares over (R, t) of Z and each X: rotation residuals
@@ -236,7 +228,7 @@ def _refine(A: np.ndarray, bodies: list[np.ndarray], Z: np.ndarray, Xs: list[np.
     def jacobian(p: np.ndarray) -> np.ndarray:
         R, _ = unpack(p)
         # dR_k/dw_k[a] = R_k hat(J_r(w_k)[:, a])
-        dR = [R[i] @ skew(_right_jacobian(p[3 * i:3 * i + 3]).T) for i in range(m + 1)]
+        dR = [R[i] @ skew(right_jacobian(p[3 * i:3 * i + 3]).T) for i in range(m + 1)]
         blocks = []
         for j, N in enumerate(bodies):
             Jr = np.zeros((n, 3, 3, 2 * k))

@@ -70,6 +70,7 @@ from ..errors import CalibrationError
 from ..geometry import make_pose, orthonormalize
 from .bound import uncertainty_at
 from .calibration import Applied, Calibration
+from .lsq import levenberg_marquardt as levenberg_marquardt_core
 from .methods import register_method, solve
 from .ml_model import (
     DISTORTION_MODELS,
@@ -108,39 +109,22 @@ def _wres(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def levenberg_marquardt(prob: Problem, whiten: np.ndarray, max_iter: int = 50
                         ) -> tuple[Problem, int]:
-    """Minimise the whitened χ² from the problem's start; returns (the problem re-centred at
-    the estimate, iterations). Each iteration: the analytic Jacobian at the current estimate
-    (:meth:`Problem.raw_jacobian`), its column-scaled normal matrix factorised once
-    (eigendecomposition), so that every damping λ tried is a product, not a solve."""
-    r = _wres(whiten, prob.residuals(np.zeros(prob.n_params)))
-    cost = float(r @ r)
-    lam = 1e-6
-    k = prob.n_params
-    for it in range(1, max_iter + 1):
-        J = _whitened(whiten, prob.raw_jacobian())
-        d = np.linalg.norm(J, axis=0)
-        d[d == 0] = 1.0
-        Js = J / d
-        w, V = np.linalg.eigh(Js.T @ Js)
-        gV = V.T @ (Js.T @ r)
-        while True:
-            step = -(V @ (gV / (w + lam))) / d
-            cand = prob.recentred(step)
-            r_new = _wres(whiten, cand.residuals(np.zeros(k)))
-            c_new = float(r_new @ r_new)
-            if c_new <= cost or lam > 1e8:
-                break
-            lam *= 10
-        if c_new > cost:
-            return prob, it
-        # converged when χ² falls by less than 1e-10 of itself (far below any difference the
-        # model selection's tests or the covariance could notice) or the step is negligible
-        done = cost - c_new <= 1e-10 * max(cost, 1e-300) + 1e-30 or \
-            np.linalg.norm(step * d) < 1e-12 * np.sqrt(k)
-        prob, r, cost, lam = cand, r_new, c_new, max(lam / 10, 1e-12)
-        if done:
-            break
-    return prob, it
+    """Minimise the whitened χ² from the problem's start with the one least-squares loop
+    (:func:`tmscal.calib.lsq.levenberg_marquardt`); returns (the problem re-centred at the
+    estimate, iterations). The analytic Jacobian (:meth:`Problem.raw_jacobian`) at each
+    estimate. Converged when χ² falls by less than 1e-10 of itself (far below any difference
+    the model selection's tests or the covariance could notice) or the scaled step is
+    negligible."""
+    zero = np.zeros(prob.n_params)
+
+    def evaluate(p: Problem, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        return _wres(whiten, p.residuals(zero)), \
+            (_whitened(whiten, p.raw_jacobian()) if jac else None)
+
+    sol = levenberg_marquardt_core(evaluate, prob, lambda p, dx: p.recentred(dx),
+                                   max_iter=max_iter, ftol=1e-10,
+                                   xtol=1e-12 * np.sqrt(prob.n_params))
+    return sol.state, sol.iterations
 
 
 @dataclass

@@ -17,7 +17,14 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
-from ..geometry import invert, make_pose, orthonormalize, skew
+from ..geometry import (
+    invert,
+    make_pose,
+    matrix_from_rotvec,
+    orthonormalize,
+    rotvec_from_matrix,
+    skew,
+)
 
 __all__ = ["DISTORTION_MODELS", "STEPS", "G_STEP", "undistortion", "g_of", "tool_moment",
            "undistort", "Problem", "whiten_residuals", "check_sigma", "tracker_covs",
@@ -29,26 +36,6 @@ DISTORTION_MODELS = {"none": 0, "scale": 1, "axis": 3, "affine": 6}
 _SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))  # affine: symmetric G
 STEPS = (1e-6, 1e-4)  # finite-difference steps: rotation (rad), translation (mm)
 G_STEP = 1e-7
-
-
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix exp([w]×) of one rotation vector w (rad)."""
-    th = float(np.sqrt(w @ w))
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if th < 1e-8:
-        return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * K @ K
-
-
-def _log_so3(R: np.ndarray) -> np.ndarray:
-    """Rotation vectors (n, 3) of rotations (n, 3, 3) near the identity (angle well below π:
-    residuals), by θ = atan2(sin θ, cos θ) from the skew part and the trace."""
-    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0],
-                        R[:, 1, 0] - R[:, 0, 1]], axis=1)
-    s = np.linalg.norm(w, axis=1)
-    th = np.arctan2(s, 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0))
-    f = np.where(s < 1e-12, 1.0, th / np.where(s < 1e-12, 1.0, s))
-    return w * f[:, None]
 
 
 def undistortion(model: str, g: np.ndarray) -> np.ndarray:
@@ -115,7 +102,7 @@ class Problem:
     def unpack(self, th: np.ndarray) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
         """(Ws, Z, G) at parameters th (offsets from the start)."""
         def pose(T0: np.ndarray, p: np.ndarray) -> np.ndarray:
-            return make_pose(T0[:3, :3] @ _rodrigues(p[:3]), T0[:3, 3] + p[3:])
+            return make_pose(T0[:3, :3] @ matrix_from_rotvec(p[:3]), T0[:3, 3] + p[3:])
         m = len(self.Ws)
         Ws = [pose(W, th[6 * j:6 * j + 6]) for j, W in enumerate(self.Ws)]
         Z = pose(self.Z0, th[6 * m:6 * m + 6])
@@ -129,7 +116,7 @@ class Problem:
         Ms = self.moments or [None] * len(Ws)
         for W, N, M in zip(Ws, self.bodies, Ms, strict=True):
             E = invert(self.A @ W) @ (Z @ undistort(N, G, self.model, M))
-            out.append(np.concatenate([_log_so3(E[:, :3, :3]), E[:, :3, 3]], axis=1))
+            out.append(np.concatenate([rotvec_from_matrix(E[:, :3, :3]), E[:, :3, 3]], axis=1))
         return np.concatenate(out, axis=1)
 
     def raw_jacobian(self) -> np.ndarray:
@@ -150,7 +137,7 @@ class Problem:
         for j, (W, N, M) in enumerate(zip(Ws, self.bodies, Ms, strict=True)):
             Nt = undistort(N, G, self.model, M)
             E = invert(self.A @ W) @ (Z @ Nt)
-            phi = _log_so3(E[:, :3, :3])
+            phi = rotvec_from_matrix(E[:, :3, :3])
             half = 0.5 * skew(phi)
             r = 6 * j
             J[:, r:r + 3, r:r + 3] = -(np.eye(3) - half)

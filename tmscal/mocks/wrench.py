@@ -19,27 +19,14 @@ from typing import Any
 
 import numpy as np
 
+from ..calib.gravity import gravity_wrench
 from ..sim.rig import SimRig
 
-__all__ = ["FALLBACK_TOOL", "G_STANDARD", "URWrenchOutputs", "gravity_wrench",
-           "gravity_wrench_source"]
+__all__ = ["FALLBACK_TOOL", "URWrenchOutputs", "gravity_wrench_source"]
 
-#: standard gravity (m/s²), as in tmscal.calib.selfcal.model
-G_STANDARD = 9.80665
 #: the tool of a rig without a kinematic arm: mass (kg) and centre of gravity (mm, sensor
 #: frame), a TMS coil-sized load
 FALLBACK_TOOL = {"mass_kg": 1.5, "cog_mm": (0.0, 0.0, 60.0)}
-
-
-def gravity_wrench(base_from_sensor_rot: np.ndarray, mass_kg: float,
-                   cog_mm: Any) -> np.ndarray:
-    """(6,) gravity wrench of a load of ``mass_kg`` with centre of gravity ``cog_mm`` (sensor
-    frame, mm) for a sensor whose orientation in a z-up base frame is ``base_from_sensor_rot``
-    (3×3): f = Rᵀ (0, 0, −m g) N, τ = c × f N·m."""
-    R = np.asarray(base_from_sensor_rot, dtype=np.float64)
-    f = R.T @ np.array([0.0, 0.0, -mass_kg * G_STANDARD])
-    tau = np.cross(np.asarray(cog_mm, dtype=np.float64) * 1e-3, f)
-    return np.concatenate([f, tau])
 
 
 def gravity_wrench_source(rig: SimRig) -> Callable[[], np.ndarray]:

@@ -238,11 +238,8 @@ def linear_flange_poses(start: np.ndarray, target: np.ndarray, shares: Sequence[
 
 
 def _frame_poses(geo: _LinearGeometry, f: np.ndarray) -> np.ndarray:
-    """The frame's poses (n, 4, 4) at shares f: R_A·exp(f·θ·n) (Rodrigues) and a + f·Δ."""
-    n = geo.n
-    K = np.array([[0.0, -n[2], n[1]], [n[2], 0.0, -n[0]], [-n[1], n[0], 0.0]])
-    u = f * geo.theta
-    E = np.eye(3) + np.sin(u)[:, None, None] * K + (1.0 - np.cos(u))[:, None, None] * (K @ K)
+    """The frame's poses (n, 4, 4) at shares f: R_A·exp(f·θ·n) and a + f·Δ."""
+    E = matrix_from_rotvec((f * geo.theta)[:, None] * np.asarray(geo.n)[None])
     out = np.zeros((len(f), 4, 4))
     out[:, 3, 3] = 1.0
     out[:, :3, :3] = geo.RA @ E

@@ -54,7 +54,8 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import make_pose, matrix_from_rotvec, skew
+from ...geometry import make_pose, matrix_from_rotvec, right_jacobian_inv, rotvec_from_matrix, skew
+from ..lsq import levenberg_marquardt
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
@@ -87,18 +88,8 @@ __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_paramet
 def _log_and_jr_inv(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation vectors φ (n, 3) of rotations R (n, 3, 3) (angle < π) and the inverse right
     Jacobians J_r⁻¹(φ) (n, 3, 3): log(R exp(η)) = φ + J_r⁻¹(φ) η + O(η²)."""
-    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0],
-                        R[:, 1, 0] - R[:, 0, 1]], axis=1)
-    s = np.linalg.norm(w, axis=1)
-    th = np.arctan2(s, 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0))
-    small = s < 1e-9
-    phi = w * np.where(small, 1.0, th / np.where(small, 1.0, s))[:, None]
-    K = skew(phi)
-    th2 = np.where(small, 1.0, th * th)
-    coef = np.where(small, 1.0 / 12.0,
-                    1.0 / th2 - (1.0 + np.cos(th)) / (2.0 * np.where(small, 1.0, th)
-                                                       * np.where(small, 1.0, np.sin(th))))
-    return phi, np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
+    phi = rotvec_from_matrix(R)
+    return phi, right_jacobian_inv(phi)
 
 
 @dataclass
@@ -240,31 +231,13 @@ def _apply_jac(whiten: np.ndarray, J: np.ndarray) -> np.ndarray:
 
 def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int
                          ) -> tuple[_State, np.ndarray, np.ndarray, int]:
-    """Minimise the whitened cost from s; returns (state, residuals, Jacobian, iterations)."""
-    r, J = prob.evaluate(s)
-    cost, lam, its = float(r @ r), 1e-6, 0
-    while its < max_iter:
-        its += 1
-        d = np.linalg.norm(J, axis=0)
-        d[d == 0] = 1.0
-        Js = J / d
-        H, g = Js.T @ Js, Js.T @ r
-        while True:
-            step = np.linalg.solve(H + lam * np.eye(len(d)), -g) / d
-            s_new = prob.step(s, step)
-            r_new, _ = prob.evaluate(s_new, jac=False)
-            c_new = float(r_new @ r_new)
-            if c_new <= cost or lam > 1e8:
-                break
-            lam *= 10.0
-        if c_new > cost:
-            break
-        done = cost - c_new <= 1e-12 * cost + 1e-30
-        s, cost, lam = s_new, c_new, max(lam / 10.0, 1e-12)
-        r, J = prob.evaluate(s)
-        if done:
-            break
-    return s, r, J, its
+    """Minimise the whitened cost from s with the one least-squares loop
+    (:func:`tmscal.calib.lsq.levenberg_marquardt`; converged when the cost falls by less than
+    1e-12 of itself); returns (state, residuals, Jacobian, iterations)."""
+    sol = levenberg_marquardt(lambda st, jac: prob.evaluate(st, jac=jac), s, prob.step,
+                              max_iter=max_iter, ftol=1e-12)
+    assert sol.jacobian is not None
+    return sol.state, sol.residuals, sol.jacobian, sol.iterations
 
 
 # --- one level --------------------------------------------------------------------------------

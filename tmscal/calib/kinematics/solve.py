@@ -64,7 +64,7 @@ def _wrench_report(fit: KinematicFit) -> dict[str, Any] | None:
     w = fit.wrench
     if w is None:
         return None
-    from ..selfcal.model import G_STANDARD
+    from ..gravity import G_STANDARD
 
     return {"estimate": w["estimate"], "sd": w["sd"], "units": dict(zip(WRENCH_NAMES,
                                                                          WRENCH_UNITS,

@@ -38,6 +38,7 @@ import numpy as np
 
 from ...errors import CalibrationError
 from ...geometry import matrix_from_rotvec, rotvec_from_matrix, skew
+from ..gravity import wrench_from_up
 
 __all__ = ["WRENCH_NAMES", "WRENCH_UNITS", "DEFAULT_SIGMA", "SIGMA_FLOOR", "WrenchData",
            "WrenchParams", "initial_wrench", "gravity_up", "predict_wrench", "wrench_rows",
@@ -116,9 +117,7 @@ def predict_wrench(p: WrenchParams, R_A: np.ndarray) -> np.ndarray:
     (n, 3, 3) (base_from_flange)."""
     u_b, _ = gravity_up(p.tilt)
     u = np.einsum("ji,nkj,k->ni", p.R_fs, R_A, u_b)      # R_fsᵀ R_Aᵀ u_b
-    f = -p.mg * u
-    tau = np.cross(p.cog_mm * 1e-3, f)
-    return np.concatenate([f + p.bias[:3], tau + p.bias[3:]], axis=1)
+    return wrench_from_up(u, p.mg, p.cog_mm, p.bias)
 
 
 def wrench_rows(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk_w: np.ndarray | None

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from ...geometry import matrix_from_rotvec, skew
+from ..lsq import levenberg_marquardt
 from .model import ArmModel, forward, jacobian, wrench
 
 __all__ = ["Identifiability", "identifiable", "Fit", "identify", "position_errors",
@@ -197,31 +199,23 @@ def identify(model0: ArmModel, q: Any, wrench_meas: Any, sigma: Any, keep: Any,
     inv_s = np.tile(1.0 / sigma, len(q))
     p = model0.vector()
 
-    def residual(pv: np.ndarray) -> np.ndarray:
-        return (w - wrench(model0.with_vector(pv), q)).ravel() * inv_s
+    def evaluate(pv: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        r = (w - wrench(model0.with_vector(pv), q)).ravel() * inv_s
+        # the residual is measured − model: its derivative is −J
+        return r, (-jacobian(model0.with_vector(pv), q)[:, idx] * inv_s[:, None]
+                   if jac else None)
 
-    r = residual(p)
-    cost, lam, converged, it = float(r @ r), 1e-3, False, 0
-    while it < max_iter and not converged:
-        it += 1
-        Jw = jacobian(model0.with_vector(p), q)[:, idx] * inv_s[:, None]
-        h = 1.0 / np.maximum(np.linalg.norm(Jw, axis=0), 1e-300)
-        Js = Jw * h
-        A, g = Js.T @ Js, Js.T @ r
-        while True:
-            step = h * np.linalg.solve(A + lam * np.eye(len(idx)), g)
-            trial = p.copy()
-            trial[idx] += step
-            r_t = residual(trial)
-            c_t = float(r_t @ r_t)
-            if c_t <= cost or lam > 1e12:
-                break
-            lam *= 10.0
-        if c_t > cost:                                    # no descent at any damping
-            converged = np.linalg.norm(step) <= rtol * max(np.linalg.norm(p[idx]), 1.0)
-            break
-        p, r, cost, lam = trial, r_t, c_t, max(lam / 10.0, 1e-12)
-        converged = bool(np.linalg.norm(step) <= rtol * max(np.linalg.norm(p[idx]), 1.0))
+    def moved(pv: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        out = pv.copy()
+        out[idx] += dx
+        return out
+
+    sol = levenberg_marquardt(
+        evaluate, p, moved, max_iter=max_iter, lam0=1e-3, lam_max=1e12, ftol=0.0,
+        small_step=lambda pv, dx: bool(np.linalg.norm(dx)
+                                       <= rtol * max(np.linalg.norm(pv[idx]), 1.0)))
+    p, r, it, converged = sol.state, sol.residuals, sol.iterations, sol.converged
+    cost = sol.cost
     model = model0.with_vector(p)
     Jw = jacobian(model, q)[:, idx] * inv_s[:, None]
     cov = np.linalg.pinv(Jw.T @ Jw)
@@ -282,38 +276,20 @@ def canonical(model0: Any, q: Any, wrench_meas: Any, sigma: Any, start: Any = No
     inv_s = np.tile(1.0 / sigma, len(q))
     x = np.zeros_like(p0) if start is None else (start.vector() - p0) / tau
 
-    def residual(xv: np.ndarray) -> np.ndarray:
+    def evaluate(xv: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
         m = model0.with_vector(p0 + tau * xv)
-        return np.concatenate([(wrench(m, q) - w).ravel() * inv_s, xv])
+        r = np.concatenate([(wrench(m, q) - w).ravel() * inv_s, xv])
+        if not jac:
+            return r, None
+        return r, np.vstack([jacobian(m, q) * inv_s[:, None] * tau, np.eye(len(xv))])
 
-    r = residual(x)
-    cost, lam = float(r @ r), 1e-6
-    for _ in range(max_iter):
-        Jd = jacobian(model0.with_vector(p0 + tau * x), q) * inv_s[:, None] * tau
-        A = Jd.T @ Jd + np.eye(len(x))
-        g = Jd.T @ r[:len(inv_s)] + r[len(inv_s):]
-        while True:
-            step = -np.linalg.solve(A + lam * np.diag(np.diag(A)), g)
-            r_t = residual(x + step)
-            c_t = float(r_t @ r_t)
-            if c_t <= cost or lam > 1e8:
-                break
-            lam *= 10.0
-        if c_t > cost:
-            break
-        x, r, cost, lam = x + step, r_t, c_t, max(lam / 10.0, 1e-12)
-        if np.linalg.norm(step) <= 1e-12 * max(1.0, float(np.linalg.norm(x))):
-            break
+    # the prior rows keep every column's norm ≥ 1: the scaled damping is λ·diag(JᵀJ + I)
+    x = levenberg_marquardt(
+        evaluate, x, lambda xv, dx: xv + dx, max_iter=max_iter, ftol=0.0,
+        small_step=lambda xv, dx: bool(np.linalg.norm(dx)
+                                       <= 1e-12 * max(1.0, float(np.linalg.norm(xv + dx))))
+    ).state
     return model0.with_vector(p0 + tau * x)
-
-
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    t = float(np.linalg.norm(w))
-    if t < 1e-15:
-        return np.eye(3)
-    k = w / t
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
 
 
 def absorbed_errors(model_true: Any, model_est: Any, q: Any, tcp_mm: Any = (0.0, 0.0, 0.0),
@@ -330,21 +306,26 @@ def absorbed_errors(model_true: Any, model_est: Any, q: Any, tcp_mm: Any = (0.0,
     Ft = forward(model_true, q)
     target = Ft[:, :3, :3] @ tcp + Ft[:, :3, 3]
     Fe = forward(model_est, q)
-    R, t, u = np.eye(3), np.zeros(3), np.zeros(3)
     m = len(q)
-    for _ in range(iterations):
-        P = Fe[:, :3, :3] @ (tcp + u) + Fe[:, :3, 3]
-        RP = P @ R.T
-        r = target - (RP + t)
-        J = np.zeros((m, 3, 9))
-        J[:, 0, 1], J[:, 0, 2] = RP[:, 2], -RP[:, 1]      # d(ω × RP)/dω = −[RP]×
-        J[:, 1, 0], J[:, 1, 2] = -RP[:, 2], RP[:, 0]
-        J[:, 2, 0], J[:, 2, 1] = RP[:, 1], -RP[:, 0]
+
+    def evaluate(x: tuple[np.ndarray, np.ndarray, np.ndarray], jac: bool
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
+        R, t, u = x
+        RP = (Fe[:, :3, :3] @ (tcp + u) + Fe[:, :3, 3]) @ R.T
+        r = (target - (RP + t)).ravel()
+        if not jac:
+            return r, None
+        J = np.zeros((m, 3, 9))                 # d(RP + t)/d(ω, t, u); ω on the left of R
+        J[:, :, :3] = -skew(RP)
         J[:, :, 3:6] = np.eye(3)
         J[:, :, 6:9] = R @ Fe[:, :3, :3]
-        step, *_ = np.linalg.lstsq(J.reshape(-1, 9), r.ravel(), rcond=None)
-        R = _rodrigues(step[:3]) @ R
-        t = t + step[3:6]
-        u = u + step[6:9]
+        return r, -J.reshape(-1, 9)
+
+    def moved(x: tuple[np.ndarray, np.ndarray, np.ndarray], d: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return matrix_from_rotvec(d[:3]) @ x[0], x[1] + d[3:6], x[2] + d[6:9]
+
+    R, t, u = levenberg_marquardt(evaluate, (np.eye(3), np.zeros(3), np.zeros(3)), moved,
+                                  max_iter=iterations, ftol=0.0).state
     P = Fe[:, :3, :3] @ (tcp + u) + Fe[:, :3, 3]
     return np.linalg.norm(target - (P @ R.T + t), axis=-1)

@@ -40,11 +40,11 @@ from typing import Any
 
 import numpy as np
 
+from ..gravity import G_STANDARD, gravity_wrench
 from ..kinematics import pose_from_rpy, rpy_from_matrix
 
 __all__ = ["MedRUE", "MEDRUE", "GEOMETRY_NAMES", "five_bar_point"]
 
-_G = 9.80665  # standard gravity, m/s² (= model.G_STANDARD; not imported: model imports us not)
 #: the geometric parameters, in the order of ``MedRUE.geometry``
 GEOMETRY_NAMES: list[str] = ["d1"]
 for _i, (_a, _c) in ((1, (2, 3)), (2, (4, 5))):
@@ -153,7 +153,7 @@ class MedRUE:
         return np.concatenate([
             self.geometry, rpy_from_matrix(self.base), self.base[:3, 3],
             rpy_from_matrix(self.flange_from_sensor), self.flange_from_sensor[:3, 3],
-            [self.tool_mass_kg * _G], self.tool_cog_mm, self.bias])
+            [self.tool_mass_kg * G_STANDARD], self.tool_cog_mm, self.bias])
 
     def with_vector(self, p: Any) -> MedRUE:
         p = np.asarray(p, dtype=float)
@@ -162,7 +162,7 @@ class MedRUE:
             raise ValueError(f"p must have {k + len(_TAIL)} entries, got shape {p.shape}")
         return replace(self, geometry=p[:k], base=pose_from_rpy(p[k:k + 3], p[k + 3:k + 6]),
                        flange_from_sensor=pose_from_rpy(p[k + 6:k + 9], p[k + 9:k + 12]),
-                       tool_mass_kg=p[k + 12] / _G, tool_cog_mm=p[k + 13:k + 16],
+                       tool_mass_kg=p[k + 12] / G_STANDARD, tool_cog_mm=p[k + 13:k + 16],
                        bias=p[k + 16:k + 22])
 
     # --- kinematics ---------------------------------------------------------------------
@@ -217,10 +217,7 @@ class MedRUE:
         q = np.asarray(q, dtype=float)
         R_ws = (self.base[:3, :3] @ self.probe_poses(q.reshape(-1, 6))[:, :3, :3]
                 @ self.flange_from_sensor[:3, :3])
-        u = R_ws[:, 2, :]
-        f = -self.tool_mass_kg * _G * u
-        tau = np.cross(self.tool_cog_mm * 1e-3, f)
-        w = np.concatenate([f + self.bias[:3], tau + self.bias[3:]], axis=-1)
+        w = gravity_wrench(R_ws, self.tool_mass_kg, self.tool_cog_mm, self.bias)
         return w.reshape(q.shape[:-1] + (6,))
 
     def jacobian(self, q: Any) -> np.ndarray:

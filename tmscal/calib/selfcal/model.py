@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..gravity import G_STANDARD, wrench_from_up
 from ..kinematics import (
     ARMS,
     Arm,
@@ -42,8 +43,6 @@ from ..kinematics.model import check_joints
 __all__ = ["ArmModel", "G_STANDARD", "UR5E", "VS060", "NOMINAL", "forward", "joint_frames",
            "wrench", "jacobian", "perturb", "rpy_from_matrix", "pose_from_rpy"]
 
-#: standard gravity, m/s²; the tool weight parameter is ``tool_mass_kg · G_STANDARD`` (N)
-G_STANDARD = 9.80665
 _TAIL = ["base_roll", "base_pitch", "base_yaw", "base_x", "base_y", "base_z",
          "sensor_roll", "sensor_pitch", "sensor_yaw", "sensor_x", "sensor_y", "sensor_z",
          "mg", "cog_x", "cog_y", "cog_z", "f0_x", "f0_y", "f0_z", "t0_x", "t0_y", "t0_z"]
@@ -176,9 +175,7 @@ def wrench(model: ArmModel, q: Any) -> np.ndarray:
     if not isinstance(model, ArmModel):          # another mechanism (medrue.MedRUE)
         return model.wrench(q)
     _, _, u = _up_in_sensor(model, check_joints(model, q))
-    f = -model.tool_mass_kg * G_STANDARD * u
-    tau = np.cross(model.tool_cog_mm * 1e-3, f)
-    return np.concatenate([f + model.bias[:3], tau + model.bias[3:]], axis=-1)
+    return wrench_from_up(u, model.tool_mass_kg * G_STANDARD, model.tool_cog_mm, model.bias)
 
 
 def _rotation_axes(model: ArmModel, q: np.ndarray, R_wf: np.ndarray) -> np.ndarray:

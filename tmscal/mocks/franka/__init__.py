@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from ...calib.kinematics.ik import inverse_of
 from ...errors import ConfigError, MissingExtraError
 from ...geometry import angle_between
 from ...net import listen_error, loopback_family
@@ -82,28 +83,28 @@ def _flange_model(pin: Any, urdf: str) -> tuple[Any, Any, int]:
 def flange_ik(target_mm: np.ndarray, q0: Sequence[float], iterations: int = 200
               ) -> np.ndarray:
     """Joint angles (7, rad) that put the simulated FR3's flange (``link8``) at ``target_mm``
-    (base_from_flange, 4×4 mm), from ``q0`` by damped least squares. ``ValueError`` when it
-    does not converge to 1 µm / 1 µrad within the joint limits."""
+    (base_from_flange, 4×4 mm), from ``q0`` by tmscal's one inverse kinematics
+    (:func:`tmscal.calib.kinematics.ik.inverse_of`) on the URDF model's forward kinematics.
+    ``ValueError`` when it does not converge within the joint limits."""
     franky_sim, _, _, pin = _sim_modules()
     model, data, fid = _flange_model(pin, franky_sim.FR3_URDF)
-    T = np.array(target_mm, dtype=np.float64)
-    T[:3, 3] /= 1000.0
-    target = pin.SE3(T[:3, :3], T[:3, 3])
-    q = np.array(q0, dtype=np.float64)
-    for _ in range(iterations):
-        pin.forwardKinematics(model, data, q)
-        pin.updateFramePlacement(model, data, fid)
-        err = pin.log6(data.oMf[fid].inverse() * target).vector
-        if np.linalg.norm(err[:3]) < 1e-6 and np.linalg.norm(err[3:]) < 1e-6:
-            break
-        J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)
-        q = pin.integrate(model, q, J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), err))
-    else:
+
+    def forward(Q: np.ndarray) -> np.ndarray:
+        out = np.empty((len(Q), 4, 4))
+        for k, q in enumerate(Q):
+            pin.forwardKinematics(model, data, q)
+            pin.updateFramePlacement(model, data, fid)
+            out[k] = data.oMf[fid].homogeneous
+        out[:, :3, 3] *= 1000.0
+        return out
+
+    limits = np.stack([model.lowerPositionLimit, model.upperPositionLimit], axis=1)
+    q = inverse_of(forward, np.asarray(target_mm, dtype=np.float64),
+                   [np.asarray(q0, dtype=np.float64)], limits, max_iter=iterations)
+    if q is None:
         raise ValueError(f"the simulated FR3 cannot reach the start pose "
-                         f"{np.round(target_mm[:3, 3], 1).tolist()} mm (no IK solution)")
-    if np.any(q < model.lowerPositionLimit) or np.any(q > model.upperPositionLimit):
-        raise ValueError(f"the start pose {np.round(target_mm[:3, 3], 1).tolist()} mm needs "
-                         f"joint angles outside the FR3's limits: {np.round(q, 3).tolist()}")
+                         f"{np.round(target_mm[:3, 3], 1).tolist()} mm within its joint limits "
+                         "(no IK solution)")
     return q
 
 
