@@ -169,3 +169,32 @@ def test_skew_is_the_cross_product_batched():
                                rtol=1e-14, atol=1e-14)
     np.testing.assert_array_equal(skew(v[0, 0]), -skew(v[0, 0]).T)
     assert skew([1.0, 2.0, 3.0]).shape == (3, 3)
+
+
+@pytest.mark.parametrize("angle", [1e-9, 1e-5, 5e-5, 1e-3, 0.7, 2.0, 2.2, 3.0, np.pi - 1e-7])
+def test_exp_and_log_match_scipy_across_the_branches(angle):
+    # the hand-written exp switches to its Taylor series at 1e-4 rad and the log to the
+    # quaternion beyond 120°: both sides of each switch, and near π
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng(7)
+    axes = rng.normal(size=(20, 3))
+    rv = axes / np.linalg.norm(axes, axis=1, keepdims=True) * angle
+    R = Rotation.from_rotvec(rv).as_matrix()
+    np.testing.assert_allclose(g.matrix_from_rotvec(rv), R, atol=2e-15)
+    np.testing.assert_allclose(g.rotvec_from_matrix(R), rv, atol=1e-8 if angle > 3 else 1e-13)
+    np.testing.assert_allclose(g.rotvec_from_matrix(R[0]), rv[0], atol=1e-8)
+
+
+@pytest.mark.parametrize("rv", [[0.3, -0.7, 1.1], [2e-5, -1e-5, 3e-5], [0.0, 0.0, 2.9]])
+def test_right_jacobian_by_differences_and_its_inverse(rv):
+    rv = np.array(rv)
+    h = 1e-6
+    R0 = g.matrix_from_rotvec(rv)
+    # exp(rv + h e_k) = exp(rv) exp(h J_r e_k): the k-th column is log(R0ᵀ exp(rv + h e_k))/h
+    num = np.stack([g.rotvec_from_matrix(R0.T @ g.matrix_from_rotvec(rv + h * e)) / h
+                    for e in np.eye(3)], axis=1)
+    np.testing.assert_allclose(g.right_jacobian(rv), num, atol=1e-6)
+    np.testing.assert_allclose(g.right_jacobian_inv(rv) @ g.right_jacobian(rv), np.eye(3),
+                               atol=1e-12)
+    batch = np.stack([rv, 0.5 * rv])
+    assert g.right_jacobian_inv(batch).shape == (2, 3, 3)
