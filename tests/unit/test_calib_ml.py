@@ -272,3 +272,39 @@ def test_auto_does_not_invent_a_distortion_and_still_finds_a_scale():
         assert cal.extra["lrt"][cal.distortion["model"]] < 0.01 or \
             cal.distortion["model"] == "none"
     assert all(m != "none" for m in found), found
+
+
+def test_body_residual_blocks_against_central_differences():
+    """The one ML residual's derivatives (tmscal.calib.ml_model.body_residual) for W, Z and a
+    body twist of the flange, against central differences of its own residual, at residuals
+    of a few degrees (where a first-order J_r⁻¹ would be visibly off)."""
+    from tmscal.calib.ml_model import body_residual
+    from tmscal.geometry import make_pose, matrix_from_rotvec
+
+    rng = np.random.default_rng(11)
+
+    def rand_pose(rot, trans):
+        return make_pose(matrix_from_rotvec(rng.normal(scale=rot, size=3)),
+                         rng.normal(scale=trans, size=3))
+
+    A = np.stack([rand_pose(1.0, 300.0) for _ in range(5)])
+    W, Z = rand_pose(1.0, 50.0), rand_pose(1.0, 1000.0)
+    N = np.stack([np.linalg.inv(Z) @ a @ W @ rand_pose(0.05, 2.0) for a in A])
+    br = body_residual(A, W, Z, N)
+
+    def turned(T, d):
+        return make_pose(T[..., :3, :3] @ matrix_from_rotvec(d[:3]), T[..., :3, 3] + d[3:])
+
+    def twisted(T, d):  # A exp(ξ), ξ = [ω; v] a body twist (first order suffices: h → 0)
+        E = np.eye(4)
+        E[:3, :3] = matrix_from_rotvec(d[:3])
+        E[:3, 3] = d[3:]
+        return T @ E
+
+    h = 1e-6
+    for block, move in ((br.dW, lambda d: body_residual(A, turned(W, d), Z, N, False)),
+                        (br.dZ, lambda d: body_residual(A, W, turned(Z, d), N, False)),
+                        (br.dA, lambda d: body_residual(twisted(A, d), W, Z, N, False))):
+        num = np.stack([(move(h * e).r - move(-h * e).r) / (2 * h) for e in np.eye(6)],
+                       axis=2)
+        np.testing.assert_allclose(block, num, atol=2e-6 * max(1.0, np.abs(num).max()))

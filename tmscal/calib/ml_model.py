@@ -18,15 +18,16 @@ import numpy as np
 
 from ..errors import CalibrationError
 from ..geometry import (
-    invert,
     make_pose,
     matrix_from_rotvec,
     orthonormalize,
+    right_jacobian_inv,
     rotvec_from_matrix,
     skew,
 )
 
-__all__ = ["DISTORTION_MODELS", "STEPS", "G_STEP", "undistortion", "g_of", "tool_moment",
+__all__ = ["BodyResidual", "body_residual", "DISTORTION_MODELS", "STEPS", "G_STEP",
+           "undistortion", "g_of", "tool_moment",
            "undistort", "Problem", "whiten_residuals", "check_sigma", "tracker_covs",
            "noise_covariance", "robot_parts", "tracker_part", "whitener",
            "covariance_from_jacobian", "parameter_names"]
@@ -82,6 +83,62 @@ def undistort(N: np.ndarray, G: np.ndarray, model: str, M: np.ndarray | None = N
     return out
 
 
+@dataclass(frozen=True)
+class BodyResidual:
+    """The residual of one tracked body at every pose, E = W⁻¹ A⁻¹ Z N (W = X or Y, N = B or
+    C undistorted): ``r`` (n, 6) [log R_E rad; t_E mm], and, when asked, its derivatives
+    (n, 6, 6) with respect to W and Z turned on the right (R exp(ω), t + p; columns [ω rad,
+    p mm]) and to a body twist ξ = [ξ_ω rad; ξ_v mm] of the flange (A' = A exp(ξ))."""
+
+    r: np.ndarray
+    dW: np.ndarray | None = None
+    dZ: np.ndarray | None = None
+    dA: np.ndarray | None = None
+
+
+def body_residual(A: np.ndarray, W: np.ndarray, Z: np.ndarray, N: np.ndarray,
+                  jac: bool = True) -> BodyResidual:
+    """The one ML residual of tmscal (module docstring; used by :class:`Problem` and the
+    kinematic estimate, :mod:`tmscal.calib.kinematics.estimate`): poses A (n, 4, 4)
+    base_from_flange, W (4, 4) flange_from_body, Z (4, 4) base_from_tracker, tracker poses N
+    (n, 4, 4) tracker_from_body (undistorted), all mm.
+
+    With φ = log R_E, J_r⁻¹ its inverse right Jacobian (exact) and R_M, t_M the rotation and
+    translation of W⁻¹A⁻¹: ∂φ/∂ω_W = −J_r⁻¹ R_Eᵀ, ∂t_E/∂ω_W = [t_E]×, ∂t_E/∂p_W = −R_Wᵀ;
+    ∂φ/∂ω_Z = J_r⁻¹ R_Nᵀ, ∂t_E/∂ω_Z = −R_M R_Z [t_N]×, ∂t_E/∂p_Z = R_M; the flange's twist
+    enters as η = Ad(W⁻¹) ξ: ∂φ = −J_r⁻¹ R_Eᵀ η_ω, ∂t_E = [t_E]× η_ω − η_v."""
+    R_A, t_A = A[:, :3, :3], A[:, :3, 3]
+    RZ, tZ = Z[:3, :3], Z[:3, 3]
+    RW, tW = W[:3, :3], W[:3, 3]
+    R_M = RW.T @ np.swapaxes(R_A, 1, 2)                       # rotation of W⁻¹A⁻¹
+    t_M = -RW.T @ tW - np.einsum("nij,nj->ni", R_M, t_A)
+    R_E = R_M @ (RZ @ N[:, :3, :3])
+    t_E = np.einsum("nij,nj->ni", R_M, N[:, :3, 3] @ RZ.T + tZ) + t_M
+    phi = rotvec_from_matrix(R_E)
+    r = np.concatenate([phi, t_E], axis=1)
+    if not jac:
+        return BodyResidual(r)
+    n = len(A)
+    Jr = right_jacobian_inv(phi)
+    JrEt = Jr @ np.swapaxes(R_E, 1, 2)
+    tEx = skew(t_E)
+    dW = np.zeros((n, 6, 6))
+    dW[:, :3, :3] = -JrEt
+    dW[:, 3:, :3] = tEx
+    dW[:, 3:, 3:] = -RW.T
+    dZ = np.zeros((n, 6, 6))
+    dZ[:, :3, :3] = Jr @ np.swapaxes(N[:, :3, :3], 1, 2)
+    dZ[:, 3:, :3] = -(R_M @ RZ) @ skew(N[:, :3, 3])
+    dZ[:, 3:, 3:] = R_M
+    # η_ω = R_Wᵀ ξ_ω, η_v = R_Wᵀ ξ_v + [t_W⁻¹]× R_Wᵀ ξ_ω with t_W⁻¹ = −R_Wᵀ t_W
+    tWi_x = skew(-RW.T @ tW)
+    dA = np.zeros((n, 6, 6))
+    dA[:, :3, :3] = -JrEt @ RW.T
+    dA[:, 3:, :3] = (tEx - tWi_x) @ RW.T
+    dA[:, 3:, 3:] = -RW.T
+    return BodyResidual(r, dW, dZ, dA)
+
+
 @dataclass
 class Problem:
     """One ML problem: poses A (n, 4, 4), bodies [B, (C)], start transforms Ws [X0, (Y0)],
@@ -115,19 +172,15 @@ class Problem:
         out = []
         Ms = self.moments or [None] * len(Ws)
         for W, N, M in zip(Ws, self.bodies, Ms, strict=True):
-            E = invert(self.A @ W) @ (Z @ undistort(N, G, self.model, M))
-            out.append(np.concatenate([rotvec_from_matrix(E[:, :3, :3]), E[:, :3, 3]], axis=1))
+            out.append(body_residual(self.A, W, Z, undistort(N, G, self.model, M), False).r)
         return np.concatenate(out, axis=1)
 
     def raw_jacobian(self) -> np.ndarray:
         """Raw Jacobian (n, 6m, k) of :meth:`residuals` at θ = 0 (the start), analytically
         (the distortion's g by :meth:`_distortion_columns`).
 
-        Per body j, with E = W⁻¹ A⁻¹ Z Ñ (Ñ undistorted), φ = log R(E), t_E = t(E):
-        R(E) turns to exp(−ω_W) R(E) exp(R_Ñᵀ ω_Z), so ∂φ/∂ω_W = −J_l⁻¹(φ), ∂φ/∂ω_Z =
-        J_r⁻¹(φ) R_Ñᵀ (J_l⁻¹ ≈ I − ½[φ]×, J_r⁻¹ ≈ I + ½[φ]×, exact to O(|φ|²): residuals
-        are ≪ 1 rad); ∂t_E/∂ω_W = [t_E]×, ∂t_E/∂t_W = −R_Wᵀ, ∂t_E/∂ω_Z = −R_Wᵀ R_Aᵀ R_Z
-        [t_Ñ]×, ∂t_E/∂t_Z = R_Wᵀ R_Aᵀ."""
+        Per body j, E = W⁻¹ A⁻¹ Z Ñ (Ñ undistorted): the blocks of :func:`body_residual`
+        for W and Z; the distortion's columns as :meth:`_distortion_columns` says."""
         k, m = self.n_params, len(self.Ws)
         Ws, Z, G = self.unpack(np.zeros(k))
         n = len(self.A)
@@ -136,19 +189,14 @@ class Problem:
         RAt = np.swapaxes(self.A[:, :3, :3], 1, 2)
         for j, (W, N, M) in enumerate(zip(Ws, self.bodies, Ms, strict=True)):
             Nt = undistort(N, G, self.model, M)
-            E = invert(self.A @ W) @ (Z @ Nt)
-            phi = rotvec_from_matrix(E[:, :3, :3])
-            half = 0.5 * skew(phi)
+            br = body_residual(self.A, W, Z, Nt)
+            assert br.dW is not None and br.dZ is not None
             r = 6 * j
-            J[:, r:r + 3, r:r + 3] = -(np.eye(3) - half)
-            J[:, r + 3:r + 6, r:r + 3] = skew(E[:, :3, 3])
-            J[:, r + 3:r + 6, r + 3:r + 6] = -W[:3, :3].T
-            RNt = np.swapaxes(Nt[:, :3, :3], 1, 2)
-            J[:, r:r + 3, 6 * m:6 * m + 3] = (np.eye(3) + half) @ RNt
-            WAZ = W[:3, :3].T[None] @ RAt @ Z[:3, :3][None]
-            J[:, r + 3:r + 6, 6 * m:6 * m + 3] = -WAZ @ skew(Nt[:, :3, 3])
-            J[:, r + 3:r + 6, 6 * m + 3:6 * m + 6] = W[:3, :3].T[None] @ RAt
+            J[:, r:r + 6, r:r + 6] = br.dW
+            J[:, r:r + 6, 6 * m:6 * m + 6] = br.dZ
             if k > 6 * (m + 1):
+                WAZ = W[:3, :3].T[None] @ RAt @ Z[:3, :3][None]
+                half = 0.5 * skew(br.r[:, :3])
                 J[:, r:r + 6, 6 * (m + 1):] = self._distortion_columns(N, Nt, M, WAZ, half)
         return J
 

@@ -54,11 +54,12 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
-from ...geometry import make_pose, matrix_from_rotvec, right_jacobian_inv, rotvec_from_matrix, skew
+from ...geometry import make_pose, matrix_from_rotvec
 from ..lsq import levenberg_marquardt
 from ..ml_model import (
     DISTORTION_MODELS,
     G_STEP,
+    body_residual,
     g_of,
     noise_covariance,
     tracker_covs,
@@ -84,13 +85,6 @@ __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_paramet
            "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
 
 # --- residuals and their analytic Jacobian ---------------------------------------------------
-
-def _log_and_jr_inv(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation vectors φ (n, 3) of rotations R (n, 3, 3) (angle < π) and the inverse right
-    Jacobians J_r⁻¹(φ) (n, 3, 3): log(R exp(η)) = φ + J_r⁻¹(φ) η + O(η²)."""
-    phi = rotvec_from_matrix(R)
-    return phi, right_jacobian_inv(phi)
-
 
 @dataclass
 class _State:
@@ -142,44 +136,20 @@ class _Problem:
         """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None)."""
         n = len(self.q)
         A, Jk = deviation_twists(self.chain(s), self.q, self.names)
-        R_A, t_A = A[:, :3, :3], A[:, :3, 3]
+        R_A = A[:, :3, :3]
         res = np.zeros((n, 6 * self.nb))
         J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
-        RZ, tZ = s.Z[:3, :3], s.Z[:3, 3]
         for b, (W, N) in enumerate(zip(s.Ws, self._measured(s.g), strict=True)):
-            RW, tW = W[:3, :3], W[:3, 3]
-            # E = W⁻¹ A⁻¹ Z N
-            R_M = RW.T @ np.swapaxes(R_A, 1, 2)                       # rotation of W⁻¹A⁻¹
-            t_M = -RW.T @ tW - np.einsum("nij,nj->ni", R_M, t_A)
-            ZN_R = RZ @ N[:, :3, :3]
-            ZN_t = N[:, :3, 3] @ RZ.T + tZ
-            R_E = R_M @ ZN_R
-            t_E = np.einsum("nij,nj->ni", R_M, ZN_t) + t_M
-            phi, Jr = _log_and_jr_inv(R_E)
+            br = body_residual(A, W, s.Z, N, J is not None)
             rows = slice(6 * b, 6 * b + 6)
-            res[:, rows] = np.concatenate([phi, t_E], axis=1)
+            res[:, rows] = br.r
             if J is None:
                 continue
-            R_Et = np.swapaxes(R_E, 1, 2)
-            tEx = skew(t_E)
-            # W = (R_W exp(ω), t_W + p): dlog = −J_r⁻¹ R_Eᵀ ω; dt = [t_E]× ω − R_Wᵀ p
-            c = 6 * b
-            J[:, 6 * b:6 * b + 3, c:c + 3] = -Jr @ R_Et
-            J[:, 6 * b + 3:6 * b + 6, c:c + 3] = tEx
-            J[:, 6 * b + 3:6 * b + 6, c + 3:c + 6] = -RW.T
-            # Z = (R_Z exp(ω), t_Z + p): dlog = J_r⁻¹ R_Nᵀ ω; dt = −R_M R_Z [t_N]× ω + R_M p
-            c = 6 * self.nb
-            J[:, 6 * b:6 * b + 3, c:c + 3] = Jr @ np.swapaxes(N[:, :3, :3], 1, 2)
-            J[:, 6 * b + 3:6 * b + 6, c:c + 3] = -(R_M @ RZ) @ skew(N[:, :3, 3])
-            J[:, 6 * b + 3:6 * b + 6, c + 3:c + 6] = R_M
-            # the arm: A' = A exp(ξ), η = Ad(W⁻¹) ξ: dlog = −J_r⁻¹ R_Eᵀ η_ω; dt = [t_E]× η_ω − η_v
-            if self.names:
-                eta_w = np.einsum("ij,njk->nik", RW.T, Jk[:, :3, :])
-                tWi = -RW.T @ tW
-                eta_v = np.einsum("ij,njk->nik", RW.T, Jk[:, 3:, :]) \
-                    + np.cross(tWi[None, :, None], eta_w, axis=1)
-                J[:, 6 * b:6 * b + 3, self.n_xyz:] = -Jr @ R_Et @ eta_w
-                J[:, 6 * b + 3:6 * b + 6, self.n_xyz:] = tEx @ eta_w - eta_v
+            assert br.dW is not None and br.dZ is not None and br.dA is not None
+            J[:, rows, 6 * b:6 * b + 6] = br.dW
+            J[:, rows, 6 * self.nb:6 * self.nb + 6] = br.dZ
+            if self.names:  # the arm: A' = A exp(ξ) with ξ = Jk δ
+                J[:, rows, self.n_xyz:] = br.dA @ Jk
         if J is not None and self.n_g:  # the distortion's few columns by central differences
             c0 = 6 * (self.nb + 1)
             for k in range(self.n_g):
@@ -203,12 +173,8 @@ class _Problem:
 
     def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
         """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
-        out = []
-        for W, N in zip(s.Ws, self._measured(s.g), strict=True):
-            E = np.linalg.inv(A @ W) @ (s.Z @ N)
-            phi, _ = _log_and_jr_inv(E[:, :3, :3])
-            out.append(np.concatenate([phi, E[:, :3, 3]], axis=1))
-        return np.concatenate(out, axis=1)
+        return np.concatenate([body_residual(A, W, s.Z, N, False).r
+                               for W, N in zip(s.Ws, self._measured(s.g), strict=True)], axis=1)
 
     def step(self, s: _State, d: np.ndarray) -> _State:
         """The state moved by parameters d (rotation vectors on the right, offsets in mm)."""
