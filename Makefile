@@ -52,7 +52,7 @@ test: $(STAMP) lint
 	$(TEST_ENV) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 # every benchmark script (figures for the README; well over 5 minutes), then the check that
-# README's and docs' marked figures agree with what they printed (benchmarks/check_figures.py)
+# docs/benchmarks.md's (and README's, docs') marked figures agree with what they printed (benchmarks/check_figures.py)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/speed.py
