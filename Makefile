@@ -35,10 +35,12 @@ venv: $(STAMP)
 demo: $(DEMO_STAMP)
 	$(DEMO_VENV)/bin/tmscal demo
 
-# ruff, then the layers of docs/architecture.md ([tool.importlinter] in pyproject.toml)
+# ruff, the layers of docs/architecture.md ([tool.importlinter] in pyproject.toml), then the
+# type checker ([tool.mypy]; a rerun reads its cache, .mypy_cache)
 lint: $(STAMP)
 	$(BIN)/ruff check tmscal tests benchmarks
 	$(BIN)/lint-imports
+	$(BIN)/mypy
 
 # the suite in parallel (pytest-xdist: one worker per core, a test file whole on one worker;
 # PYTEST_WORKERS=0 runs it in this process), one BLAS thread per process (OpenBLAS's busy-waiting
