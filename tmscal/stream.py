@@ -298,8 +298,8 @@ class _Handler(socketserver.BaseRequestHandler):
                 pending = client.take() or b""
                 if not pending:
                     client.progress = time.monotonic()  # nothing waits for it
-            r, w, _ = select.select([sock, client.wake_r], [sock] if pending else [], [],
-                                    _POLL_S)
+            watched: list[socket.socket | int] = [sock, client.wake_r]
+            r, w, _ = select.select(watched, [sock] if pending else [], [], _POLL_S)
             if client.wake_r in r:
                 client.woken()
             if sock in r:
