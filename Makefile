@@ -35,10 +35,12 @@ venv: $(STAMP)
 demo: $(DEMO_STAMP)
 	$(DEMO_VENV)/bin/tmscal demo
 
-# ruff, then the layers of docs/architecture.md ([tool.importlinter] in pyproject.toml)
+# ruff, the layers of docs/architecture.md ([tool.importlinter] in pyproject.toml), then the
+# type checker ([tool.mypy]; a rerun reads its cache, .mypy_cache)
 lint: $(STAMP)
 	$(BIN)/ruff check tmscal tests benchmarks
 	$(BIN)/lint-imports
+	$(BIN)/mypy
 
 # the suite in parallel (pytest-xdist: one worker per core, a test file whole on one worker;
 # PYTEST_WORKERS=0 runs it in this process), one BLAS thread per process (OpenBLAS's busy-waiting
@@ -52,7 +54,7 @@ test: $(STAMP) lint
 	$(TEST_ENV) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 # every benchmark script (figures for the README; well over 5 minutes), then the check that
-# README's and docs' marked figures agree with what they printed (benchmarks/check_figures.py)
+# docs/benchmarks.md's (and README's, docs') marked figures agree with what they printed (benchmarks/check_figures.py)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/speed.py

@@ -1,7 +1,8 @@
-"""Check the figures README.md and docs/ quote against the benchmarks' last output.
+"""Check the figures docs/*.md and README.md quote against the benchmarks' last output.
 
 Reruns nothing: it reads the JSON the benchmark scripts wrote (``benchmarks/out/<script>.json``,
-see ``benchmarks/figures.py``) and every figure marked in README.md and docs/*.md, and exits 1,
+see ``benchmarks/figures.py``) and every figure marked in README.md and docs/*.md (the tables
+are in docs/benchmarks.md, the README quotes a few), and exits 1,
 naming each figure, the text's value, the output's value and the tolerance, when they differ by
 more than the tolerance (or the output lacks the figure). ``make bench`` runs it last.
 

@@ -47,7 +47,8 @@ class MissingExtraError(ConfigError):
         self.extra = extra
         self.reason = reason
 
-    def __reduce__(self):  # picklable with its fields (multiprocessing, logging handlers)
+    # picklable with its fields (multiprocessing, logging handlers)
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
         return (type(self), (self.what, self.extra, self.reason))
 
 
@@ -91,7 +92,7 @@ class DeviceError(TmscalError):
             msg = f"{self.device}: {msg}"
         return msg
 
-    def __reduce__(self):  # picklable with its fields
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:  # picklable with its fields
         return (type(self), (self.message, self.code, self.text, self.device))
 
 

@@ -298,8 +298,8 @@ class _Handler(socketserver.BaseRequestHandler):
                 pending = client.take() or b""
                 if not pending:
                     client.progress = time.monotonic()  # nothing waits for it
-            r, w, _ = select.select([sock, client.wake_r], [sock] if pending else [], [],
-                                    _POLL_S)
+            watched: list[socket.socket | int] = [sock, client.wake_r]
+            r, w, _ = select.select(watched, [sock] if pending else [], [], _POLL_S)
             if client.wake_r in r:
                 client.woken()
             if sock in r:
@@ -373,7 +373,7 @@ class StreamServer(socketserver.ThreadingTCPServer):
                              "max_body_bytes ≥ 0")
         self.address_family = _family(host)
         super().__init__((host, port), _Handler)
-        self.host, self.port = self.server_address[0], int(self.server_address[1])
+        self.host, self.port = str(self.server_address[0]), int(self.server_address[1])
         self.max_clients, self.queue_frames = max_clients, queue_frames
         self.stall_s, self.max_body_bytes = stall_s, max_body_bytes
         self.socket_buffer_bytes = socket_buffer_bytes

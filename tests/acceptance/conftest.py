@@ -1,5 +1,5 @@
 """The rig under test for ``tests/acceptance``: the ``--rig CONFIG`` config's devices and checks
-as ``tmscal selftest`` runs them (``tmscal.acquisition.selftest_rig.RigSelftest``, the one
+as ``tmscal selftest`` runs them (``tmscal.acceptance.rig.RigSelftest``, the one
 implementation), opened by the first check and closed at the end of the session, and the
 report a lab keeps (``--rig-report``).
 
@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
-from tmscal.acquisition.selftest import Check
-from tmscal.acquisition.selftest_rig import RigSelftest, default_report_path, write_report
+from tmscal.acceptance.checks import Check
+from tmscal.acceptance.rig import RigSelftest, default_report_path, write_report
 from tmscal.config import load_config
 
 NO_RIG = ("no --rig CONFIG given: the rig acceptance suite runs only against a rig config "

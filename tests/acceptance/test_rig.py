@@ -2,7 +2,7 @@
 ``tmscal.drivers.base`` on the devices of ``--rig CONFIG``, real or mock, in this order:
 connect and identity, tool visibility and frame rate, a small move and back, stop while
 moving, reconnect. The checks and their order live in the package
-(``tmscal.acquisition.selftest`` and ``selftest_rig``; ``tmscal selftest --rig CONFIG`` runs
+(``tmscal.acceptance.checks`` and ``tmscal.acceptance.rig``; ``tmscal selftest --rig CONFIG`` runs
 the same ones from an installed tmscal); each test here runs one, keeps it for the report, and
 passes, fails or skips as it says. Without ``--rig`` every test is skipped with the reason."""
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tmscal.acquisition.selftest import CHECK_NAMES
+from tmscal.acceptance.checks import CHECK_NAMES
 
 from ..rigs import REPO
 

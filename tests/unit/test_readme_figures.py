@@ -1,4 +1,5 @@
-"""README's and docs' benchmark figures name the command that prints them, and
+"""The benchmark figures of docs/benchmarks.md and README.md (its summary) and the other docs
+name the command that prints them, and
 benchmarks/check_figures.py reads their markers and fails when one is altered (no benchmark
 is run: the check's input is written here from the text itself)."""
 
@@ -14,6 +15,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
+BENCHMARKS = ROOT / "docs" / "benchmarks.md"
 COMMAND = re.compile(r"python benchmarks/\w+\.py|tmscal \w+|make test|bash \.ci/run|pytest")
 # a measured number: digits with a unit or a ratio after them
 MEASURE = re.compile(r"\d(?:<!--[^>]*-->)?\s?(?:mm|ms|s\b|%|×|°|min\b|frames/s)")
@@ -32,10 +34,12 @@ cf = _load()
 
 
 def _benchmarks_section() -> list[str]:
+    """docs/benchmarks.md whole, then the README's summary of it."""
     text = README.read_text(encoding="utf-8")
     start = text.index("\n## Benchmarks")
     end = text.index("\n## ", start + 1)
-    return text[start:end].split("\n")
+    return [*BENCHMARKS.read_text(encoding="utf-8").split("\n"), "",
+            *text[start:end].split("\n")]
 
 
 def _paragraphs(lines: list[str]) -> list[tuple[int, str]]:
@@ -89,16 +93,28 @@ def _outputs_from_text(figures, out: Path) -> None:
         (out / f"{script}.json").write_text(json.dumps(d))
 
 
-def test_check_passes_on_readme_as_written_and_fails_on_an_altered_copy(tmp_path, capsys):
-    figures = cf.parse(README, "README.md")
+def test_the_benchmark_tables_live_in_docs_and_the_readme_quotes_them():
+    """README.md keeps a few headline figures, each the same as docs/benchmarks.md's (the
+    check reads both: benchmarks/check_figures.py's default files)."""
+    assert BENCHMARKS in cf.default_files() and README in cf.default_files()
+    doc = {f.name: f.value for f in cf.parse(BENCHMARKS)}
+    readme = [f for f in cf.parse(README) if f.script != "reregister_rig"]
+    assert 3 <= len(readme) < 20 < len(doc)
+    assert {f.name: f.value for f in readme}.items() <= doc.items()
+    assert "| QR36 e_t min |" not in README.read_text(encoding="utf-8")
+
+
+def test_check_passes_on_the_benchmarks_as_written_and_fails_on_an_altered_copy(tmp_path,
+                                                                               capsys):
+    figures = cf.parse(BENCHMARKS, "docs/benchmarks.md")
     assert len(figures) > 50
     out = tmp_path / "out"
     _outputs_from_text(figures, out)
-    assert cf.main([str(README), "--out", str(out)]) == 0
-    text = README.read_text(encoding="utf-8")
+    assert cf.main([str(BENCHMARKS), "--out", str(out)]) == 0
+    text = BENCHMARKS.read_text(encoding="utf-8")
     old = "0.0744<!--fig ml_selection.ml_mm_n7 =-->"
     assert old in text
-    altered = tmp_path / "README.md"
+    altered = tmp_path / "benchmarks.md"
     altered.write_text(text.replace(old, old.replace("0.0744", "0.0751")), encoding="utf-8")
     capsys.readouterr()
     assert cf.main([str(altered), "--out", str(out)]) == 1

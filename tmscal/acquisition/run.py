@@ -13,7 +13,7 @@ devices, reconnect, stop, resume, the session file, progress).
   wrench and its spread (``ft.samples`` readings after the tracker's, the same settle;
   :func:`.sample.sample_wrench`), for the wrench rows of ``tmscal solve --kinematics
   estimate`` (docs/kinematics.md); a sensor fault is a device fault like any other.
-* ``PlanStrategy`` is also the adaptive run's base (:mod:`.adaptive`): its candidates are
+* ``PlanStrategy`` is also the adaptive run's base (:mod:`.adaptive_run`): its candidates are
   this plan with ``adaptive.pool`` poses, measured the same way.
 
 Poses: base_from_flange (A), tracker_from_marker (B), tracker_from_probe (C); 4×4 mm.

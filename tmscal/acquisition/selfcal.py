@@ -347,8 +347,9 @@ class SelfcalSettings:
 def _ft_samples(cfg: RigConfig, header: dict[str, Any] | None, samples: int | None) -> int:
     """--samples, else the resumed session's, else the config's ``ft.samples``."""
     n = ((header or {}).get("sampling") or {}).get("samples") if samples is None else samples
-    ok = isinstance(n, int) and not isinstance(n, bool) and n >= 1
-    return int(n) if ok else int(cfg.ft.samples if cfg.ft is not None else 100)
+    if isinstance(n, int) and not isinstance(n, bool) and n >= 1:
+        return n
+    return int(cfg.ft.samples if cfg.ft is not None else 100)
 
 
 def measure_wrench(dev: Devices, i: int, P: np.ndarray, st: SelfcalSettings, t: float,

@@ -5,7 +5,7 @@ records, how a resumed run reads its plan back and checks it, which pose comes n
 to stop, how one pose is measured, and what the result holds. The base class visits a fixed
 list of poses (``self.poses``) in order, skipping those already recorded: the plan run
 (:mod:`.run`) and the self-calibration run (:mod:`.selfcal`) need nothing else; the adaptive
-run (:mod:`.adaptive`) chooses its next pose itself.
+run (:mod:`.adaptive_run`) chooses its next pose itself.
 
 Poses are base_from_flange 4×4 in mm; times in seconds.
 """

@@ -2,7 +2,7 @@
 it): the tracker distortion and its undoing, the residuals of one problem (``Problem``), the
 noise covariance per pose that whitens them, and the parameters' names and covariance. Shared
 by the solver, the Cramér–Rao bound (:mod:`.bound`), the adaptive prediction
-(:mod:`.adaptive`) and ``Calibration.errors`` (which undistorts with a solver's distortion).
+(:mod:`.prediction`) and ``Calibration.errors`` (which undistorts with a solver's distortion).
 
 Frames and units as everywhere: A = base_from_flange, B = tracker_from_marker, C =
 tracker_from_probe, X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker;

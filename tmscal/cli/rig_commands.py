@@ -166,7 +166,8 @@ def track(config: Path, tracker_port: str | None, old_port: str | None, frames: 
         click.echo("tracker: " + ", ".join(f"{k} {value_text(v)}" for k, v in ident.items()
                                            if v))
         handles = getattr(tr, "handles", {})  # an NDI's port handles
-        names = ident.get("tools") if isinstance(ident.get("tools"), dict) else {}
+        tools = ident.get("tools")
+        names = tools if isinstance(tools, dict) else {}
         for name in tr.tools:
             h = handles.get(name)
             if h is None and name in names:  # what the driver knows it by (a TRANSFORM name)

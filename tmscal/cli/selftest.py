@@ -1,6 +1,6 @@
 """``tmscal selftest --rig CONFIG``: the rig acceptance checks (``docs/acceptance.md``) from an
 installed tmscal, the same checks and report as ``pytest tests/acceptance --rig CONFIG``
-(:class:`tmscal.acquisition.selftest_rig.RigSelftest`)."""
+(:class:`tmscal.acceptance.rig.RigSelftest`)."""
 
 from __future__ import annotations
 
@@ -46,8 +46,8 @@ def selftest(config: Path, report: Path | None, no_start_mocks: bool, rate_toler
     visibility and frame rate, a small move inside the envelope and back, stop while moving,
     reconnect. THE ROBOT MOVES (10 mm, then 40 mm stopped midway): see docs/acceptance.md.
     Prints each verdict, writes the report; exit 0 when no check failed, 3 when one did."""
-    from ..acquisition.selftest import CHECK_NAMES, result_text
-    from ..acquisition.selftest_rig import RigSelftest, default_report_path
+    from ..acceptance.checks import CHECK_NAMES, result_text
+    from ..acceptance.rig import RigSelftest, default_report_path
     from ..config import load_config
 
     check_outputs({"--report": report}, [config], force)

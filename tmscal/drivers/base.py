@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Generator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -160,7 +160,7 @@ class Tracker(_Device):
 
     def distinct_frames(self, limit: int | None = None, timeout_s: float | None = None, *,
                         max_reads: int | None = None,
-                        stall_s: float | None = None) -> Iterator[TrackerFrame]:
+                        stall_s: float | None = None) -> Generator[TrackerFrame, None, None]:
         """Yield each new frame once: ``read()`` repeats a frame number when polled faster
         than ``frame_rate_hz``, and a repeat is skipped. Stops after ``limit`` distinct frames
         (None: when the caller stops iterating).

@@ -144,11 +144,11 @@ def _plan_offsets(session: Session) -> tuple[np.ndarray, np.ndarray, str] | None
     """(translation offsets (n, 3) mm in the base frame, rotation angles (n,) deg, what they
     are relative to) of the commanded flange poses (else the measured A) from P0."""
     poses = sorted(session.poses, key=lambda p: p.index)
-    P = [p.commanded if p.commanded is not None else p.A for p in poses]
-    P = [m for m in P if m is not None]
-    if not P:
+    given = [p.commanded if p.commanded is not None else p.A for p in poses]
+    mats = [m for m in given if m is not None]
+    if not mats:
         return None
-    P = np.stack(P)
+    P = np.stack(mats)
     p0 = (session.header.get("plan") or {}).get("p0")
     ref, what = (np.asarray(p0, float), "P0") if p0 is not None else (P[0], "the first pose")
     t = P[:, :3, 3] - ref[:3, 3]
@@ -353,7 +353,8 @@ def html_report(session: Session, sha256: str, *, method: str = "qr36",
         cal, res = solve_session(session, method=method, folds=folds)
         source = (f"{res.method.upper()} solved on the {res.n_solve} usable poses of this "
                   "session (tmscal solve).")
-        unc = (res, "")  # res.prediction: this calibration's (the solve service's)
+        # res.prediction: this calibration's (the solve service's)
+        unc: tuple[SolveResult | None, str] = (res, "")
     else:
         cal = calib.calibration
         res = _stored_result(session, cal, calib.doc, sha256)

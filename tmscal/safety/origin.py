@@ -96,7 +96,8 @@ class CalibratedP0:
         """The section :meth:`to_doc` wrote; ValueError naming the key (``p0.pose`` …)."""
         if not isinstance(d, dict):
             raise ValueError("p0: expected a mapping (pose, plan, extent)")
-        pose = check_pose(d.get("pose"), "p0.pose")
+        raw: Any = d.get("pose")   # the file's value, whatever it is: check_pose names it
+        pose = check_pose(raw, "p0.pose")
         plan = d.get("plan")
         if not isinstance(plan, dict):
             raise ValueError("p0.plan: expected a mapping (kind, radius_mm, rotation_deg)")

@@ -179,7 +179,7 @@ def _open_regular(p: Path, flags: int, what: str) -> int:
 
 
 def _read_all(fd: int) -> bytes:
-    chunks = []
+    chunks: list[bytes] = []
     pos = 0
     while True:
         b = os.pread(fd, 1 << 20, pos)

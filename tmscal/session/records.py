@@ -13,7 +13,7 @@ import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -80,7 +80,7 @@ def _dumps(obj: Any) -> str:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=json_default)
 
 
-def _count(x: Any) -> bool:
+def _count(x: Any) -> TypeGuard[int]:
     return type(x) is int and 0 <= x <= _MAX_COUNT
 
 
@@ -248,7 +248,7 @@ def skip_cause(reason: str) -> str:
         bodies = " and ".join(c[0] for c in counts)
         if all(c[1] == 0 for c in counts):
             return f"{bodies} not seen (missing or out of volume)"
-        limits = {c[3] for c in counts} - {None}
+        limits = {c[3] for c in counts if c[3] is not None}
         below = f" (below min_share {min(limits):g})" if limits else ""
         return f"{bodies} seen in too few frames{below}"
     return reason.split(" (", 1)[0].strip() or "skipped"

@@ -239,7 +239,7 @@ def _three(value: object, name: str, broadcast: bool) -> tuple[float, float, flo
         vals = [float(value)] * 3
     else:
         try:
-            vals = [float(v) for v in value]  # type: ignore[union-attr]
+            vals = [float(v) for v in value]  # type: ignore[attr-defined]
         except (TypeError, ValueError):
             what = "a number or a list of three numbers" if broadcast else "a list of three"
             raise ValueError(f"{name}: expected {what}, got {value!r}") from None
@@ -359,7 +359,7 @@ class SimRig:
         degrees) and return the new truth. The tracker sees it from the next frame read;
         the robot's reported pose is unchanged. ValueError for a bad change (nothing
         changes)."""
-        change = Change(move, mm, deg)  # type: ignore[arg-type]  (checked: three numbers)
+        change = Change(move, mm, deg)  # type: ignore[arg-type]  # Change checks: 3 numbers
         with self._lock:
             self._set_truth(change.apply(self.truth))
             return self.truth

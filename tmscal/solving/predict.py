@@ -26,7 +26,7 @@ __all__ = ["PHASES", "ADAPTIVE_OVERRIDES", "adaptive_header", "settings_from_hea
 
 #: the calibration an adaptive run's prediction is about, and so the one ``demo --adaptive``
 #: solves and ``acquire --adaptive`` tells to solve: ml with its distortion fixed
-RUN_METHOD = {"method": "ml", "options": {"distortion": PREDICTION_DISTORTION}}
+RUN_METHOD: dict[str, Any] = {"method": "ml", "options": {"distortion": PREDICTION_DISTORTION}}
 #: the phases of a pose that count as robot time (docs/adaptive.md)
 PHASES = ("moving", "settling", "sampling")
 _ADAPTIVE_KEYS = ("target_mm", "confidence", "max_poses", "bootstrap", "pool", "region")

@@ -36,6 +36,7 @@ class RTDECalls:
     _rx: Any
     _ctl: Any
     _stuck: bool
+    _dashboard_check: Callable[[str], dict[str, Any]]
 
     def _check_reachable(self) -> None:
         """Before ur_rtde is asked to connect (its failures print raw text on stderr and say

@@ -41,6 +41,8 @@ __all__ = ["ATIFaults", "ATINetFTMock", "FAST_STREAM_CAP"]
 #: records a fast-clock stream without a count sends before it waits for STOP
 FAST_STREAM_CAP = 1000
 _POLL_S = 0.05
+#: a UDP client's address, as ``recvfrom`` gives it (host, port)
+Peer = tuple[str, int]
 #: a fast-clock stream goes out in chunks of this many records with a short pause between,
 #: so that a client's UDP receive buffer does not overflow (which would read as lost records)
 _FAST_CHUNK, _FAST_PAUSE_S = 32, 0.0005
@@ -117,7 +119,7 @@ class ATINetFTMock(MockDevice):
         self._record_no = 0
         self._held: bytes | None = None
         #: the current stream: (peer, records left or None for unbounded, next rdt_sequence)
-        self._stream: tuple[object, int | None, int] | None = None
+        self._stream: tuple[Peer, int | None, int] | None = None
 
     @property
     def endpoint(self) -> str:
@@ -180,7 +182,7 @@ class ATINetFTMock(MockDevice):
                 self._emit()
                 next_t += 1.0 / self.rate_hz
 
-    def _on_request(self, data: bytes, peer: object) -> None:
+    def _on_request(self, data: bytes, peer: Peer) -> None:
         try:
             command, count = codec.parse_request(data)
         except Exception as e:  # the sensor ignores what it cannot parse
@@ -242,7 +244,7 @@ class ATINetFTMock(MockDevice):
             self._send(self._held, peer)
             self._held = None
 
-    def _send(self, data: bytes, peer: object) -> None:
+    def _send(self, data: bytes, peer: Peer) -> None:
         assert self._sock is not None
         try:
             self._sock.sendto(data, peer)

@@ -113,7 +113,7 @@ class URFaults:
 
 
 # The InitVar's class attribute would always read None: read the field it stands for.
-URFaults.drop_connection_at_move = property(  # type: ignore[assignment,misc]
+URFaults.drop_connection_at_move = property(  # type: ignore[attr-defined]
     lambda self: self.drop_at_move, doc="The earlier name of ``drop_at_move``.")
 
 
@@ -281,8 +281,9 @@ class URController:
         m = _REGISTER.fullmatch(name)
         if m is None or (inputs_only and m.group(1) != "input"):
             return None
-        arrays = {("input", "int"): self.in_int, ("input", "double"): self.in_double,
-                  ("output", "int"): self.out_int, ("output", "double"): self.out_double}
+        arrays: dict[tuple[str, str], list[Any]] = {
+            ("input", "int"): self.in_int, ("input", "double"): self.in_double,
+            ("output", "int"): self.out_int, ("output", "double"): self.out_double}
         return arrays[(m.group(1), m.group(2))], int(m.group(3))
 
     def _joints(self) -> list[float]:

@@ -4,7 +4,7 @@
 Each check returns a :class:`Check` (pass, fail or skip, the measured values, a note) instead
 of raising, so that one run can report every check: ``tmscal selftest --rig CONFIG`` prints
 them and ``pytest tests/acceptance --rig CONFIG`` asserts on them, both through
-:class:`tmscal.acquisition.selftest_rig.RigSelftest` (the devices, the order, the skips), and
+:class:`tmscal.acceptance.rig.RigSelftest` (the devices, the order, the skips), and
 both write the same text report (:func:`format_report`).
 
 Frames and units as everywhere (``docs/conventions.md``): poses base_from_flange 4×4 mm,
@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 
+from ..acquisition.devices import envelope_for
 from ..config import RigConfig
 from ..errors import TmscalError
 from ..escape import value_text
 from ..geometry import angle_between, check_pose
-from .devices import envelope_for
 
 __all__ = ["Check", "Settings", "CHECK_NAMES", "check_connect", "check_tools",
            "check_small_move", "check_stop", "check_reconnect", "format_report",

@@ -1,13 +1,13 @@
 """The rig under test of the acceptance checks (``docs/acceptance.md``): the devices of a rig
 config, built through the driver registry as ``tmscal acquire`` builds them, each check of
-:mod:`tmscal.acquisition.selftest` run in order with the skips that follow from the config
+:mod:`tmscal.acceptance.checks` run in order with the skips that follow from the config
 and from the connect check, and the text report a lab keeps, written whole or not at all.
 
 One implementation for both ways of running the checks: ``tmscal selftest --rig CONFIG``
 (:mod:`tmscal.cli.selftest`, from an installed package) and ``pytest tests/acceptance --rig
 CONFIG`` (one test per check). A config with a ``mock:`` section is served by mocks that the
 caller starts (``tmscal.mocks.launch.spawn_mock_rig``; their endpoints are given here), or
-that are already running. Units as in :mod:`tmscal.acquisition.selftest`.
+that are already running. Units as in :mod:`tmscal.acceptance.checks`.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from ..acquisition.devices import envelope_for, make_robot, make_tracker
 from ..config import RigConfig, load_config
 from ..net import split_endpoint
-from .devices import envelope_for, make_robot, make_tracker
-from .selftest import (
+from .checks import (
     CHECK_NAMES,
     Check,
     Settings,
@@ -133,7 +133,7 @@ class RigSelftest:
                     self.meta.setdefault("close", []).append(f"{dev.name}: {e}")
 
     def report(self, when: dt.datetime | None = None) -> str:
-        """The text report (:func:`tmscal.acquisition.selftest.format_report`)."""
+        """The text report (:func:`tmscal.acceptance.checks.format_report`)."""
         return format_report(str(self.path), self.checks, self.meta, when)
 
     def __enter__(self) -> RigSelftest:
