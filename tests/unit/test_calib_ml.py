@@ -290,7 +290,7 @@ def test_body_residual_blocks_against_central_differences():
     A = np.stack([rand_pose(1.0, 300.0) for _ in range(5)])
     W, Z = rand_pose(1.0, 50.0), rand_pose(1.0, 1000.0)
     N = np.stack([np.linalg.inv(Z) @ a @ W @ rand_pose(0.05, 2.0) for a in A])
-    br = body_residual(A, W, Z, N)
+    br = body_residual(A, W, Z, N, flange=True)
 
     def turned(T, d):
         return make_pose(T[..., :3, :3] @ matrix_from_rotvec(d[:3]), T[..., :3, 3] + d[3:])

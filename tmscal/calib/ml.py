@@ -70,6 +70,7 @@ from ..errors import CalibrationError
 from ..geometry import make_pose, orthonormalize
 from .bound import uncertainty_at
 from .calibration import Applied, Calibration
+from .lsq import Solution
 from .lsq import levenberg_marquardt as levenberg_marquardt_core
 from .methods import register_method, solve
 from .ml_model import (
@@ -111,10 +112,17 @@ def levenberg_marquardt(prob: Problem, whiten: np.ndarray, max_iter: int = 50
                         ) -> tuple[Problem, int]:
     """Minimise the whitened χ² from the problem's start with the one least-squares loop
     (:func:`tmscal.calib.lsq.levenberg_marquardt`); returns (the problem re-centred at the
-    estimate, iterations). The analytic Jacobian (:meth:`Problem.raw_jacobian`) at each
-    estimate. Converged when χ² falls by less than 1e-10 of itself (far below any difference
-    the model selection's tests or the covariance could notice) or the scaled step is
-    negligible."""
+    estimate, iterations)."""
+    sol = _minimise(prob, whiten, max_iter)
+    return sol.state, sol.iterations
+
+
+def _minimise(prob: Problem, whiten: np.ndarray, max_iter: int) -> Solution[Problem]:
+    """:func:`levenberg_marquardt` with the whole solution (residuals and whitened Jacobian
+    at the estimate, so that the fit does not evaluate them again). The analytic Jacobian
+    (:meth:`Problem.raw_jacobian`) at each estimate. Converged when χ² falls by less than
+    1e-10 of itself (far below any difference the model selection's tests or the covariance
+    could notice) or the scaled step is negligible."""
     zero = np.zeros(prob.n_params)
 
     def evaluate(p: Problem, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -124,7 +132,7 @@ def levenberg_marquardt(prob: Problem, whiten: np.ndarray, max_iter: int = 50
     sol = levenberg_marquardt_core(evaluate, prob, lambda p, dx: p.recentred(dx),
                                    max_iter=max_iter, ftol=1e-10,
                                    xtol=1e-12 * np.sqrt(prob.n_params))
-    return sol.state, sol.iterations
+    return sol
 
 
 @dataclass
@@ -172,11 +180,10 @@ def _fit(prob: Problem, theta: np.ndarray, T: np.ndarray, max_iter: int) -> Fit:
     start's X, Y)."""
     m = _residual_count(prob)
     whiten = whitener(_covariance(prob.Ws, theta, T, len(prob.A)))
-    prob, its = levenberg_marquardt(prob, whiten, max_iter)
-    J = _whitened(whiten, prob.raw_jacobian())
-    P = covariance_from_jacobian(J, f"the ml model (distortion {prob.model!r})")
-    r = _wres(whiten, prob.residuals(np.zeros(prob.n_params)))
-    return Fit(prob, J, P, float(r @ r), m, its, theta.copy())
+    sol = _minimise(prob, whiten, max_iter)
+    J = sol.jacobian if sol.jacobian is not None else _whitened(whiten, sol.state.raw_jacobian())
+    P = covariance_from_jacobian(J, f"the ml model (distortion {sol.state.model!r})")
+    return Fit(sol.state, J, P, sol.cost, m, sol.iterations, theta.copy())
 
 
 def _components(prob: Problem, theta: np.ndarray, T: np.ndarray, estimate: np.ndarray

@@ -97,7 +97,7 @@ class BodyResidual:
 
 
 def body_residual(A: np.ndarray, W: np.ndarray, Z: np.ndarray, N: np.ndarray,
-                  jac: bool = True) -> BodyResidual:
+                  jac: bool = True, flange: bool = False) -> BodyResidual:
     """The one ML residual of tmscal (module docstring; used by :class:`Problem` and the
     kinematic estimate, :mod:`tmscal.calib.kinematics.estimate`): poses A (n, 4, 4)
     base_from_flange, W (4, 4) flange_from_body, Z (4, 4) base_from_tracker, tracker poses N
@@ -106,7 +106,8 @@ def body_residual(A: np.ndarray, W: np.ndarray, Z: np.ndarray, N: np.ndarray,
     With φ = log R_E, J_r⁻¹ its inverse right Jacobian (exact) and R_M, t_M the rotation and
     translation of W⁻¹A⁻¹: ∂φ/∂ω_W = −J_r⁻¹ R_Eᵀ, ∂t_E/∂ω_W = [t_E]×, ∂t_E/∂p_W = −R_Wᵀ;
     ∂φ/∂ω_Z = J_r⁻¹ R_Nᵀ, ∂t_E/∂ω_Z = −R_M R_Z [t_N]×, ∂t_E/∂p_Z = R_M; the flange's twist
-    enters as η = Ad(W⁻¹) ξ: ∂φ = −J_r⁻¹ R_Eᵀ η_ω, ∂t_E = [t_E]× η_ω − η_v."""
+    enters as η = Ad(W⁻¹) ξ: ∂φ = −J_r⁻¹ R_Eᵀ η_ω, ∂t_E = [t_E]× η_ω − η_v (``dA`` only
+    with ``flange``: the ml solve keeps A fixed)."""
     R_A, t_A = A[:, :3, :3], A[:, :3, 3]
     RZ, tZ = Z[:3, :3], Z[:3, 3]
     RW, tW = W[:3, :3], W[:3, 3]
@@ -130,6 +131,8 @@ def body_residual(A: np.ndarray, W: np.ndarray, Z: np.ndarray, N: np.ndarray,
     dZ[:, :3, :3] = Jr @ np.swapaxes(N[:, :3, :3], 1, 2)
     dZ[:, 3:, :3] = -(R_M @ RZ) @ skew(N[:, :3, 3])
     dZ[:, 3:, 3:] = R_M
+    if not flange:
+        return BodyResidual(r, dW, dZ)
     # η_ω = R_Wᵀ ξ_ω, η_v = R_Wᵀ ξ_v + [t_W⁻¹]× R_Wᵀ ξ_ω with t_W⁻¹ = −R_Wᵀ t_W
     tWi_x = skew(-RW.T @ tW)
     dA = np.zeros((n, 6, 6))

@@ -140,15 +140,15 @@ class _Problem:
         res = np.zeros((n, 6 * self.nb))
         J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
         for b, (W, N) in enumerate(zip(s.Ws, self._measured(s.g), strict=True)):
-            br = body_residual(A, W, s.Z, N, J is not None)
+            br = body_residual(A, W, s.Z, N, J is not None, flange=bool(self.names))
             rows = slice(6 * b, 6 * b + 6)
             res[:, rows] = br.r
             if J is None:
                 continue
-            assert br.dW is not None and br.dZ is not None and br.dA is not None
+            assert br.dW is not None and br.dZ is not None
             J[:, rows, 6 * b:6 * b + 6] = br.dW
             J[:, rows, 6 * self.nb:6 * self.nb + 6] = br.dZ
-            if self.names:  # the arm: A' = A exp(ξ) with ξ = Jk δ
+            if br.dA is not None:  # the arm: A' = A exp(ξ) with ξ = Jk δ
                 J[:, rows, self.n_xyz:] = br.dA @ Jk
         if J is not None and self.n_g:  # the distortion's few columns by central differences
             c0 = 6 * (self.nb + 1)
