@@ -184,6 +184,21 @@ def test_an_ndi_key_error_names_its_line(tmp_path: Path) -> None:
         load_config(p)
 
 
+def test_the_old_ndi_reply_option_word_names_its_new_spelling(tmp_path: Path) -> None:
+    """The NDI reply option word was ``tracker.options.options``; it is
+    ``tracker.options.reply_options`` now: the old spelling is refused naming file, line and
+    the new one, and the new one reaches the driver."""
+    p = _write(tmp_path, f"tracker:\n  driver: ndi\n  port: /dev/ttyUSB0\n"
+                         f"  tools: {{marker: {ROM}}}\n  options:\n    options: 1\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == (f"{p}, line 6: key 'tracker.options.options': moved for driver "
+                            "'ndi': write it as tracker.options.reply_options (docs/configs.md)")
+    p.write_text(p.read_text().replace("    options: 1", "    reply_options: 1"))
+    tr = make_tracker(load_config(p))
+    assert tr.reply_options == 1  # type: ignore[attr-defined]
+
+
 def test_a_tracker_port_override_is_checked_against_the_wire_log(tmp_path: Path) -> None:
     cfg = parse_config({"tracker": {"port": "/dev/ttyUSB0", "tools": {"marker": ROM},
                                     "log_wire": str(tmp_path / "wire.log")}}, "rig.yaml")

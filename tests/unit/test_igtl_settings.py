@@ -7,12 +7,13 @@ from typing import Any
 
 import pytest
 
+from tmscal.config import load_config, parse_config
 from tmscal.drivers.igtl.settings import IGTLSettings
 from tmscal.drivers.igtl.tracker import IGTLTracker
 from tmscal.errors import ConfigError
 
 SRC = "rigs/plus.yaml"
-SECTION = {"driver": "igtl", "host": "192.168.1.20", "port": 18945, "timeout_s": 1.5,
+SECTION = {"driver": "igtl", "host": "192.168.1.20", "port": 18945,
            "frame_rate_hz": 60, "tools": {"marker": "MarkerToTracker",
                                           "probe": "ProbeToTracker"}}
 
@@ -27,27 +28,51 @@ def parse(**changes: Any) -> IGTLSettings:
 _DROP = object()
 
 
+@pytest.mark.parametrize("value", [0, -1, float("nan"), float("inf"), 3601, "2", False])
+def test_a_bad_timeout_option_names_its_key(value: Any) -> None:
+    with pytest.raises(ConfigError) as e:
+        parse_config({"tracker": {**SECTION, "options": {"timeout_s": value}}}, SRC)
+    assert str(e.value).startswith(f"{SRC}: key 'tracker.options.timeout_s': ")
+
+
+def test_the_timeout_option_reaches_the_driver() -> None:
+    cfg = parse_config({"tracker": {**SECTION, "options": {"timeout_s": 1.5}}}, SRC)
+    assert cfg.tracker is not None and cfg.tracker.options == {"timeout_s": 1.5}
+    assert IGTLTracker(**cfg.tracker.settings.kwargs(), **cfg.tracker.options).timeout_s == 1.5
+
+
+def test_the_old_timeout_key_names_its_new_spelling(tmp_path) -> None:
+    """``tracker.timeout_s`` was a key of this driver; it is an option now (docs/configs.md,
+    "General rules"): the old spelling is refused with the file, the line and the new one."""
+    p = tmp_path / "plus.yaml"
+    p.write_text("tracker:\n  driver: igtl\n  host: 127.0.0.1\n  timeout_s: 1.5\n"
+                 "  tools: {marker: MarkerToTracker}\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == (f"{p}, line 4: key 'tracker.timeout_s': moved for driver 'igtl': "
+                            "write it as tracker.options.timeout_s (docs/configs.md)")
+
+
 def test_a_section_gives_the_driver_its_arguments() -> None:
     s = parse()
-    assert s.kwargs() == {"tools": SECTION["tools"], "host": "192.168.1.20", "port": 18945,
-                          "timeout_s": 1.5}
+    assert s.kwargs() == {"tools": SECTION["tools"], "host": "192.168.1.20", "port": 18945}
     assert s.address() == "192.168.1.20:18945"
     t = IGTLTracker(**s.kwargs(), frame_rate_hz=60)   # the constructor takes them as they are
     assert (t.host, t.port, t.device_names) == ("192.168.1.20", 18945, SECTION["tools"])
 
 
 def test_defaults() -> None:
-    s = parse(port=_DROP, timeout_s=_DROP)
-    assert (s.port, s.timeout_s) == (18944, 2.0)
-    assert IGTLSettings.KEYS == ("host", "port", "timeout_s")
+    s = parse(port=_DROP)
+    assert s.port == 18944
+    assert IGTLSettings.KEYS == ("host", "port")
+    t = IGTLTracker(**s.kwargs())
+    assert (t.timeout_s, t.ask_metadata) == (2.0, True)
 
 
 @pytest.mark.parametrize("key, value", [
     ("host", _DROP), ("host", ""), ("host", "  "), ("host", "plus pc"), ("host", 5),
     ("port", 0), ("port", 65536), ("port", -1), ("port", "18944"), ("port", True),
     ("port", 18944.0),
-    ("timeout_s", 0), ("timeout_s", -1), ("timeout_s", float("nan")),
-    ("timeout_s", float("inf")), ("timeout_s", "2"), ("timeout_s", False),
 ])
 def test_a_bad_value_names_its_key(key: str, value: Any) -> None:
     with pytest.raises(ConfigError) as e:
@@ -85,7 +110,6 @@ def test_tools_must_be_a_mapping() -> None:
 def test_an_address_override(text: str, host: str, port: int) -> None:
     s = parse().with_address(text)
     assert (s.host, s.port) == (host, port) and s.tools == SECTION["tools"]
-    assert s.timeout_s == 1.5
 
 
 @pytest.mark.parametrize("text, key", [

@@ -353,7 +353,7 @@ def test_out_of_volume(rig: SimRig) -> None:
         with NDITracker(ep, ROMS, **FAST_OPTS) as tr:  # option 0801: transform still sent
             s = tr.read().tools["probe"]
         assert s.out_of_volume and not s.missing and s.pose is not None and not s.usable
-        with NDITracker(ep, ROMS, options=0x0001, **FAST_OPTS) as tr:
+        with NDITracker(ep, ROMS, reply_options=0x0001, **FAST_OPTS) as tr:
             s = tr.read().tools["probe"]
         assert s.out_of_volume and s.missing and s.pose is None
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tmscal.acquisition.sample import sample_pose
+from tmscal.config import SamplingConfig
 from tmscal.drivers.base import Robot, ToolState, Tracker, TrackerFrame
 from tmscal.geometry import make_pose, matrix_from_rotvec, random_rotation, rotvec_from_matrix
 
@@ -88,7 +89,7 @@ def _errors(n: int, seed: int) -> dict[str, np.ndarray]:
     out: dict[str, list] = {"marker": [], "probe": [], "A": [], "rot": [], "nA": [],
                             "spread": []}
     for _ in range(REPS):
-        s = sample_pose(rob, tr, n, settle_s=0.0, sleep=lambda _s: None)
+        s = sample_pose(rob, tr, SamplingConfig(samples=n, settle_s=0.0), sleep=lambda _s: None)
         assert s.problem is None and s.samples["marker"] == n and s.samples["probe"] == n
         for b in ("marker", "probe"):
             out[b].append(s.bodies[b][:3, 3] - TRUE[b][:3, 3])
@@ -165,8 +166,8 @@ def test_samples_by_need_reach_the_standard_error_they_were_asked_for(sem):
     tr, rob = NoisyTracker(rng).open(), NoisyRobot(rng).open()
     err, counts = [], []
     for _ in range(REPS):
-        s = sample_pose(rob, tr, 1000, settle_s=0.0, sleep=lambda _s: None, sem_mm=sem,
-                        min_samples=10)
+        s = sample_pose(rob, tr, SamplingConfig(samples=1000, settle_s=0.0, sem_mm=sem,
+                                                min_samples=10), sleep=lambda _s: None)
         assert s.problem is None and s.samples["marker"] == s.frames < 1000
         err.append(np.linalg.norm(s.bodies["marker"][:3, 3] - TRUE["marker"][:3, 3]))
         counts.append(s.frames)

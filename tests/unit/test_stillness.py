@@ -29,7 +29,7 @@ from tmscal.acquisition.sample import (
     window_frames,
 )
 from tmscal.acquisition.settings import sampling_settings as _settings
-from tmscal.config import parse_config
+from tmscal.config import SamplingConfig, parse_config
 from tmscal.drivers.base import Robot, ToolState, Tracker, TrackerFrame
 from tmscal.errors import ConfigError
 from tmscal.geometry import make_pose
@@ -140,8 +140,8 @@ def _run(tr: SwingTracker, n: int = 30, **kw):
         seen[name] = tr.frame
 
     kw.setdefault("settle_s", 3.0)
-    s = sample_pose(rob, tr, n, sleep=lambda _s: pytest.fail("slept"), clock=tr.clock,
-                    on_phase=phase, **kw)
+    s = sample_pose(rob, tr, SamplingConfig(samples=n, **kw),
+                    sleep=lambda _s: pytest.fail("slept"), clock=tr.clock, on_phase=phase)
     return s, seen.get("sampling")
 
 
@@ -247,8 +247,8 @@ def test_fixed_settle_waits_and_reads_no_frame():
     rob = StillRobot(tr).open()
     tr.open()
     slept: list[float] = []
-    s = sample_pose(rob, tr, 5, settle_s=0.7, settle="fixed", sleep=slept.append,
-                    clock=tr.clock)
+    s = sample_pose(rob, tr, SamplingConfig(samples=5, settle_s=0.7, settle="fixed"),
+                    sleep=slept.append, clock=tr.clock)
     assert slept == [0.7] and s.first_frame == 1 and not s.still
 
 
@@ -269,11 +269,14 @@ def test_a_body_never_seen_does_not_hold_up_settling():
 
 @pytest.mark.parametrize("kw", [{"settle": "wait"}, {"still_window_s": 0.0},
                                 {"still_tol_mm": -1.0}, {"sem_mm": 0.0},
-                                {"min_samples": 0}, {"sem_mm": float("nan")}])
+                                {"min_samples": 0}, {"sem_mm": float("nan")},
+                                # the config's ranges hold here too: one check of them
+                                {"min_share": 1.5}, {"settle_s": 5000.0},
+                                {"max_frames_factor": 0.0}])
 def test_bad_options_are_named(kw):
     tr = SwingTracker(0, 0.0, None, 1.0, sigma_mm=0.0)
     with pytest.raises(ValueError, match=next(iter(kw))):
-        sample_pose(StillRobot(tr).open(), tr.open(), 5, **kw)
+        sample_pose(StillRobot(tr).open(), tr.open(), SamplingConfig(samples=5, **kw))
 
 
 # --- the rule itself --------------------------------------------------------------------------
@@ -480,7 +483,10 @@ def test_a_session_from_before_stillness_resumes_as_it_was_recorded():
 @pytest.mark.parametrize("bad", [{"settle": "wait"}, {"settle": None},
                                  {"still_tol_mm": -1.0}, {"sem_mm": "0.01"},
                                  {"min_samples": 0}, {"min_samples": 2.5},
-                                 {"still_window_s": None}, {"sem_mm": float("inf")}])
+                                 {"still_window_s": None}, {"sem_mm": float("inf")},
+                                 # beyond the config's ranges (check_sampling, the one check)
+                                 {"min_share": 0.0}, {"settle_s": 5000.0},
+                                 {"still_window_s": 61.0}, {"sem_mm": 11.0}])
 def test_a_header_value_the_config_would_refuse_is_ignored(bad):
     cfg = _cfg(sem_mm=0.02, still_tol_mm=0.05)
     h = {**_settings(cfg, None, None).to_header(), **bad}

@@ -81,11 +81,7 @@ def measure_tracked(dev: Devices, i: int, P: np.ndarray, st: SamplingSettings, t
     for attempt in range(2):
         phase("moving")
         dev.robot.move_to(P)
-        s = sample_pose(dev.robot, dev.tracker, st.samples, st.settle_s, st.min_share,
-                        st.max_frames_factor, sleep=sleep, robot_reads=st.robot_reads,
-                        on_phase=phase, settle=st.settle, still_window_s=st.still_window_s,
-                        still_tol_mm=st.still_tol_mm, sem_mm=st.sem_mm,
-                        min_samples=st.min_samples)
+        s = sample_pose(dev.robot, dev.tracker, st, sleep=sleep, on_phase=phase)
         if s.problem is None:
             break
         log.info("pose %d attempt %d: %s", i, attempt + 1, s.problem)

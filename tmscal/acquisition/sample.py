@@ -47,12 +47,13 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from ..config import SETTLE_MODES
+from ..config import SETTLE_MODES, SamplingConfig
+from ..config.run import check_sampling
 from ..drivers.base import ForceTorque, Robot, Tracker
+from ..errors import ConfigError
 from ..geometry import angle_between, pose_mean
 from ..timing import Deadline
 
@@ -315,55 +316,40 @@ def _average(names: list[str], got: dict, A_reads: list, n_frames: int, min_shar
     return out, samples, spread, share, problems
 
 
-def _check_options(n_samples: int, settle: str, settle_s: float, still_window_s: float,
-                   still_tol_mm: float | None, sem_mm: float | None, min_samples: int) -> None:
-    """ValueError naming the first option out of range."""
-    if settle not in SETTLE_MODES:
-        raise ValueError(f"settle: expected one of {SETTLE_MODES}, got {settle!r}")
-    checks = [("n_samples", n_samples, n_samples >= 1, "≥ 1"),
-              ("settle_s", settle_s, settle_s >= 0, "≥ 0 s"),
-              ("still_window_s", still_window_s, still_window_s > 0, "> 0 s"),
-              ("min_samples", min_samples, min_samples >= 1, "≥ 1"),
-              ("still_tol_mm", still_tol_mm, still_tol_mm is None or still_tol_mm > 0,
-               "> 0 mm or None"),
-              ("sem_mm", sem_mm, sem_mm is None or sem_mm > 0, "> 0 mm or None")]
-    for name, value, ok, want in checks:
-        if not ok:  # NaN fails every comparison, so it lands here too
-            raise ValueError(f"{name}: expected {want}, got {value!r}")
-
-
-def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float = 1.0,
-                min_share: float = 0.8, max_frames_factor: float = 3.0,
-                sleep: Any = time.sleep, robot_reads: int = 10,
+def sample_pose(robot: Robot, tracker: Tracker, sampling: SamplingConfig,
+                sleep: Callable[[float], None] = time.sleep,
                 on_phase: Callable[[str], None] | None = None, *,
-                settle: str = "still", still_window_s: float = 0.2,
-                still_tol_mm: float | None = None, sem_mm: float | None = None,
-                min_samples: int = 10, clock: Callable[[], float] = time.monotonic
-                ) -> PoseSample:
-    """Settle (module docstring: ``settle`` "still" waits for stillness, at most ``settle_s``
-    s; "fixed" waits ``settle_s`` s; ``settle_s`` 0 not at all), then read tracker frames:
-    ``n_samples`` distinct frames, or with ``sem_mm`` (mm) until every body's standard error
-    of the mean position is ≤ sem_mm (at least ``min_samples``, at most ``n_samples``
-    frames). The robot's flange pose is read alongside ``robot_reads`` of those frames,
-    spread evenly over the n frames (by need: over the first ``min_samples``); the robot holds
-    still, and every read is a round trip on some controllers. The read budget is bounded
-    (``max_frames_factor``·n reads per distinct frame budget and a wall-time limit from the
-    frame rate). The joint angles are read once, after sampling (``read_joints``). Each
-    body keeps the frames in which it is usable; a body usable in fewer
-    than ``min_share`` of the frames, or a pose never still, makes the sample a problem
-    (named). ``on_phase`` hears "settling", then "sampling". ``clock`` (monotonic seconds)
-    times the phases and bounds the stillness wait."""
-    _check_options(n_samples, settle, settle_s, still_window_s, still_tol_mm, sem_mm,
-                   min_samples)
+                clock: Callable[[], float] = time.monotonic) -> PoseSample:
+    """Settle, then sample the tracker at one pose as ``sampling`` (the config's
+    ``SamplingConfig``, or a run's settings) says. Settling (module docstring): ``settle``
+    "still" waits for stillness, at most ``settle_s`` s; "fixed" waits ``settle_s`` s
+    (``sleep``); ``settle_s`` 0 not at all. Then ``samples`` distinct frames, or with
+    ``sem_mm`` (mm) until every body's standard error of the mean position is ≤ sem_mm (at
+    least ``min_samples``, at most ``samples`` frames). The robot's flange pose is read
+    alongside ``robot_reads`` of those frames, spread evenly over the n frames (by need: over
+    the first ``min_samples``); the robot holds still, and every read is a round trip on some
+    controllers. The read budget is bounded (``max_frames_factor``·n reads per distinct frame
+    budget and a wall-time limit from the frame rate). The joint angles are read once, after
+    sampling (``read_joints``). Each body keeps the frames in which it is usable; a body
+    usable in fewer than ``min_share`` of the frames, or a pose never still, makes the sample
+    a problem (named). ``on_phase`` hears "settling", then "sampling". ``clock`` (monotonic
+    seconds) times the phases and bounds the stillness wait. Settings out of range (the
+    config's one check, ``check_sampling``) raise ValueError naming the key."""
+    try:
+        check_sampling(sampling, "sample_pose", floor_within_cap=False)
+    except ConfigError as e:
+        raise ValueError(str(e)) from None
+    sm = sampling
+    n_samples, settle_s, max_frames_factor = sm.samples, sm.settle_s, sm.max_frames_factor
     names = list(tracker.tools)
     if on_phase:
         on_phase("settling")
     t0 = clock()
     settled = _Settled(False)
-    if settle_s > 0 and settle == "fixed":
+    if settle_s > 0 and sm.settle == "fixed":
         sleep(settle_s)
     elif settle_s > 0:
-        settled = _wait_until_still(tracker, settle_s, still_window_s, still_tol_mm,
+        settled = _wait_until_still(tracker, settle_s, sm.still_window_s, sm.still_tol_mm,
                                     max_frames_factor, clock)
     t1 = clock()
     if settled.problem is not None:
@@ -376,11 +362,11 @@ def sample_pose(robot: Robot, tracker: Tracker, n_samples: int, settle_s: float 
                           flags={b: 0 for b in names}, settling_s=t1 - t0)
     if on_phase:
         on_phase("sampling")
-    got, flags, A_reads, frames = _collect(robot, tracker, n_samples, sem_mm,
-                                           min(min_samples, n_samples), robot_reads,
+    got, flags, A_reads, frames = _collect(robot, tracker, n_samples, sm.sem_mm,
+                                           min(sm.min_samples, n_samples), sm.robot_reads,
                                            max_frames_factor, settled.last_frame)
     means, samples, spread, share, problems = _average(names, got, A_reads, len(frames),
-                                                       min_share)
+                                                       sm.min_share)
     A = means.pop("A")
     assert A is not None
     return PoseSample(A=A, bodies=means, samples=samples, spread=spread, share=share,

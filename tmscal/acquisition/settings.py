@@ -6,38 +6,24 @@ docs/session-format.md.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..config import SETTLE_MODES, RigConfig
+from ..config import RigConfig, SamplingConfig
+from ..config.run import check_sampling
+from ..errors import ConfigError
 
 __all__ = ["SamplingSettings", "sampling_settings"]
 
 
 @dataclass
-class SamplingSettings:
-    """The sampling settings of a run: from the config for a new run; on ``--resume`` from
-    the session header unless overridden on the command line (``notes`` says which).
-    ``settle`` … ``sem_mm`` are ``sample_pose``'s settling and samples-by-need options."""
+class SamplingSettings(SamplingConfig):
+    """The sampling settings of a run (the fields of ``SamplingConfig``, declared there
+    once; ``sample_pose`` takes them as they are): from the config for a new run; on
+    ``--resume`` from the session header unless overridden on the command line (``notes``
+    says which)."""
 
-    samples: int
-    settle_s: float
-    min_share: float
-    robot_reads: int
-    max_frames_factor: float
-    notes: list[str]
-    settle: str = "still"
-    still_window_s: float = 0.2
-    still_tol_mm: float | None = None
-    min_samples: int = 10
-    sem_mm: float | None = None
-
-    def to_header(self) -> dict[str, Any]:
-        return {"samples": self.samples, "settle_s": self.settle_s,
-                "min_share": self.min_share, "robot_reads": self.robot_reads,
-                "settle": self.settle, "still_window_s": self.still_window_s,
-                "still_tol_mm": self.still_tol_mm, "min_samples": self.min_samples,
-                "sem_mm": self.sem_mm}
+    notes: list[str] = field(default_factory=list)
 
 
 _COUNTS = ("samples", "robot_reads", "min_samples")
@@ -45,19 +31,29 @@ _OPTIONAL_MM = ("still_tol_mm", "sem_mm")
 
 
 def _header_value(k: str, v: Any) -> tuple[bool, Any]:
-    """(usable, value) for sampling key ``k`` as a session header records it; a value the
-    config would refuse is not usable (the config's is kept)."""
-    if k == "settle":
-        return v in SETTLE_MODES, v
+    """(usable, value) for sampling key ``k`` as a session header records it: of the key's
+    type (a count a whole number) and within the config's ranges (``check_sampling``, the
+    one check of them); a value the config would refuse is not usable (the config's is
+    kept)."""
     if v is None:
-        return k in _OPTIONAL_MM, None
-    if isinstance(v, bool) or not isinstance(v, int | float):
+        if k not in _OPTIONAL_MM:
+            return False, v
+    elif k == "settle":
+        if not isinstance(v, str):
+            return False, v
+    elif isinstance(v, bool) or not isinstance(v, int | float):
         return False, v
-    if k in _COUNTS:
-        return float(v).is_integer() and v >= 1, int(v)
-    if k in ("settle_s", "min_share"):
-        return 0 <= v < float("inf"), float(v)
-    return 0 < v < float("inf"), float(v)
+    elif k in _COUNTS:
+        if not float(v).is_integer():
+            return False, v
+        v = int(v)
+    else:
+        v = float(v)
+    try:
+        check_sampling(replace(SamplingConfig(), **{k: v}), "header", floor_within_cap=False)
+    except ConfigError:
+        return False, v
+    return True, v
 
 
 def _show(v: Any) -> str:
@@ -71,11 +67,7 @@ def sampling_settings(cfg: RigConfig, header: dict[str, Any] | None, samples: in
     by stillness and samples by need has no ``settle``: its poses waited settle_s and took
     every sample, and so do the resumed ones); ``samples`` overrides both."""
     c = cfg.sampling
-    vals: dict[str, Any] = {"samples": c.samples, "settle_s": c.settle_s,
-                            "min_share": c.min_share, "robot_reads": c.robot_reads,
-                            "settle": c.settle, "still_window_s": c.still_window_s,
-                            "still_tol_mm": c.still_tol_mm, "min_samples": c.min_samples,
-                            "sem_mm": c.sem_mm}
+    vals: dict[str, Any] = c.values()
     notes: list[str] = []
     recorded = (header or {}).get("sampling")
     if isinstance(recorded, dict):
@@ -85,7 +77,8 @@ def sampling_settings(cfg: RigConfig, header: dict[str, Any] | None, samples: in
                              "(before settling by stillness and samples by need)")
             vals.update(settle="fixed", sem_mm=None)
         for k, v in recorded.items():
-            usable, v = _header_value(k, v) if k in vals else (False, v)
+            usable, v = (_header_value(k, v) if k in SamplingConfig.HEADER_KEYS
+                         else (False, v))
             if not usable:
                 continue
             if v != vals[k]:
@@ -97,4 +90,4 @@ def sampling_settings(cfg: RigConfig, header: dict[str, Any] | None, samples: in
             notes.append(f"samples {samples} from the command line (the session was "
                          f"recorded with {vals['samples']})")
         vals["samples"] = int(samples)
-    return SamplingSettings(max_frames_factor=c.max_frames_factor, notes=notes, **vals)
+    return SamplingSettings(notes=notes, **vals)

@@ -99,12 +99,28 @@ def _driver_of(data: Any, src: str, kind: str,
         cls = settings_class(kind, driver)
     except ConfigError as e:
         raise err(src, f"{kind}.driver", str(e)) from None
+    _moved(data, src, kind, driver, cls)
     accepted = GENERIC_KEYS[kind] + tuple(cls.KEYS)
     unknown = sorted(k for k in data if k not in accepted)
     if unknown:
         raise err(src, f"{kind}.{unknown[0]}", f"unknown key for driver {driver!r}; expected "
                   f"one of: {', '.join(sorted(accepted))}")
     return driver, cls
+
+
+def _moved(data: Mapping[str, Any], src: str, kind: str, driver: str,
+           cls: type[DriverSettings]) -> None:
+    """A key or option of the section that the driver's ``MOVED`` says has moved is refused,
+    naming its new spelling (``key 'tracker.timeout_s': moved: write it as
+    tracker.options.timeout_s``)."""
+    options = data.get("options")
+    for old, new in cls.MOVED.items():
+        head, _, rest = old.partition(".")
+        here = (rest in options if head == "options" and isinstance(options, Mapping)
+                else not rest and head in data)
+        if here:
+            raise err(src, f"{kind}.{old}", f"moved for driver {driver!r}: write it as "
+                      f"{kind}.{new} (docs/configs.md)")
 
 
 def _options(data: Mapping[str, Any], src: str, kind: str, driver: str,

@@ -20,10 +20,12 @@ __all__ = ["SETTLE_MODES", "parse_sampling", "parse_run", "parse_adaptive",
 SETTLE_MODES = ("still", "fixed")
 
 
-def check_sampling(s: Any, src: str) -> None:
+def check_sampling(s: Any, src: str, floor_within_cap: bool = True) -> None:
     """The ``sampling`` section's ranges (a ``SamplingConfig``), each violation a ConfigError
     naming the key: counts, times and tolerances finite and in a sensible range; with
-    ``sem_mm``, the floor ``min_samples`` is not above the cap ``samples``."""
+    ``sem_mm`` and ``floor_within_cap``, the floor ``min_samples`` is not above the cap
+    ``samples``. The one check of the sampling settings: the config's, and ``sample_pose``'s
+    (without ``floor_within_cap``: a ``--samples`` below the config's floor caps it)."""
     in_range(src, "sampling.samples", s.samples, 1, 1_000_000)
     positive(src, "sampling.settle_s", s.settle_s, allow_zero=True, at_most=3600.0)
     in_range(src, "sampling.robot_reads", s.robot_reads, 1, 1_000_000)
@@ -39,7 +41,7 @@ def check_sampling(s: Any, src: str) -> None:
     in_range(src, "sampling.min_samples", s.min_samples, 1, 1_000_000)
     if s.sem_mm is not None:
         positive(src, "sampling.sem_mm", s.sem_mm, at_most=10.0)
-        if s.min_samples > s.samples:
+        if floor_within_cap and s.min_samples > s.samples:
             raise err(src, "sampling.min_samples", f"{s.min_samples} is above samples "
                       f"{s.samples} (the floor of samples by need is above their cap)")
 

@@ -6,9 +6,9 @@ in their ``settings`` (:mod:`tmscal.config.settings`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 if TYPE_CHECKING:
     from ..calib.prediction import AdaptiveSettings
@@ -82,7 +82,12 @@ class SamplingConfig:
     is retried then skipped, how many of those frames also read the robot's flange pose
     (spread evenly), and samples by need: stop when every body's standard error of the mean
     position is ≤ ``sem_mm`` (mm; None: always ``samples``), after at least ``min_samples``.
-    ``tmscal.acquisition.sample`` documents the rules."""
+    ``tmscal.acquisition.sample`` documents the rules.
+
+    The one declaration of the sampling settings: the config's section, a run's settings
+    (``tmscal.acquisition.settings.SamplingSettings`` adds where they came from) and
+    ``sample_pose``'s argument; ``tmscal.config.run.check_sampling`` is the one check of
+    their ranges."""
 
     samples: int = 100
     settle_s: float = 1.0
@@ -94,6 +99,19 @@ class SamplingConfig:
     still_tol_mm: float | None = None
     min_samples: int = 10
     sem_mm: float | None = None
+
+    #: what a session header records (``max_frames_factor`` bounds a read, not the data)
+    HEADER_KEYS: ClassVar[tuple[str, ...]] = (
+        "samples", "settle_s", "min_share", "robot_reads", "settle", "still_window_s",
+        "still_tol_mm", "min_samples", "sem_mm")
+
+    def to_header(self) -> dict[str, Any]:
+        """The settings a session header records (docs/session-format.md)."""
+        return {k: getattr(self, k) for k in self.HEADER_KEYS}
+
+    def values(self) -> dict[str, Any]:
+        """Every field's value by name."""
+        return {f.name: getattr(self, f.name) for f in fields(SamplingConfig)}
 
 
 @dataclass

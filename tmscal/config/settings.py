@@ -17,8 +17,14 @@ subclassing :class:`DriverSettings` (trackers: :class:`TrackerSettings`) that de
   ``baud``, ``reply``, ``log_wire``), each a dataclass field whose type (bool, int, float,
   str, optionally ``| None``) is checked when the section is read;
 * ``OPTIONS``: ``{name: Option(...)}``, the ``<kind>.options`` the driver accepts, each with
-  its type and range (None: no declaration, the constructor decides when the driver is
-  built);
+  its type, range, default, unit and help, declared once (None: no declaration, the
+  constructor decides when the driver is built). The driver's constructor takes its
+  defaults from here (``defaults()``) and checks its keyword arguments with
+  ``check_options`` against the same declaration, so no range is written twice; the option
+  tables of docs/configs.md are rendered from it (:mod:`tmscal.config.doc`);
+* ``MOVED`` (optional): ``{old spelling: new spelling}`` of keys and options that moved
+  (``"timeout_s": "options.timeout_s"``), each relative to the section: a config that still
+  uses the old one is refused naming the new one;
 * ``parse(section, src, base_dir, check_files)``: the settings from the whole section
   mapping (generic keys already checked): the driver's keys and, for a tracker, the tools'
   values, every problem a ``ConfigError`` made by ``err(src, "<kind>.<key>", ...)`` so that
@@ -67,8 +73,10 @@ def _n(v: float) -> str:
 class Option:
     """One driver option (``<kind>.options.<name>``): its ``type`` (bool, int, float or
     str), inclusive bounds ``lo``/``hi`` and exclusive bounds ``above``/``below`` (numbers,
-    in the option's unit), the ``choices`` a string may take, and whether null is allowed
-    (``null``)."""
+    in the option's ``unit``), the ``choices`` a string may take, whether null is allowed
+    (``null``), the ``default`` the driver takes when the option is not given, and for the
+    docs ``help`` (what the option does) and ``default_text`` (how to show the default,
+    when its value alone does not say it: "null: the controller's")."""
 
     type: type
     lo: float | None = None
@@ -77,6 +85,10 @@ class Option:
     below: float | None = None
     choices: tuple[str, ...] = ()
     null: bool = False
+    default: Any = None
+    unit: str = ""
+    help: str = ""
+    default_text: str = ""
 
     def describe(self) -> str:
         """What the option takes, for messages and docs ("a number > 0", "true or false")."""
@@ -122,6 +134,14 @@ class Option:
             raise bad
         return x
 
+    def validate(self, v: Any, who: str, name: str) -> Any:
+        """As ``check``, for a driver's keyword argument: ``v`` (a float for a number
+        option), else ValueError naming ``who`` (the driver class) and ``name``."""
+        try:
+            return self.check(v, who, name)
+        except ConfigError as e:
+            raise ValueError(f"{who}: {name}: {str(e).split(': ', 2)[-1]}") from None
+
 
 @dataclass(frozen=True)
 class DriverSettings:
@@ -137,8 +157,27 @@ class DriverSettings:
     OPTIONS: ClassVar[Mapping[str, Option] | None] = None
     #: the key ``address()`` is read from ("" when the address is not the driver's key)
     ADDRESS_KEY: ClassVar[str] = ""
+    #: keys and options that moved, old spelling → new, both relative to the section
+    #: (``"options.options": "options.reply_options"``); the old one is refused naming the new
+    MOVED: ClassVar[Mapping[str, str]] = {}
 
     src: str = field(default="<config>", kw_only=True, compare=False)
+
+    @classmethod
+    def defaults(cls) -> dict[str, Any]:
+        """Each declared option's default (the driver constructor's keyword defaults)."""
+        return {k: o.default for k, o in (cls.OPTIONS or {}).items()}
+
+    @classmethod
+    def check_options(cls, who: str, **values: Any) -> dict[str, Any]:
+        """``values`` (a driver's keyword arguments named as its options) checked against
+        ``OPTIONS``, the one declaration of their types and ranges: the checked values (a
+        float for a number option), or ValueError naming ``who`` and the option."""
+        declared = cls.OPTIONS or {}
+        unknown = sorted(set(values) - set(declared))
+        if unknown:
+            raise ValueError(f"{who}: {unknown[0]!r} is not an option of {cls.__name__}")
+        return {k: declared[k].validate(v, who, k) for k, v in values.items()}
 
     @classmethod
     def parse(cls, section: Mapping[str, Any], src: str, base_dir: Path | None,

@@ -27,10 +27,14 @@ from ...net import connect_problem
 from ...timing import Deadline
 from ..base import ForceTorque
 from . import codec
+from .settings import ATISettings
 
 log = logging.getLogger(__name__)
 
 __all__ = ["ATINetFT"]
+
+#: the options' defaults, declared once in ATISettings.OPTIONS
+_OPT = ATISettings.defaults()
 
 
 def _positive(name: str, v: Any) -> float:
@@ -51,8 +55,8 @@ class ATINetFT(ForceTorque):
     name = "ati"
 
     def __init__(self, host: str, counts_per_force: float, counts_per_torque: float,
-                 port: int = codec.PORT, timeout_s: float = 1.0,
-                 max_lost_share: float = 0.05) -> None:
+                 port: int = codec.PORT, timeout_s: float = _OPT["timeout_s"],
+                 max_lost_share: float = _OPT["max_lost_share"]) -> None:
         super().__init__()
         if not isinstance(host, str) or not host:
             raise ValueError("ATINetFT: host must be a non-empty address")
@@ -61,11 +65,10 @@ class ATINetFT(ForceTorque):
         self.host, self.port = host, port
         self.counts_per_force = _positive("counts_per_force", counts_per_force)
         self.counts_per_torque = _positive("counts_per_torque", counts_per_torque)
-        self.timeout_s = _positive("timeout_s", timeout_s)
-        if not 0 <= max_lost_share < 1:
-            raise ValueError(f"ATINetFT: max_lost_share must be in [0, 1), got "
-                             f"{max_lost_share!r}")
-        self.max_lost_share = float(max_lost_share)
+        o = ATISettings.check_options("ATINetFT", timeout_s=timeout_s,
+                                      max_lost_share=max_lost_share)
+        self.timeout_s: float = o["timeout_s"]
+        self.max_lost_share: float = o["max_lost_share"]
         #: records lost and reordered over the driver's life (``read`` adds to them)
         self.lost = 0
         self.reordered = 0

@@ -25,8 +25,10 @@ class ATISettings(FTSettings):
 
     KEYS: ClassVar[tuple[str, ...]] = ("counts_per_force", "counts_per_torque")
     OPTIONS: ClassVar[Mapping[str, Option]] = {
-        "timeout_s": Option(float, above=0, hi=3600),
-        "max_lost_share": Option(float, lo=0, below=1),
+        "timeout_s": Option(float, above=0, hi=3600, default=1.0, unit="s",
+                            help="the longest wait for a record"),
+        "max_lost_share": Option(float, lo=0, below=1, default=0.05,
+                                 help="the share of records one read may lose"),
     }
 
     counts_per_force: float | None = None

@@ -45,14 +45,18 @@ from ..robot_lock import host_port
 from .arm import denso_arm
 from .client import DEFAULT_PORT, BCAPClient, close_down
 from .halt import HaltLink
+from .settings import DensoSettings
 from .variant import to_variant
 
 log = logging.getLogger(__name__)
 
+#: the options' defaults, declared once in DensoSettings.OPTIONS
+_OPT = DensoSettings.defaults()
+
 #: Default ``max_linear_accel_mm_s2``: an assumed upper bound (≈ 2 g) on the linear
 #: acceleration DENSO's 6-axis arms reach at 100 %; deliberately high so that the percentage
 #: derived from it errs on the gentle side. Set the arm's own figure (CHECK at the rig).
-DEFAULT_MAX_LINEAR_ACCEL_MM_S2 = 20000.0
+DEFAULT_MAX_LINEAR_ACCEL_MM_S2: float = _OPT["max_linear_accel_mm_s2"]
 
 
 def _positive(name: str, value: float) -> float:
@@ -121,38 +125,37 @@ class DensoRobot(Robot):
 
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  envelope: Envelope | None = None, speed_mm_s: float = 100.0,
-                 accel_mm_s2: float = 500.0, max_linear_speed_mm_s: float = 1000.0,
-                 max_linear_accel_mm_s2: float = DEFAULT_MAX_LINEAR_ACCEL_MM_S2,
-                 ext_speed_percent: float = 100.0,
-                 provider: str = "CaoProv.DENSO.VRC", machine: str = "localhost",
-                 robot_name: str = "Arm", timeout_s: float = 30.0,
-                 watchdog_ms: int | None = 400, fig: int = -1, manual_reset: bool = False,
-                 halt_timeout_s: float = 5.0) -> None:
+                 accel_mm_s2: float = 500.0,
+                 max_linear_speed_mm_s: float = _OPT["max_linear_speed_mm_s"],
+                 max_linear_accel_mm_s2: float = _OPT["max_linear_accel_mm_s2"],
+                 ext_speed_percent: float = _OPT["ext_speed_percent"],
+                 provider: str = _OPT["provider"], machine: str = _OPT["machine"],
+                 robot_name: str = _OPT["robot_name"], timeout_s: float = _OPT["timeout_s"],
+                 watchdog_ms: int | None = _OPT["watchdog_ms"], fig: int = _OPT["fig"],
+                 manual_reset: bool = _OPT["manual_reset"],
+                 halt_timeout_s: float = _OPT["halt_timeout_s"]) -> None:
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         _positive("speed_mm_s", speed_mm_s)
-        self.max_linear_speed_mm_s = _positive("max_linear_speed_mm_s", max_linear_speed_mm_s)
-        self.max_linear_accel_mm_s2 = _positive("max_linear_accel_mm_s2",
-                                                max_linear_accel_mm_s2)
+        o = DensoSettings.check_options(
+            "DensoRobot", max_linear_speed_mm_s=max_linear_speed_mm_s,
+            max_linear_accel_mm_s2=max_linear_accel_mm_s2, ext_speed_percent=ext_speed_percent,
+            provider=provider, machine=machine, robot_name=robot_name, timeout_s=timeout_s,
+            watchdog_ms=watchdog_ms, fig=fig, manual_reset=manual_reset,
+            halt_timeout_s=halt_timeout_s)
+        self.max_linear_speed_mm_s: float = o["max_linear_speed_mm_s"]
+        self.max_linear_accel_mm_s2: float = o["max_linear_accel_mm_s2"]
         accel_percent(accel_mm_s2, self.max_linear_accel_mm_s2)  # refuses bad values now
-        ext = float(ext_speed_percent)
-        if not 0.01 <= ext <= 100.0:  # also refuses NaN
-            raise ValueError(f"ext_speed_percent must be in [0.01, 100], got {ext_speed_percent!r}")
-        self.ext_speed_percent = ext
-        if watchdog_ms is not None and not (isinstance(watchdog_ms, int | float)
-                                            and 0 <= watchdog_ms <= 3_600_000):
-            raise ValueError(f"watchdog_ms must be None or 0..3600000 ms, got {watchdog_ms!r}")
+        self.ext_speed_percent: float = o["ext_speed_percent"]
         self.host = host
         self.port = int(port)
-        self.provider = provider
-        self.machine = machine
-        self.robot_name = robot_name
-        self.timeout_s = float(timeout_s)
-        self.watchdog_ms = watchdog_ms
-        self.fig = int(fig)
-        if not isinstance(manual_reset, bool):
-            raise ValueError(f"manual_reset must be true or false, got {manual_reset!r}")
-        self.manual_reset = manual_reset
-        self.halt_timeout_s = _positive("halt_timeout_s", halt_timeout_s)
+        self.provider: str = o["provider"]
+        self.machine: str = o["machine"]
+        self.robot_name: str = o["robot_name"]
+        self.timeout_s: float = o["timeout_s"]
+        self.watchdog_ms: int | None = o["watchdog_ms"]
+        self.fig: int = o["fig"]
+        self.manual_reset: bool = o["manual_reset"]
+        self.halt_timeout_s: float = o["halt_timeout_s"]
         self._halt: HaltLink | None = None
         self._client: BCAPClient | None = None
         self._ctrl: int | None = None

@@ -44,6 +44,10 @@ from ...safety import AxisPath, AxisProfile, MotionLaw
 from ...timing import Deadline
 from ..base import Envelope, Robot
 from .frames import MIN_FACTOR, base_from_flange, dynamics_factors, ee_target, matrix_m
+from .settings import FrankaSettings
+
+#: the options' defaults, declared once in FrankaSettings.OPTIONS
+_OPT = FrankaSettings.defaults()
 
 log = logging.getLogger(__name__)
 
@@ -116,20 +120,17 @@ class FrankaRobot(Robot):
     name = "franka"
 
     def __init__(self, host: str, envelope: Envelope | None = None, speed_mm_s: float = 100.0,
-                 accel_mm_s2: float = 500.0, auto_recover: bool = False,
-                 realtime: bool = False, timeout_s: float = 60.0) -> None:
+                 accel_mm_s2: float = 500.0, auto_recover: bool = _OPT["auto_recover"],
+                 realtime: bool = _OPT["realtime"], timeout_s: float = _OPT["timeout_s"]) -> None:
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         if not host or not isinstance(host, str):
             raise ValueError("FrankaRobot: host must be a non-empty address")
-        if not isinstance(auto_recover, bool) or not isinstance(realtime, bool):
-            raise ValueError("FrankaRobot: auto_recover and realtime must be true or false")
-        if isinstance(timeout_s, bool) or not isinstance(timeout_s, int | float) \
-                or not timeout_s > 0:
-            raise ValueError(f"FrankaRobot: timeout_s must be a number > 0, got {timeout_s!r}")
+        o = FrankaSettings.check_options("FrankaRobot", auto_recover=auto_recover,
+                                         realtime=realtime, timeout_s=timeout_s)
         self.host = host
-        self.auto_recover = auto_recover
-        self.realtime = realtime
-        self.timeout_s = float(timeout_s)
+        self.auto_recover: bool = o["auto_recover"]
+        self.realtime: bool = o["realtime"]
+        self.timeout_s: float = o["timeout_s"]
         self._robot: Any = None
         self._identity: dict[str, Any] = {}
         self._halt = threading.Event()

@@ -20,7 +20,14 @@ class FrankaSettings(RobotSettings):
     which needs a real-time kernel) and ``timeout_s`` (the longest one move may take, s)."""
 
     OPTIONS: ClassVar[Mapping[str, Option]] = {
-        "auto_recover": Option(bool),
-        "realtime": Option(bool),
-        "timeout_s": Option(float, above=0, hi=3600),
+        "auto_recover": Option(
+            bool, default=False,
+            help="true: recover from a reflex with `recover_from_errors()` (logged); false: "
+                 "a reflex is a RobotFault naming its errors"),
+        "realtime": Option(
+            bool, default=False,
+            help="true: franky's `RealtimeConfig.Enforce`, which needs a real-time kernel "
+                 "and real-time priority"),
+        "timeout_s": Option(float, above=0, hi=3600, default=60.0, unit="s",
+                            help="the longest one move may take"),
     }

@@ -2,18 +2,18 @@
 config parser through the driver registry (``tmscal.config.settings``, the settings protocol).
 
 ``host`` (the PlusServer or other OpenIGTLink source; required), ``port`` (1…65535, default
-18944), ``timeout_s`` (s, > 0, default 2), and the values of the generic ``tools`` mapping:
+18944), and the values of the generic ``tools`` mapping:
 each tool's TRANSFORM device name, 1…20 bytes of ASCII (OpenIGTLink's char[20]; PlusServer
 sends the first 20 characters of a longer transform name). ``frame_rate_hz`` is the generic
-section's; ``tracker.options`` takes ``ask_metadata`` (bool). Every problem is a
-``ConfigError`` naming the key: ``<config>: key 'tracker.port': ...``. docs/devices.md,
+section's; ``tracker.options`` takes ``timeout_s`` (s) and ``ask_metadata`` (bool); the key
+``tracker.timeout_s`` of older configs is refused naming ``tracker.options.timeout_s``. Every
+problem is a ``ConfigError`` naming the key: ``<config>: key 'tracker.port': ...``. docs/devices.md,
 "OpenIGTLink tracker (PlusServer)".
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,27 +21,34 @@ from typing import Any, ClassVar, Self
 
 from ...config.settings import Option, TrackerSettings
 from ...config.values import err, show
-from .tracker import DEFAULT_PORT
 from .wire import MAX_NAME_BYTES
 
-__all__ = ["IGTLSettings"]
+__all__ = ["IGTLSettings", "DEFAULT_PORT"]
+
+#: PlusServer's usual port (the OpenIGTLink registered port)
+DEFAULT_PORT = 18944
 
 
 @dataclass(frozen=True)
 class IGTLSettings(TrackerSettings):
-    """Where the OpenIGTLink source is and how long to wait for it: ``host``, ``port``
-    (TCP), ``timeout_s`` (s), and ``tools`` (our tool name → TRANSFORM device name). The
-    base class's ``kwargs()`` gives ``IGTLTracker`` these as they are (``make_tracker`` adds
-    ``frame_rate_hz`` and the options)."""
+    """Where the OpenIGTLink source is: ``host``, ``port`` (TCP), and ``tools`` (our tool
+    name → TRANSFORM device name). The base class's ``kwargs()`` gives ``IGTLTracker``
+    these as they are (``make_tracker`` adds ``frame_rate_hz`` and the options)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("host", "port", "timeout_s")
-    #: the options the driver accepts beside KEYS
-    OPTIONS: ClassVar[Mapping[str, Option]] = {"ask_metadata": Option(bool)}
+    KEYS: ClassVar[tuple[str, ...]] = ("host", "port")
+    OPTIONS: ClassVar[Mapping[str, Option]] = {
+        "timeout_s": Option(float, above=0, hi=3600, default=2.0, unit="s",
+                            help="the longest wait for the connection and for a new frame"),
+        "ask_metadata": Option(
+            bool, default=True,
+            help="send one `GET_STATUS` with header version 2 after connecting, so that "
+                 "PlusServer answers in version 2 and its TRANSFORMs carry `TransformStatus`"),
+    }
+    MOVED: ClassVar[Mapping[str, str]] = {"timeout_s": "options.timeout_s"}
     ADDRESS_KEY: ClassVar[str] = "host"
 
     host: str = ""
     port: int = DEFAULT_PORT
-    timeout_s: float = 2.0
 
     @classmethod
     def parse(cls, section: Mapping[str, Any], src: str, base_dir: Path | None,
@@ -51,18 +58,13 @@ class IGTLSettings(TrackerSettings):
         no files."""
         host = cls._host(section.get("host"), src)
         port = cls._port(section.get("port", DEFAULT_PORT), src)
-        timeout = section.get("timeout_s", 2.0)
-        if isinstance(timeout, bool) or not isinstance(timeout, int | float) \
-                or not math.isfinite(timeout) or timeout <= 0:
-            raise err(src, "tracker.timeout_s",
-                      f"expected a number of seconds > 0, got {show(timeout)}")
         tools = section.get("tools") or {}
         if not isinstance(tools, Mapping):
             raise err(src, "tracker.tools", "expected a mapping of tool name → TRANSFORM "
                       f"device name, got {show(tools)}")
         parsed = {str(k): cls.parse_tool(str(k), v, src, base_dir, check_files)
                   for k, v in tools.items()}
-        return cls(host, port, float(timeout), tools=parsed, src=src)
+        return cls(host, port, tools=parsed, src=src)
 
     @classmethod
     def parse_tool(cls, name: str, value: Any, src: str, base_dir: Path | None,

@@ -42,13 +42,14 @@ from ...timing import Deadline
 from ..base import Tracker, TrackerFrame
 from . import wire
 from .frames import FrameAssembler, transform_status
+from .settings import DEFAULT_PORT, IGTLSettings
 
 log = logging.getLogger(__name__)
 
 __all__ = ["IGTLTracker", "DEFAULT_PORT"]
 
-#: PlusServer's usual port (the OpenIGTLink registered port)
-DEFAULT_PORT = 18944
+#: the options' defaults, declared once in IGTLSettings.OPTIONS
+_OPT = IGTLSettings.defaults()
 _RECV_BYTES = 1 << 16
 #: how often the reader looks at its stop flag while the source is quiet (s)
 _POLL_S = 0.1
@@ -72,8 +73,8 @@ class IGTLTracker(Tracker):
     name = "igtl"
 
     def __init__(self, host: str, tools: Mapping[str, str], *, port: int = DEFAULT_PORT,
-                 frame_rate_hz: float = 60.0, timeout_s: float = 2.0,
-                 ask_metadata: bool = True) -> None:
+                 frame_rate_hz: float = 60.0, timeout_s: float = _OPT["timeout_s"],
+                 ask_metadata: bool = _OPT["ask_metadata"]) -> None:
         if not isinstance(host, str) or not host:
             raise ValueError("IGTLTracker: host must be a non-empty address")
         if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
@@ -87,15 +88,13 @@ class IGTLTracker(Tracker):
                                  f"1…{wire.MAX_NAME_BYTES} bytes")
         if len(set(tools.values())) != len(tools):
             raise ValueError(f"IGTLTracker: two tools share one device name: {dict(tools)}")
-        if isinstance(timeout_s, bool) or not isinstance(timeout_s, int | float) \
-                or not 0 < timeout_s < float("inf"):
-            raise ValueError(f"IGTLTracker: timeout_s must be a number of seconds > 0, got "
-                             f"{timeout_s!r}")
+        o = IGTLSettings.check_options("IGTLTracker", timeout_s=timeout_s,
+                                       ask_metadata=ask_metadata)
         super().__init__(list(tools), frame_rate_hz)
         self.host, self.port = host, port
         self.device_names = dict(tools)
-        self.timeout_s = float(timeout_s)
-        self.ask_metadata = bool(ask_metadata)
+        self.timeout_s: float = o["timeout_s"]
+        self.ask_metadata: bool = o["ask_metadata"]
         self._where = f"{self.name} {f'[{host}]' if ':' in host else host}:{port}"
         self._cond = threading.Condition()
         self._sock: socket.socket | None = None

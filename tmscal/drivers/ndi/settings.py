@@ -27,8 +27,10 @@ from .rom import read_rom
 __all__ = ["NDISettings", "tracker_port_problem", "rom_path", "check_rom_exists",
            "log_wire_path", "short_path"]
 
-#: per-command waits the driver takes as options (seconds)
-_WAIT = Option(float, above=0, hi=120)
+
+def _wait(default: float, help: str) -> Option:
+    """A per-command wait the driver takes as an option (s)."""
+    return Option(float, above=0, hi=120, default=default, unit="s", help=help)
 
 
 #: the API port of a networked NDI tracker (the Vega), for the hint of ``tracker_port_problem``
@@ -188,9 +190,22 @@ class NDISettings(TrackerSettings):
     FRAME_RATE_HZ: ClassVar[tuple[float, float] | None] = (20.0, 400.0)
     FRAME_RATE_DEVICES: ClassVar[str] = "NDI Polaris Vicra 20 Hz, Spectra 20–60 Hz, Vega"
     OPTIONS: ClassVar[Mapping[str, Option]] = {
-        "timeout_s": _WAIT, "retries": Option(int, lo=0, hi=100), "reset": Option(bool, null=True),
-        "reset_timeout_s": _WAIT, "init_timeout_s": _WAIT, "pinit_timeout_s": _WAIT,
-        "tstart_timeout_s": _WAIT, "options": Option(int, lo=0, hi=0xFFFF)}
+        "timeout_s": _wait(2.0, "the wait for each reply"),
+        "retries": Option(int, lo=0, hi=100, default=3,
+                          help="re-sends of a command after a corrupt, torn or missing reply"),
+        "reset": Option(bool, null=True, default=None,
+                        default_text="null: only when every tool has a ROM file",
+                        help="send a serial break first (never over `socket://`)"),
+        "reset_timeout_s": _wait(7.0, "the wait for RESET after the break"),
+        "init_timeout_s": _wait(5.0, "the wait for INIT"),
+        "pinit_timeout_s": _wait(5.0, "the wait for each PINIT"),
+        "tstart_timeout_s": _wait(5.0, "the wait for TSTART"),
+        "reply_options": Option(int, lo=0, hi=0xFFFF, default=0x0801,
+                                default_text="2049 (0x0801: transforms, out-of-volume "
+                                             "included)",
+                                help="the TX/BX reply option word"),
+    }
+    MOVED: ClassVar[Mapping[str, str]] = {"options.options": "options.reply_options"}
 
     port: str = ""
     baud: int = 115200

@@ -41,7 +41,11 @@ from . import protocol as p
 from .codes import ErrorCode, HandleStatus, PortStatus, SystemStatus, flag_names
 from .replies import ReplyKind
 from .rom import read_roms
+from .settings import NDISettings
 from .wire import open_port, silence_message
+
+#: the options' defaults, declared once in NDISettings.OPTIONS
+_OPT = NDISettings.defaults()
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +93,7 @@ class NDITracker(Tracker):
       ndicapi) before carrying on with INIT.
     * ``init_timeout_s``, ``pinit_timeout_s``, ``tstart_timeout_s``: reply timeouts of INIT,
       PINIT and TSTART (5 s each; never shorter than ``timeout_s``).
-    * ``options``: TX/BX reply option word (default 0x0801: transforms incl. out-of-volume).
+    * ``reply_options``: TX/BX reply option word (default 0x0801: transforms incl. out-of-volume).
     * ``log_wire``: a file that records the serial traffic (pyserial's ``spy://`` hex dump;
       device paths only). It must not exist yet; a reconnect writes ``NAME.1``, ``NAME.2`` …
     """
@@ -98,10 +102,13 @@ class NDITracker(Tracker):
 
     def __init__(self, port: str, tools: Mapping[str, str | os.PathLike[str] | None], *,
                  baud: int = 115200, frame_rate_hz: float = 60.0, reply: str = "bx",
-                 timeout_s: float = 2.0, retries: int = 3, reset: bool | None = None,
-                 reset_timeout_s: float = 7.0, init_timeout_s: float = 5.0,
-                 pinit_timeout_s: float = 5.0, tstart_timeout_s: float = 5.0,
-                 options: int = 0x0801,
+                 timeout_s: float = _OPT["timeout_s"], retries: int = _OPT["retries"],
+                 reset: bool | None = _OPT["reset"],
+                 reset_timeout_s: float = _OPT["reset_timeout_s"],
+                 init_timeout_s: float = _OPT["init_timeout_s"],
+                 pinit_timeout_s: float = _OPT["pinit_timeout_s"],
+                 tstart_timeout_s: float = _OPT["tstart_timeout_s"],
+                 reply_options: int = _OPT["reply_options"],
                  log_wire: str | os.PathLike[str] | None = None) -> None:
         if not tools:
             raise ValueError("NDITracker needs at least one tool")
@@ -109,27 +116,25 @@ class NDITracker(Tracker):
             raise ValueError(f"reply must be 'bx' or 'tx', got {reply!r}")
         if baud not in p.BAUD_CODES:
             raise ValueError(f"unsupported baud {baud}; choose from {sorted(p.BAUD_CODES)}")
-        if timeout_s <= 0 or retries < 0:
-            raise ValueError("timeout_s must be > 0 and retries >= 0")
-        waits = {"reset_timeout_s": reset_timeout_s, "init_timeout_s": init_timeout_s,
-                 "pinit_timeout_s": pinit_timeout_s, "tstart_timeout_s": tstart_timeout_s}
-        for key, v in waits.items():
-            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v <= 120:
-                raise ValueError(f"{key} must be a number of seconds in (0, 120], got {v!r}")
+        o = NDISettings.check_options(
+            "NDITracker", timeout_s=timeout_s, retries=retries, reset=reset,
+            reset_timeout_s=reset_timeout_s, init_timeout_s=init_timeout_s,
+            pinit_timeout_s=pinit_timeout_s, tstart_timeout_s=tstart_timeout_s,
+            reply_options=reply_options)
         super().__init__(list(tools), frame_rate_hz)
         self.port = port
         self.rom_paths: dict[str, Path | None] = {
             k: (Path(v) if v is not None else None) for k, v in tools.items()}
         self.baud = int(baud)
         self.reply = reply
-        self.timeout_s = float(timeout_s)
-        self.retries = int(retries)
-        self.reset = reset
-        self.reset_timeout_s = float(reset_timeout_s)
+        self.timeout_s: float = o["timeout_s"]
+        self.retries: int = o["retries"]
+        self.reset: bool | None = o["reset"]
+        self.reset_timeout_s: float = o["reset_timeout_s"]
         #: per-command reply timeouts longer than ``timeout_s``
-        self.command_timeouts = {"INIT": float(init_timeout_s), "PINIT": float(pinit_timeout_s),
-                                 "TSTART": float(tstart_timeout_s)}
-        self.options = int(options)
+        self.command_timeouts = {"INIT": o["init_timeout_s"], "PINIT": o["pinit_timeout_s"],
+                                 "TSTART": o["tstart_timeout_s"]}
+        self.reply_options: int = o["reply_options"]
         self.log_wire = Path(log_wire) if log_wire is not None else None
         self._opens = 0
         self.handles: dict[str, int] = {}
@@ -370,7 +375,7 @@ class NDITracker(Tracker):
 
     def _request_tracking(self) -> p.TrackingReply:
         """Send BX (or TX) with our reply options and decode the answer."""
-        opts = f"{self.options:04X}"
+        opts = f"{self.reply_options:04X}"
         if self.reply == "tx":
             return p.decode_tx(self._command("TX", opts).text)
         raw, _ = self._transact("BX", opts)

@@ -40,6 +40,7 @@ from ...timing import Deadline
 from ..base import Envelope, Robot
 from .arm import ur_arm
 from .calls import RTDECalls
+from .settings import URSettings
 from .states import (
     MODE_ACTION,
     ROBOT_MODE_RUNNING,
@@ -49,6 +50,9 @@ from .states import (
     dashboard_value,
     remote_check_applies,
 )
+
+#: the options' defaults, declared once in URSettings.OPTIONS
+_OPT = URSettings.defaults()
 
 log = logging.getLogger(__name__)
 
@@ -124,24 +128,21 @@ class URRobot(RTDECalls, Robot):
     name = "ur"
 
     def __init__(self, host: str, envelope: Envelope | None = None, speed_mm_s: float = 100.0,
-                 accel_mm_s2: float = 500.0, upload_script: bool = True,
-                 frequency_hz: float | None = None, timeout_s: float = 30.0,
-                 ur_cap_port: int = 50002) -> None:
+                 accel_mm_s2: float = 500.0, upload_script: bool = _OPT["upload_script"],
+                 frequency_hz: float | None = _OPT["frequency_hz"],
+                 timeout_s: float = _OPT["timeout_s"],
+                 ur_cap_port: int = _OPT["ur_cap_port"]) -> None:
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         if not host:
             raise ValueError("URRobot: host must be a non-empty address")
-        if frequency_hz is not None and not frequency_hz > 0:
-            raise ValueError(f"URRobot: frequency_hz must be positive, got {frequency_hz}")
-        if not timeout_s > 0:
-            raise ValueError(f"URRobot: timeout_s must be positive, got {timeout_s}")
+        o = URSettings.check_options("URRobot", upload_script=upload_script,
+                                     frequency_hz=frequency_hz, timeout_s=timeout_s,
+                                     ur_cap_port=ur_cap_port)
         self.host = host
-        self.upload_script = bool(upload_script)
-        self.frequency_hz = frequency_hz
-        self.timeout_s = float(timeout_s)
-        if isinstance(ur_cap_port, bool) or not isinstance(ur_cap_port, int) \
-                or not 0 < ur_cap_port < 65536:
-            raise ValueError(f"URRobot: ur_cap_port must be a TCP port, got {ur_cap_port!r}")
-        self.ur_cap_port = ur_cap_port
+        self.upload_script: bool = o["upload_script"]
+        self.frequency_hz: float | None = o["frequency_hz"]
+        self.timeout_s: float = o["timeout_s"]
+        self.ur_cap_port: int = o["ur_cap_port"]
         self.flange_from_tcp = np.eye(4)
         self._rx: Any = None
         self._ctl: Any = None

@@ -22,10 +22,18 @@ class URSettings(RobotSettings):
     URCap's script port)."""
 
     OPTIONS: ClassVar[Mapping[str, Option]] = {
-        "upload_script": Option(bool),
-        "frequency_hz": Option(float, above=0, hi=500, null=True),
-        "timeout_s": Option(float, above=0, hi=3600),
-        "ur_cap_port": Option(int, lo=1, hi=65535),
+        "upload_script": Option(
+            bool, default=True,
+            help="true: ur_rtde uploads its control script; false: a program on the "
+                 "controller already runs it (the External Control URCap, `docs/devices.md`)"),
+        "frequency_hz": Option(float, above=0, hi=500, null=True, default=None, unit="Hz",
+                               default_text="null: the controller's", help="RTDE data rate"),
+        "timeout_s": Option(float, above=0, hi=3600, default=30.0, unit="s",
+                            help="the longest a move or a wait for controller data may take"),
+        "ur_cap_port": Option(
+            int, lo=1, hi=65535, default=50002,
+            help="the port of ur_rtde's script sender for the URCap (with "
+                 "`upload_script: false`)"),
     }
 
 
@@ -36,7 +44,11 @@ class URWrenchSettings(FTSettings):
     controller's) and ``timeout_s`` (the longest wait for a new reading, s)."""
 
     OPTIONS: ClassVar[Mapping[str, Option]] = {
-        "kind": Option(str, choices=("raw", "tcp")),
-        "frequency_hz": Option(float, above=0, hi=500, null=True),
-        "timeout_s": Option(float, above=0, hi=3600),
+        "kind": Option(str, choices=("raw", "tcp"), default="raw",
+                       help="`raw`: ft_raw_wrench, flange frame; `tcp`: actual_TCP_force, "
+                            "base frame"),
+        "frequency_hz": Option(float, above=0, hi=500, null=True, default=None, unit="Hz",
+                               default_text="null: the controller's", help="RTDE data rate"),
+        "timeout_s": Option(float, above=0, hi=3600, default=2.0, unit="s",
+                            help="the longest wait for a new reading"),
     }

@@ -31,8 +31,12 @@ import numpy as np
 from ...errors import ConnectionLost, DeviceError, DeviceTimeout, MissingExtraError
 from ...timing import Deadline
 from ..base import ForceTorque
+from .settings import URWrenchSettings
 
 __all__ = ["URWrench", "WRENCH_KINDS", "WRENCH_VARIABLES"]
+
+#: the options' defaults, declared once in URWrenchSettings.OPTIONS
+_OPT = URWrenchSettings.defaults()
 
 #: kind → (RTDE output variable, ur_rtde getter, frame the wrench is expressed in)
 WRENCH_KINDS = {"raw": ("ft_raw_wrench", "getFtRawWrench", "flange"),
@@ -52,21 +56,17 @@ class URWrench(ForceTorque):
     #: ``ft.host: robot`` in a config means the robot's address (the sensor is in the arm)
     on_robot = True
 
-    def __init__(self, host: str, kind: str = "raw", frequency_hz: float | None = None,
-                 timeout_s: float = 2.0) -> None:
+    def __init__(self, host: str, kind: str = _OPT["kind"],
+                 frequency_hz: float | None = _OPT["frequency_hz"],
+                 timeout_s: float = _OPT["timeout_s"]) -> None:
         super().__init__()
         if not isinstance(host, str) or not host:
             raise ValueError("URWrench: host must be a non-empty address")
-        if kind not in WRENCH_KINDS:
-            raise ValueError(f"URWrench: kind must be 'raw' (ft_raw_wrench, flange frame) or "
-                             f"'tcp' (actual_TCP_force, base frame), got {kind!r}")
-        if frequency_hz is not None and not (isinstance(frequency_hz, int | float)
-                                             and 0 < frequency_hz <= 500):
-            raise ValueError(f"URWrench: frequency_hz must be in (0, 500], got {frequency_hz!r}")
-        if not (isinstance(timeout_s, int | float) and timeout_s > 0):
-            raise ValueError(f"URWrench: timeout_s must be > 0, got {timeout_s!r}")
+        o = URWrenchSettings.check_options("URWrench", kind=kind, frequency_hz=frequency_hz,
+                                           timeout_s=timeout_s)
         self.host, self.kind = host, kind
-        self.frequency_hz, self.timeout_s = frequency_hz, float(timeout_s)
+        self.frequency_hz: float | None = o["frequency_hz"]
+        self.timeout_s: float = o["timeout_s"]
         self.frame = WRENCH_KINDS[kind][2]
         self._rx: Any = None
 
