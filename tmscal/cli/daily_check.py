@@ -22,7 +22,7 @@ def _with_kinematics(session: Any, kin_file: Path | None) -> Any:
     (``solving.solve.with_kinematics``), or as it is without one."""
     if kin_file is None:
         return session
-    from ..exports.kinfile import load_arm
+    from ..formats.kinfile import load_arm
     from ..solving.solve import with_kinematics
     return with_kinematics(session, load_arm(kin_file), str(kin_file))
 
@@ -35,8 +35,8 @@ def check_stored(session_file: Path, calib_file: Path, as_json: bool, strict: bo
     """``solve SESSION --calib CALIB``: the stored calibration on the session, no fitting;
     exits ``EXIT_CHECK_FAILED`` after printing when the verdict is FAIL. With ``update``
     (``--update`` names) the partial re-registration instead (:func:`_update`)."""
-    from ..exports.calibfile import read_calibration
     from ..exports.check import check_calibration, format_check
+    from ..formats.calibfile import read_calibration
     from ..session import sha256_of
 
     if update:
@@ -80,8 +80,8 @@ def _update(session_file: Path, calib_file: Path, names: list[str], as_json: boo
     lineage. A refused update prints the refusal and the diagnosis, writes nothing and exits
     ``EXIT_CHECK_FAILED``."""
     from ..calib.diagnose import UpdateRefused
-    from ..exports.calibfile import provenance, read_calibration, updated_calibration_yaml
     from ..exports.check import format_diagnosis, format_update, next_command, update_calibration
+    from ..formats.calibfile import provenance, read_calibration, updated_calibration_yaml
     from ..session import plain, sha256_of
 
     if fitting:
@@ -124,7 +124,7 @@ def calibration_origin(calib_file: Path | None) -> Any:
     without a file; a calibration that records none is a BadParameter naming it."""
     if calib_file is None:
         return None
-    from ..exports.calibfile import read_calibration
+    from ..formats.calibfile import read_calibration
     origin = read_calibration(calib_file).p0
     if origin is None:
         raise click.BadParameter(f"{calib_file} records no P0 (it was written before tmscal "

@@ -335,7 +335,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     the weakly identified and what could not be identified and why (docs/kinematics.md, "Using
     it"). With --kinematics KIN, the robot poses come from the recorded joints and the arm's
     calibrated kinematics."""
-    from ..exports.calibfile import calibration_yaml
+    from ..formats.calibfile import calibration_yaml
     from ..report.text import format_result, plot_residuals
     from ..session import sha256_of
     from ..solving.solve import pose_residuals, solve_session
@@ -382,11 +382,10 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
                                                     estimate),
                              **_kinematics_args(kinematics))
     if output is not None:
-        from ..exports.calibfile import calibration_p0, provenance
+        from ..formats.calibfile import calibration_p0, provenance
         write_atomic(output, calibration_yaml(
-            res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
-            parameters=cal.extra.get("parameters"), provenance=provenance(session.header),
-            arm=cal.arm, p0=calibration_p0(session)), force)
+            cal, res.to_json(), str(session_file), sha256_of(session_file),
+            provenance=provenance(session.header), p0=calibration_p0(session)), force)
     if plot is not None:
         with output_files({"plot": plot}, force) as tmp:
             run_plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
@@ -423,7 +422,7 @@ def _kinematics_args(kinematics: str | Path | None) -> dict[str, Any]:
     """solve_session's ``kinematics`` (and ``kinematics_source``) for --kinematics."""
     if kinematics is None or kinematics == "estimate":
         return {"kinematics": kinematics}
-    from ..exports.kinfile import load_arm
+    from ..formats.kinfile import load_arm
     return {"kinematics": load_arm(kinematics), "kinematics_source": str(kinematics)}
 
 

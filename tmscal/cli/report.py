@@ -61,8 +61,8 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
     from tqdm import tqdm
 
     from ..errors import MissingExtraError
-    from ..exports.calibfile import read_calibration
     from ..exports.check import verdict
+    from ..formats.calibfile import read_calibration
     from ..report.html import html_report
     from ..session import sha256_of
 

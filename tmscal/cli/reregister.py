@@ -30,8 +30,8 @@ def acquire_update(config: Path, output: Path, calib_file: Path | None,
     from ..acquisition.reregister import ReregisterSettings, reregister
     from ..config import load_config
     from ..errors import CalibrationError
-    from ..exports.calibfile import read_calibration
     from ..exports.check import noise_of
+    from ..formats.calibfile import read_calibration
     from .daily_check import _update, calibration_origin
     from .live import AcquireProgress, stderr_to_log
 
