@@ -23,9 +23,9 @@ from tmscal.calib import solve
 from tmscal.calib.kinematics import arm_by_name, base_from_flange
 from tmscal.calib.kinematics import estimate as est
 from tmscal.calib.metrics import placement_errors
+from tmscal.check import check_calibration
 from tmscal.cli import main
 from tmscal.errors import CalibrationError
-from tmscal.exports.check import check_calibration
 from tmscal.exports.jsonfmt import render as render_json
 from tmscal.formats.calibfile import (
     CalibrationFile,

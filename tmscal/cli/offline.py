@@ -23,7 +23,7 @@ from .app import (
     run_plot,
     write_atomic,
 )
-from .daily_check import check_stored
+from .check import check_options, check_stored
 from .selfcal import ArmName
 
 # --- simulate -------------------------------------------------------------------------------
@@ -268,21 +268,7 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "the stored ones, coil placement against the truth when the session has "
                    "one, the calibration's provenance. No fitting; the daily check before a "
                    "TMS session.")
-@click.option("--tolerance-mm", type=Finite(0, lo_open=True), default=None, metavar="MM",
-              help="With --calib: decide. PASS when the total hold-out error e_t (mm, the "
-                   "last row) is at most MM, else FAIL; one line, in the JSON as 'verdict', "
-                   "exit status 0 or 3 (docs/exports.md, \"The daily check\").")
-@click.option("--tolerance-deg", type=Finite(0, lo_open=True), default=None, metavar="DEG",
-              help="With --calib: likewise for the total rotation error θ_t (degrees).")
-@click.option("--update", "update", multiple=True, metavar="z|x|y|coil",
-              type=click.Choice(["z", "x", "y", "coil"]),
-              help="With --calib: re-register only this transform from the session's poses "
-                   "(z: the tracker moved, x: the marker moved on the coil, y: the coil's "
-                   "centre, coil: the coil re-seated, X and Y together), everything else and "
-                   "any identified arm kept; repeatable (z with x or y). Refused, nothing "
-                   "written, when the result still does not explain the session (a second "
-                   "change). -o writes the updated calibration, its parent named by SHA-256 "
-                   "(docs/lab-day.md).")
+@check_options
 @click.option("--kinematics", "kinematics", type=_KINEMATICS, default=None,
               metavar="estimate|KIN",
               help="'estimate': estimate the arm's kinematic deviations together with X, Y, "
