@@ -32,10 +32,10 @@ from figures import record
 from tmscal.acquisition.reregister import ReregisterSettings, reregister
 from tmscal.acquisition.run import acquire
 from tmscal.calib.prediction import true_coil_error
+from tmscal.check import noise_of, update_calibration
 from tmscal.cli import main
 from tmscal.config import load_config
-from tmscal.exports.calibfile import read_calibration
-from tmscal.exports.check import noise_of, update_calibration
+from tmscal.formats.calibfile import read_calibration
 from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.poses import PlanSpec
 from tmscal.session import read_session

@@ -49,7 +49,7 @@ from figures import record
 from tmscal.acquisition.run import acquire
 from tmscal.calib import solve
 from tmscal.config import load_config
-from tmscal.exports.kinfile import load_arm
+from tmscal.formats.kinfile import load_arm
 from tmscal.geometry import invert
 from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.poses import make_plan

@@ -19,7 +19,7 @@ from tests.rigs import endpoints_kwargs
 from tmscal.acquisition.run import acquire
 from tmscal.cli import main
 from tmscal.config import load_config
-from tmscal.exports.calibfile import load_calibration
+from tmscal.formats.calibfile import load_calibration
 from tmscal.geometry import rotation_angle
 from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig
 from tmscal.session import read_session

@@ -18,7 +18,7 @@ from tmscal.config import load_config
 from tmscal.drivers.base import Envelope
 from tmscal.drivers.denso.robot import DensoRobot
 from tmscal.errors import DeviceError
-from tmscal.exports.kinfile import kinematics_yaml
+from tmscal.formats.kinfile import kinematics_yaml
 from tmscal.geometry import make_pose
 from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session

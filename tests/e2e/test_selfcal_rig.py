@@ -23,7 +23,7 @@ from tmscal.acquisition.plan import check_plan
 from tmscal.acquisition.selfcal import SelfcalPlan, acquire_selfcal, nominal_arm, nominal_poses
 from tmscal.calib.selfcal.identify import error_stats, position_errors
 from tmscal.config import load_config
-from tmscal.exports.kinfile import read_kinematics
+from tmscal.formats.kinfile import read_kinematics
 from tmscal.mocks.launch import spawn_mock_rig
 from tmscal.session import read_session
 from tmscal.sim.arm import make_arm

@@ -1,4 +1,4 @@
-"""Property tests of the calibration file parser (tmscal.exports.calibfile): any text or
+"""Property tests of the calibration file parser (tmscal.formats.calibfile): any text or
 document gives a Calibration or one CalibrationError naming the file, never another
 exception; rigid matrices survive the YAML and JSON round trips exactly."""
 
@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
 from tmscal.errors import CalibrationError
-from tmscal.exports.calibfile import parse_calibration
-from tmscal.exports.textfile import load_text as parse_document
+from tmscal.formats.calibfile import parse_calibration
+from tmscal.formats.textfile import load_text as parse_document
 from tmscal.geometry import make_pose, matrix_from_rotvec
 
 SRC = "fuzz.yaml"

@@ -1,5 +1,5 @@
 """Property tests of the calibration file's ``noise_model`` section
-(tmscal.exports.calibfile.parse_noise_model; docs/lab-day.md): a valid section round-trips
+(tmscal.formats.calibfile.parse_noise_model; docs/lab-day.md): a valid section round-trips
 to the same NoiseModel; any corruption of it is one CalibrationError naming the file and a
 ``noise_model`` key, never another exception."""
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
 from tmscal.errors import CalibrationError
-from tmscal.exports.calibfile import parse_noise_model
+from tmscal.formats.calibfile import parse_noise_model
 
 SRC = "fuzz.yaml"
 

@@ -16,7 +16,7 @@ from tmscal.acquisition.run import PlanStrategy
 from tmscal.cli import main
 from tmscal.config import load_config
 from tmscal.errors import CalibrationError
-from tmscal.exports.calibfile import read_calibration
+from tmscal.formats.calibfile import read_calibration
 from tmscal.geometry import make_pose
 from tmscal.safety import Envelope
 from tmscal.safety.origin import (

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from tmscal.calib.prediction import AdaptiveSettings, predict
 from tmscal.cli import main
-from tmscal.exports.calibfile import load_calibration
+from tmscal.formats.calibfile import load_calibration
 from tmscal.session import read_session
 from tmscal.solving.predict import (
     calibration_prediction,

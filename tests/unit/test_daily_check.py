@@ -1,5 +1,5 @@
 """The daily check decides: ``tmscal solve SESSION --calib CALIB --tolerance-mm MM
---tolerance-deg DEG`` (tmscal.exports.check.verdict): a PASS or FAIL line, the verdict in the
+--tolerance-deg DEG`` (tmscal.check.verdict): a PASS or FAIL line, the verdict in the
 JSON, exit status 0 or 3. One simulated rig: a calibration solved on its first 60 poses is
 checked on its next 40 (the same rig: within 1 mm and 0.5°) and on those 40 as a tracker
 bumped by 3 mm and 1° sees them (the rig moved: over both). Poses 4×4 mm."""
@@ -15,9 +15,9 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from tmscal.check import verdict
 from tmscal.cli import main
 from tmscal.errors import CalibrationError
-from tmscal.exports.check import verdict
 from tmscal.geometry import make_pose, rot_x
 from tmscal.session import read_session, write_session
 
@@ -56,18 +56,42 @@ def rig(tmp_path_factory) -> dict[str, Path]:
             | {"cal": d / "cal.yaml"})
 
 
-def test_same_rig_passes_a_moved_tracker_fails(rig) -> None:
-    code, out = _run("solve", rig["today"], "--calib", rig["cal"], "--tolerance-mm", 1,
+@pytest.mark.parametrize("command", ["check", "solve"])
+def test_same_rig_passes_a_moved_tracker_fails(rig, command) -> None:
+    code, out = _run(command, rig["today"], "--calib", rig["cal"], "--tolerance-mm", 1,
                      "--tolerance-deg", 0.5)
     assert code == 0, out
     last = out.strip().splitlines()[-1]
     assert last.startswith("PASS: e_t ") and "≤ 1 mm" in last and "≤ 0.5°" in last, last
-    code, out = _run("solve", rig["bumped"], "--calib", rig["cal"], "--tolerance-mm", 1,
+    code, out = _run(command, rig["bumped"], "--calib", rig["cal"], "--tolerance-mm", 1,
                      "--tolerance-deg", 0.5)
     assert code == EXIT_FAIL, out
     last = out.strip().splitlines()[-1]
     assert last.startswith("FAIL: e_t ") and "> 1 mm" in last and "> 0.5°" in last, last
     assert "what moved" in last
+
+
+@pytest.mark.parametrize("args", [
+    ["today", "--tolerance-mm", 1],
+    ["bumped", "--tolerance-mm", 1, "--json"],
+    ["bumped", "--update", "z"],
+    ["bumped", "--update", "x", "--json"],
+])
+def test_check_and_solve_calib_are_the_same_command(rig, args) -> None:
+    """``tmscal check`` and its alias ``tmscal solve --calib``: the same output and exit
+    status, for a verdict, the JSON and a re-registration (accepted or refused)."""
+    rest = [rig[args[0]], "--calib", rig["cal"], *args[1:]]
+    as_check, as_solve = _run("check", *rest), _run("solve", *rest)
+    assert as_check == as_solve
+    assert as_check[0] in (0, EXIT_FAIL) and as_check[1].strip()
+
+
+def test_check_refuses_what_only_a_solve_does(rig) -> None:
+    """``tmscal check`` has no fitting options, and needs the calibration to check."""
+    code, out = _run("check", rig["today"], "--method", "qr24", "--calib", rig["cal"])
+    assert code == 2 and "--method" in out
+    code, out = _run("check", rig["today"])
+    assert code == 2 and "--calib" in out
 
 
 def test_json_carries_the_verdict_and_the_exit_status_follows_it(rig) -> None:

@@ -23,17 +23,17 @@ from tmscal.calib import solve
 from tmscal.calib.kinematics import arm_by_name, base_from_flange
 from tmscal.calib.kinematics import estimate as est
 from tmscal.calib.metrics import placement_errors
+from tmscal.check import check_calibration
 from tmscal.cli import main
 from tmscal.errors import CalibrationError
-from tmscal.exports.calibfile import (
+from tmscal.exports.jsonfmt import render as render_json
+from tmscal.formats.calibfile import (
     CalibrationFile,
     calibration_yaml,
     parse_calibration,
     read_calibration,
 )
-from tmscal.exports.check import check_calibration
-from tmscal.exports.jsonfmt import render as render_json
-from tmscal.exports.kinfile import kinematics_doc, parse_kinematics
+from tmscal.formats.kinfile import kinematics_doc, parse_kinematics
 from tmscal.geometry import make_pose, pose_mean, random_rotation
 from tmscal.poses import eq14_poses
 from tmscal.session import PoseRecord, make_header, read_session, write_session
@@ -96,8 +96,7 @@ def test_the_calibration_file_keeps_the_arm(solved, tmp_path) -> None:
     flange), the controller frame, the seeds and the report, so that robot poses and flange
     commands come out the same."""
     d, s, rig, cal, res = solved
-    text = calibration_yaml(res, str(s), "ab" * 32, covariance=cal.covariance,
-                            parameters=cal.extra.get("parameters"), arm=cal.arm)
+    text = calibration_yaml(cal, res.to_json(), str(s), "ab" * 32)
     f = tmp_path / "cal.yaml"
     f.write_text(text)
     js = tmp_path / "cal.json"
@@ -134,9 +133,9 @@ def test_files_without_an_arm_still_load(solved, tmp_path) -> None:
     kinematics file of selfcal identify (sensor and tool, no β) is still an ArmModel; one of a
     plain arm (β, no sensor) is an Arm."""
     d, s, _, _, _ = solved
-    _, plain_res = solve_session(read_session(s), "qr36", in_sample=True)
+    plain_cal, plain_res = solve_session(read_session(s), "qr36", in_sample=True)
     f = tmp_path / "old.yaml"
-    f.write_text(calibration_yaml(plain_res, str(s), "cd" * 32))
+    f.write_text(calibration_yaml(plain_cal, plain_res.to_json(), str(s), "cd" * 32))
     cal = read_calibration(f).calibration
     assert cal.arm is None and "arm" not in yaml.safe_load(f.read_text())
     from tmscal.calib.selfcal.model import UR5E, ArmModel
@@ -164,7 +163,7 @@ def test_files_without_an_arm_still_load(solved, tmp_path) -> None:
 ])
 def test_a_bad_arm_section_names_its_key(solved, change, key) -> None:
     _, s, _, cal, res = solved
-    doc = yaml.safe_load(calibration_yaml(res, str(s), "ef" * 32, arm=cal.arm))
+    doc = yaml.safe_load(calibration_yaml(cal, res.to_json(), str(s), "ef" * 32))
     change(doc["arm"])
     with pytest.raises(CalibrationError, match=key.replace("[", r"\[").replace("]", r"\]")):
         parse_calibration(doc, "cal.yaml")
@@ -176,7 +175,7 @@ def test_the_daily_check_applies_the_stored_arm(solved, tmp_path) -> None:
     the controller's poses); a session without joints is a clear error."""
     d, s, _, cal, res = solved
     f = tmp_path / "cal.yaml"
-    f.write_text(calibration_yaml(res, str(s), "ab" * 32, arm=cal.arm))
+    f.write_text(calibration_yaml(cal, res.to_json(), str(s), "ab" * 32))
     t = tmp_path / "t.jsonl"
     _session(t, seed=40)
     cf = read_calibration(f)

@@ -1,4 +1,4 @@
-"""The kinematics file (tmscal.exports.kinfile): the calibrated ArmModel survives the YAML and
+"""The kinematics file (tmscal.formats.kinfile): the calibrated ArmModel survives the YAML and
 JSON round trips; every bad document is one CalibrationError naming the file and the key;
 hypothesis: any document gives a model or that one error, never another exception."""
 
@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from tests.fuzz import fuzz_settings
 from tmscal.calib.selfcal.model import UR5E, VS060, perturb
 from tmscal.errors import CalibrationError
-from tmscal.exports.kinfile import (
+from tmscal.formats.kinfile import (
     kinematics_doc,
     kinematics_yaml,
     load_arm,

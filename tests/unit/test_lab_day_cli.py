@@ -18,7 +18,7 @@ import yaml
 from click.testing import CliRunner
 
 from tmscal.cli import main
-from tmscal.exports.calibfile import read_calibration
+from tmscal.formats.calibfile import read_calibration
 from tmscal.geometry import make_pose, rot_x
 from tmscal.session import read_session, sha256_of, write_session
 

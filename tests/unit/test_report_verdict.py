@@ -25,8 +25,8 @@ from tests.rigs import simulated
 from tests.unit.test_kinematics_use import _session as arm_session
 from tmscal.calib import solve
 from tmscal.calib.prediction import AdaptiveSettings
+from tmscal.check import verdict
 from tmscal.cli import main
-from tmscal.exports.check import verdict
 from tmscal.report.verdict import verdict_rows
 from tmscal.session import Session, make_header, read_session, records_from_arrays, write_session
 from tmscal.solving import adaptive_header, solve_session

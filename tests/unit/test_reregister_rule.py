@@ -20,11 +20,11 @@ from tmscal.acquisition.reregister import (
     ReregisterStrategy,
 )
 from tmscal.calib import diagnose as dg
+from tmscal.check import noise_of
 from tmscal.cli import main
 from tmscal.config import load_config
 from tmscal.errors import CalibrationError
-from tmscal.exports.calibfile import read_calibration
-from tmscal.exports.check import noise_of
+from tmscal.formats.calibfile import read_calibration
 from tmscal.geometry import angle_between, make_pose, rot_x
 from tmscal.poses import PlanSpec
 from tmscal.session import Session, read_session

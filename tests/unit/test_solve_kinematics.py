@@ -17,7 +17,7 @@ from click.testing import CliRunner
 from tmscal.calib.selfcal.model import forward
 from tmscal.cli import main
 from tmscal.errors import CalibrationError, SessionError
-from tmscal.exports.kinfile import kinematics_yaml
+from tmscal.formats.kinfile import kinematics_yaml
 from tmscal.geometry import make_pose, pose_mean, rot_x
 from tmscal.poses import eq14_poses
 from tmscal.session import PoseRecord, Session, make_header, read_session, write_session

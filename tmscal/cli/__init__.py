@@ -16,5 +16,5 @@ from .app import main
 __all__ = ["main"]
 
 # every command module registers its commands on ``main``
-from . import compare, demo, export, offline, report, rig_commands  # noqa: E402,F401,I001
+from . import check, compare, demo, export, offline, report, rig_commands  # noqa: E402,F401,I001
 from . import selfcal, selfcal_rig, selftest, stream  # noqa: E402,F401,I001

@@ -35,8 +35,8 @@ def export(calib_file: Path, fmt: str, output: Path, handeye2: bool, frames: tup
     Each format's frames, units and conventions, and how to load it in its consumer, are in
     docs/exports.md; every format that allows comments names them in the file."""
     from ..exports import render
-    from ..exports.calibfile import read_calibration
     from ..exports.easy_handeye import FRAMES
+    from ..formats.calibfile import read_calibration
 
     if fmt != "easy-handeye" and (handeye2 or frames):
         raise click.BadParameter("only for --format easy-handeye",
@@ -59,7 +59,7 @@ def export(calib_file: Path, fmt: str, output: Path, handeye2: bool, frames: tup
 
 def _notes(fmt: str, cf: object, out_suffix: str) -> list[str]:
     """What the user must know about what the format leaves out."""
-    from ..exports.calibfile import CalibrationFile
+    from ..formats.calibfile import CalibrationFile
 
     assert isinstance(cf, CalibrationFile)
     cal = cf.calibration

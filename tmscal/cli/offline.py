@@ -23,7 +23,7 @@ from .app import (
     run_plot,
     write_atomic,
 )
-from .daily_check import check_stored
+from .check import check_options, check_stored
 from .selfcal import ArmName
 
 # --- simulate -------------------------------------------------------------------------------
@@ -268,21 +268,7 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "the stored ones, coil placement against the truth when the session has "
                    "one, the calibration's provenance. No fitting; the daily check before a "
                    "TMS session.")
-@click.option("--tolerance-mm", type=Finite(0, lo_open=True), default=None, metavar="MM",
-              help="With --calib: decide. PASS when the total hold-out error e_t (mm, the "
-                   "last row) is at most MM, else FAIL; one line, in the JSON as 'verdict', "
-                   "exit status 0 or 3 (docs/exports.md, \"The daily check\").")
-@click.option("--tolerance-deg", type=Finite(0, lo_open=True), default=None, metavar="DEG",
-              help="With --calib: likewise for the total rotation error θ_t (degrees).")
-@click.option("--update", "update", multiple=True, metavar="z|x|y|coil",
-              type=click.Choice(["z", "x", "y", "coil"]),
-              help="With --calib: re-register only this transform from the session's poses "
-                   "(z: the tracker moved, x: the marker moved on the coil, y: the coil's "
-                   "centre, coil: the coil re-seated, X and Y together), everything else and "
-                   "any identified arm kept; repeatable (z with x or y). Refused, nothing "
-                   "written, when the result still does not explain the session (a second "
-                   "change). -o writes the updated calibration, its parent named by SHA-256 "
-                   "(docs/lab-day.md).")
+@check_options
 @click.option("--kinematics", "kinematics", type=_KINEMATICS, default=None,
               metavar="estimate|KIN",
               help="'estimate': estimate the arm's kinematic deviations together with X, Y, "
@@ -335,7 +321,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     the weakly identified and what could not be identified and why (docs/kinematics.md, "Using
     it"). With --kinematics KIN, the robot poses come from the recorded joints and the arm's
     calibrated kinematics."""
-    from ..exports.calibfile import calibration_yaml
+    from ..formats.calibfile import calibration_yaml
     from ..report.text import format_result, plot_residuals
     from ..session import sha256_of
     from ..solving.solve import pose_residuals, solve_session
@@ -382,11 +368,10 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
                                                     estimate),
                              **_kinematics_args(kinematics))
     if output is not None:
-        from ..exports.calibfile import calibration_p0, provenance
+        from ..formats.calibfile import calibration_p0, provenance
         write_atomic(output, calibration_yaml(
-            res, str(session_file), sha256_of(session_file), covariance=cal.covariance,
-            parameters=cal.extra.get("parameters"), provenance=provenance(session.header),
-            arm=cal.arm, p0=calibration_p0(session)), force)
+            cal, res.to_json(), str(session_file), sha256_of(session_file),
+            provenance=provenance(session.header), p0=calibration_p0(session)), force)
     if plot is not None:
         with output_files({"plot": plot}, force) as tmp:
             run_plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
@@ -423,7 +408,7 @@ def _kinematics_args(kinematics: str | Path | None) -> dict[str, Any]:
     """solve_session's ``kinematics`` (and ``kinematics_source``) for --kinematics."""
     if kinematics is None or kinematics == "estimate":
         return {"kinematics": kinematics}
-    from ..exports.kinfile import load_arm
+    from ..formats.kinfile import load_arm
     return {"kinematics": load_arm(kinematics), "kinematics_source": str(kinematics)}
 
 

@@ -60,9 +60,9 @@ def report(session_file: Path, output: Path, calib_file: Path | None, method: st
     it can be attached, mailed or printed as it is. Needs matplotlib (extra 'plot')."""
     from tqdm import tqdm
 
+    from ..check import verdict
     from ..errors import MissingExtraError
-    from ..exports.calibfile import read_calibration
-    from ..exports.check import verdict
+    from ..formats.calibfile import read_calibration
     from ..report.html import html_report
     from ..session import sha256_of
 

@@ -23,16 +23,16 @@ def acquire_update(config: Path, output: Path, calib_file: Path | None,
                    adaptive: bool, overrides: dict[str, Any], stop: Any) -> None:
     """``acquire --calib CAL --update NAME``: the re-registration run
     (``acquisition.reregister``), then the update of ``solve --calib --update`` on its
-    session (``daily_check._update``), written to ``update_output``. Every refusal of the
+    session (``check._update``), written to ``update_output``. Every refusal of the
     options comes before anything connects; ``stop`` (the rig commands' StopFlag) is installed
     just before."""
     from ..acquisition.engine import AcquisitionStopped
     from ..acquisition.reregister import ReregisterSettings, reregister
+    from ..check import noise_of
     from ..config import load_config
     from ..errors import CalibrationError
-    from ..exports.calibfile import read_calibration
-    from ..exports.check import noise_of
-    from .daily_check import _update, calibration_origin
+    from ..formats.calibfile import read_calibration
+    from .check import _update, calibration_origin
     from .live import AcquireProgress, stderr_to_log
 
     if not update:

@@ -26,7 +26,7 @@ from .app import (
     old_spelling,
     same_file,
 )
-from .daily_check import calibration_origin
+from .check import calibration_origin
 
 # --- rig commands: mock, track, robot, acquire ------------------------------------------------
 

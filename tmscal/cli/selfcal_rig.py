@@ -1,7 +1,7 @@
 """``tmscal selfcal acquire`` and ``tmscal selfcal identify``: the rig side of the kinematic
 self-calibration (docs/selfcal.md, "Running it"), registered on the ``selfcal`` group of
 :mod:`tmscal.cli.selfcal`. Thin: the loop is :mod:`tmscal.acquisition.selfcal`, the numerics
-:mod:`tmscal.calib.selfcal`, the kinematics file :mod:`tmscal.exports.kinfile`."""
+:mod:`tmscal.calib.selfcal`, the kinematics file :mod:`tmscal.formats.kinfile`."""
 
 from __future__ import annotations
 
@@ -254,8 +254,8 @@ def identify(session_file: Path, output: Path, arm: str | None,
     of several equivalent columns the fit kept (docs/selfcal.md, "Running it"). The σ are
     scaled by √(reduced χ²) when it exceeds 1 (the residuals are larger than the stated
     noise)."""
-    from ..exports.calibfile import provenance
-    from ..exports.kinfile import kinematics_yaml
+    from ..formats.calibfile import provenance
+    from ..formats.kinfile import kinematics_yaml
     from ..session import sha256_of
     from ..solving.selfcal import CHANNEL_UNITS, CHANNELS, identify_session
 

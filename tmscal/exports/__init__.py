@@ -1,11 +1,6 @@
-"""Calibration files and exports for the lab's other software (docs/exports.md).
-
-:mod:`.calibfile` writes the calibration file of ``tmscal solve -o`` and reads it (and the
-``json`` export) back into a :class:`tmscal.calib.Calibration` (``load_calibration``; calib
-itself does no I/O), its identified arm in the ``arm`` section of :mod:`.armfile`;
-:mod:`.kinfile` is the kinematics file (the arm's kinematics, of ``selfcal identify`` and of
-that section), :mod:`.textfile` what the readers share; :mod:`.check` the daily check; one
-module per export format:
+"""Exports of a calibration for the lab's other software (docs/exports.md), one module per
+export format, each rendering a calibration file read by :mod:`tmscal.formats.calibfile`
+(tmscal's own formats, re-exported here as ``load_calibration`` / ``read_calibration``):
 :mod:`.itk` (3D Slicer / ITK ``.tfm``), :mod:`.plus` (PLUS toolkit device set),
 :mod:`.easy_handeye` (ROS easy_handeye / easy_handeye2), :mod:`.invesalius` (InVesalius'
 robot co-registration) and :mod:`.jsonfmt` (everything, for scripts).
@@ -22,7 +17,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 from ..errors import ConfigError
-from .calibfile import load_calibration, read_calibration
+from ..formats.calibfile import load_calibration, read_calibration
 
 __all__ = ["FORMATS", "ExportFormat", "export_format", "render", "load_calibration",
            "read_calibration"]
@@ -63,7 +58,7 @@ def export_format(name: str) -> ExportFormat:
 
 def render(fmt: str, cf: Any, **options: Any) -> str:
     """The text of export ``fmt`` (a name of :data:`FORMATS`; ConfigError otherwise) for a
-    calibration file read by :func:`tmscal.exports.calibfile.read_calibration`."""
+    calibration file read by :func:`tmscal.formats.calibfile.read_calibration`."""
     import importlib
 
     module = importlib.import_module(f".{export_format(fmt).module}", __name__)

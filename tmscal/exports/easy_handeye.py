@@ -26,8 +26,8 @@ import numpy as np
 import yaml
 
 from ..escape import visible
+from ..formats.calibfile import CalibrationFile
 from ..geometry import quaternion_from_matrix
-from .calibfile import CalibrationFile
 
 __all__ = ["FRAMES", "transform_m_xyzw", "render"]
 

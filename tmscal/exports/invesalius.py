@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calibfile import CalibrationFile
+from ..formats.calibfile import CalibrationFile
 
 __all__ = ["matrices", "render", "tcp_offset_mm"]
 

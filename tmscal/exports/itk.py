@@ -20,7 +20,7 @@ import numpy as np
 
 from ..calib import Calibration
 from ..escape import visible
-from .calibfile import CalibrationFile
+from ..formats.calibfile import CalibrationFile
 
 __all__ = ["LPS", "itk_matrix", "render"]
 

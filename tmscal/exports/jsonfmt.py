@@ -20,8 +20,8 @@ import json
 import numpy as np
 
 from .. import __version__
+from ..formats.calibfile import CalibrationFile
 from ..session import plain
-from .calibfile import CalibrationFile
 
 __all__ = ["render"]
 

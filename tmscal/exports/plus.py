@@ -37,7 +37,7 @@ from ..config.settings import TrackerSettings
 from ..drivers.ndi.settings import NDISettings
 from ..errors import ConfigError
 from ..escape import xml_attr, xml_comment
-from .calibfile import CalibrationFile
+from ..formats.calibfile import CalibrationFile
 
 __all__ = ["FRAMES", "TOOL_IDS", "matrix_text", "render", "recorded_tracker", "rom_files"]
 

@@ -339,9 +339,9 @@ def html_report(session: Session, sha256: str, *, method: str = "qr36",
                 judge: Callable[[dict[str, Any]], dict[str, Any] | None] | None = None) -> str:
     """The whole page (str) for ``session`` (its file's ``sha256``). The calibration is
     solved with ``method`` (errors ``folds``-fold cross-validated, as ``tmscal solve``), or
-    is ``calib``, a :class:`tmscal.exports.calibfile.CalibrationFile` evaluated on the
+    is ``calib``, a :class:`tmscal.formats.calibfile.CalibrationFile` evaluated on the
     session. ``judge(errors)``: the decision on the held-out errors (e_t_mm, theta_t_deg) for
-    the verdict, ``tmscal.exports.check.verdict`` with the tolerances (None: none given).
+    the verdict, ``tmscal.check.verdict`` with the tolerances (None: none given).
     ``progress(stage)`` is called before each slow stage, ``solves(n)`` after n more
     solves of the convergence study. Raises CalibrationError for a session that cannot be
     solved; MissingExtraError without matplotlib."""

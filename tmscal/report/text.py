@@ -1,5 +1,5 @@
 """Human-readable tables (the plots are in :mod:`tmscal.report.plots`, re-exported here; the
-calibration file is written by :func:`tmscal.exports.calibfile.calibration_yaml`).
+calibration file is written by :func:`tmscal.formats.calibfile.calibration_yaml`).
 
 Units: mm and degrees, named in every column header. Text that comes from a file (a method
 or distortion model name of a calibration file, its notes) is shown with control characters

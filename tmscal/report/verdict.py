@@ -3,7 +3,7 @@ what a reader at the rig needs before the tables, in a few lines built from the 
 alone (:func:`verdict_rows`).
 
 1. The held-out errors against the tolerance: PASS or FAIL when the caller judged them (the
-   daily check's rule, ``tmscal.exports.check.verdict``, handed in as a dict: the report
+   daily check's rule, ``tmscal.check.verdict``, handed in as a dict: the report
    layer does not import the exports), else the totals and how to choose a tolerance.
 2. The predicted coil-placement error (``SolveResult.prediction``) and which calibration it
    belongs to.
@@ -99,7 +99,7 @@ def _arm_line(res: SolveResult) -> str:
 def verdict_rows(res: SolveResult, judged: dict[str, Any] | None = None,
                  session: Session | None = None, stored: bool = False) -> list[str]:
     """The verdict lines (module docstring) for the solve result ``res`` of ``session``:
-    ``judged`` the daily check's decision on ``res.errors`` (``exports.check.verdict``: result,
+    ``judged`` the daily check's decision on ``res.errors`` (``check.verdict``: result,
     tolerance_mm, tolerance_deg, e_t_mm, theta_t_deg, failed) or None when no tolerance was
     given; ``stored`` True when ``res`` is a stored calibration evaluated on the session
     (``tmscal report --calib``) rather than solved on it. Plain text, one item a line."""

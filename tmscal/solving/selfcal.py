@@ -101,7 +101,7 @@ class SessionIdentification:
     prior: dict[str, float]
 
     def record(self) -> dict[str, Any]:
-        """The kinematics file's ``identification`` mapping (exports.kinfile): the identified
+        """The kinematics file's ``identification`` mapping (formats.kinfile): the identified
         parameters, the written model's values of them, their σ and covariance (of the kept
         columns' fit, scaled), the nominal values, and how the model was formed."""
         names = self.model0.parameter_names()

@@ -17,9 +17,10 @@ aliases expanded, 4 MB).
 from __future__ import annotations
 
 import datetime as _dt
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import yaml
@@ -30,15 +31,12 @@ from ..config.values import check_tree
 from ..errors import CalibrationError, ConfigError
 from ..geometry import orthonormalize
 from ..safety.origin import CalibratedP0
+from ..session import plain
 from .armfile import arm_section, parse_arm_section
 from .textfile import MAX_BYTES, read_text_file
 from .textfile import bad as _bad
 from .textfile import check_matrix as _matrix
 from .textfile import load_text as _load_text
-
-if TYPE_CHECKING:
-    from ..calib.kinematics.calibrated import ArmCalibration
-    from ..solving.solve import SolveResult
 
 __all__ = ["FORMAT", "VERSION", "MAX_BYTES", "CalibrationFile", "calibration_yaml",
            "updated_calibration_yaml", "parse_noise_model",
@@ -191,20 +189,23 @@ def parse_noise_model(d: Any, src: str) -> NoiseModel:
     return NoiseModel.from_json(out)
 
 
-def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
-                     covariance: Any = None, parameters: list[str] | None = None,
-                     provenance: dict[str, Any] | None = None,
-                     arm: ArmCalibration | None = None,
+def calibration_yaml(cal: Calibration, evaluation: Mapping[str, Any], session_path: str,
+                     session_sha256: str, provenance: dict[str, Any] | None = None,
                      p0: CalibratedP0 | None = None) -> str:
-    """The calibration YAML (docs/conventions.md, docs/exports.md): X, Y, Z orthonormal (and
-    QR24's Z_probe), raw matrices, method, poses used, the errors (cross-validated by default,
-    with their SD over folds), the outlier poses, the session's SHA-256; a statistical
-    solver's parameter ``covariance`` with the ``parameters`` it is ordered by; the
-    ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices); the
-    identified ``arm`` (``Calibration.arm``: the ``arm`` section of :mod:`.armfile`, in the
-    kinematics format); where it was made, ``p0`` (the session's P0 and region, base_from_flange
-    mm; ``CalibrationFile.p0``). Units mm. :func:`load_calibration` reads it back."""
-    j = res.to_json()
+    """The calibration YAML (docs/conventions.md, docs/exports.md) of the calibration ``cal``:
+    its X, Y, Z orthonormal (and QR24's Z_probe), raw matrices, method and how its matrices
+    are applied, a statistical solver's predicted uncertainty, tracker distortion and
+    parameter covariance (with the parameters it is ordered by), its identified arm
+    (``Calibration.arm``: the ``arm`` section of :mod:`.armfile`, in the kinematics format);
+    from its ``evaluation`` (plain types, as ``SolveResult.to_json()`` of the solve service
+    gives them): the poses used (``n_solve``, ``n_test``, ``errors_on``), the errors
+    (cross-validated by default, with their SD over folds: ``errors``, ``errors_sd``,
+    ``cv``), the outlier poses (``outliers``: [{index, …}]), and where present
+    ``truth``, ``options`` and ``noise_model``; the session's path and SHA-256; the
+    ``provenance`` (tmscal/Python/NumPy versions, the session's config and devices); where it
+    was made, ``p0`` (the session's P0 and region, base_from_flange mm;
+    ``CalibrationFile.p0``). Units mm. :func:`load_calibration` reads it back."""
+    ev = evaluation
     doc = {
         "format": "tmscal-calibration",
         "version": 1,
@@ -212,35 +213,48 @@ def calibration_yaml(res: SolveResult, session_path: str, session_sha256: str,
         "units": {"length": "mm", "angles": "deg"},
         "frames": {"X": "flange_from_marker", "Y": "flange_from_probe",
                    "Z": "base_from_tracker"},
-        "method": j["method"],
-        "applied": j["applied"],
+        "method": cal.method,
+        "applied": str(cal.applied),
         "session": {"path": session_path, "sha256": session_sha256},
-        "poses": {"solve": j["n_solve"], "test": j["n_test"],
-                  "errors_on": j["errors_on"]},
-        "cross_validation": j["cv"],
-        "errors_sd": j["errors_sd"],
-        "outlier_poses": [o["index"] for o in j["outliers"]],
-        "X": j["X"], "Y": j["Y"], "Z": j["Z"],
-        **({"Z_probe": j["Z_probe"]} if "Z_probe" in j else {}),
-        "raw": j["raw"],
-        "errors": j["errors"],
+        "poses": {"solve": ev["n_solve"], "test": ev["n_test"],
+                  "errors_on": ev["errors_on"]},
+        "cross_validation": ev.get("cv"),
+        "errors_sd": ev.get("errors_sd"),
+        "outlier_poses": [o["index"] for o in ev.get("outliers") or []],
+        "X": _list(cal.X), "Y": _list(cal.Y), "Z": _list(cal.Z),
+        **({"Z_probe": _list(cal.Z_probe)} if cal.Z_probe is not None else {}),
+        "raw": {k: _list(v) for k, v in _raw(cal).items()},
+        "errors": ev["errors"],
     }
-    if res.truth is not None:
-        doc["truth_errors"] = res.truth
-    for k in ("uncertainty", "distortion", "options", "noise_model"):
-        if k in j:
-            doc[k] = j[k]
-    if covariance is not None:
-        doc["covariance"] = np.asarray(covariance, dtype=float).tolist()
-        if parameters is not None:
-            doc["parameters"] = [str(p) for p in parameters]
+    if ev.get("truth") is not None:
+        doc["truth_errors"] = ev["truth"]
+    for k, v in (("uncertainty", cal.uncertainty), ("distortion", cal.distortion),
+                 ("options", ev.get("options")), ("noise_model", ev.get("noise_model"))):
+        if v is not None:
+            doc[k] = plain(v)
+    if cal.covariance is not None:
+        doc["covariance"] = np.asarray(cal.covariance, dtype=float).tolist()
+        if cal.extra.get("parameters") is not None:
+            doc["parameters"] = [str(p) for p in cal.extra["parameters"]]
     if provenance is not None:
         doc["provenance"] = provenance
-    if arm is not None:
-        doc["arm"] = arm_section(arm)
+    if cal.arm is not None:
+        doc["arm"] = arm_section(cal.arm)
     if p0 is not None:
         doc["p0"] = p0.to_doc()
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
+
+
+def _list(M: Any) -> list | None:
+    return None if M is None else np.asarray(M, dtype=float).tolist()
+
+
+def _raw(cal: Calibration) -> dict[str, Any]:
+    """The solver's matrices by name (Z_probe only for QR24's separate Z of the probe)."""
+    raw = {"X": cal.X_raw, "Y": cal.Y_raw, "Z": cal.Z_raw}
+    if cal.Z_probe is not None:
+        raw["Z_probe"] = cal.Z_probe_raw
+    return raw
 
 
 def _header(doc: Any, src: str) -> tuple[str, Applied, int]:

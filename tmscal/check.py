@@ -21,17 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from ..calib import diagnose as dg
-from ..calib.kinematics.calibrated import controller_frame
-from ..errors import CalibrationError
-from ..escape import visible
-from ..geometry import rotation_angle
-from ..safety.origin import p0_distance
-from ..session import Session
-from ..solving.kinematics import applied_arrays, session_frames
-from ..solving.outliers import find_outliers
-from ..solving.solve import pose_residuals, truth_errors_of
-from .calibfile import CalibrationFile, calibration_p0
+from .calib import diagnose as dg
+from .calib.kinematics.calibrated import controller_frame
+from .errors import CalibrationError
+from .escape import visible
+from .formats.calibfile import CalibrationFile, calibration_p0
+from .geometry import rotation_angle
+from .safety.origin import p0_distance
+from .session import Session
+from .solving.kinematics import applied_arrays, session_frames
+from .solving.outliers import find_outliers
+from .solving.solve import pose_residuals, truth_errors_of
 
 __all__ = ["check_calibration", "format_check", "verdict", "verdict_line", "FRAME_MOVED_MM",
            "FRAME_MOVED_DEG", "UPDATE_OF", "noise_of", "next_command",
