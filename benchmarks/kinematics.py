@@ -75,7 +75,7 @@ from tmscal.net import split_endpoint
 from tmscal.poses import make_plan
 from tmscal.session import read_session, write_session
 from tmscal.solving.kinematics import coil_placement
-from tmscal.solving.solve import solve_session
+from tmscal.solving.solve import solve
 
 CONFIGS = Path(__file__).resolve().parents[1] / "tmscal" / "data" / "configs"
 RIGS = {"ur5e": ("mock-ur-polaris-kin.yaml", "127.0.0.187"),   # ur_rtde's ports are fixed
@@ -158,17 +158,17 @@ def _robot_time(session: Any, cfg_path: Path, samples: int) -> np.ndarray:
 def _three_arms(session: Any, targets: Any) -> dict[str, float]:
     """Placement of QR36 and ml with the nominal, estimated and true arm."""
     out = {}
-    est, _ = solve_session(session, "ml", kinematics="estimate", in_sample=True)
+    est = solve(session, method="ml", kinematics="estimate", in_sample=True).calibration
     arms = {"estimated": est.arm.arm, "true": session.truth_arm["true"]}
     for m in ("qr36", "ml"):
-        cal, _ = solve_session(session, m, in_sample=True)
+        cal = solve(session, method=m, in_sample=True).calibration
         out[f"{m} nominal"] = _placement(cal, session, targets)
         for what, arm in arms.items():
             if m == "ml" and what == "estimated":
                 cal = est
             else:
-                cal, _ = solve_session(session, m, kinematics=arm, in_sample=True,
-                                       kinematics_source=what)
+                cal = solve(session, method=m, kinematics=arm, in_sample=True,
+                                       kinematics_source=what).calibration
             out[f"{m} {what}"] = _placement(cal, session, targets)
     return out
 
@@ -205,8 +205,8 @@ def rig(args: argparse.Namespace, tmp: Path) -> None:
                 print(f"{arm} seed {seed}, {args.poses} poses of the {kind} plan, robot time "
                       f"{tk[args.poses - 1]:.0f} s: "
                       + ", ".join(f"{k} {v:.3f}" for k, v in r.items()))
-                pl = [_placement(solve_session(_prefix(sk, n), "ml", kinematics="estimate",
-                                               in_sample=True)[0], sk, targets)
+                pl = [_placement(solve(_prefix(sk, n), method="ml", kinematics="estimate",
+                                               in_sample=True).calibration, sk, targets)
                       for n in args.ladder]
                 ladder.setdefault((arm, kind), []).append(
                     (np.array(pl), tk[np.array(args.ladder) - 1]))
@@ -260,9 +260,9 @@ def wrench(args: argparse.Namespace, tmp: Path) -> None:
         s = _acquire(cfg_path, tmp / f"ur5e-ft-{seed}.jsonl")
         assert all(p.wrench is not None for p in s.poses), "a pose without a wrench"
         targets = _targets(s)
-        cal_w, _ = solve_session(s, "ml", kinematics="estimate", in_sample=True)
+        cal_w = solve(s, method="ml", kinematics="estimate", in_sample=True).calibration
         bare = replace(s, poses=[replace(p, wrench=None, wrench_spread=None) for p in s.poses])
-        cal_0, _ = solve_session(bare, "ml", kinematics="estimate", in_sample=True)
+        cal_0 = solve(bare, method="ml", kinematics="estimate", in_sample=True).calibration
         w = cal_w.arm.report["wrench"]
         true = build_sim_rig(load_config(cfg_path)).arm_true
         roll, pitch, _ = rpy_from_matrix(true.base)
@@ -318,7 +318,7 @@ def sim(args: argparse.Namespace, tmp: Path) -> None:
             s = read_session(out)
             for m, kw in (("qr24", {}), ("qr36", {"orthonormal": True}),
                           ("ml", {"kinematics": "estimate"})):
-                e[m].append(solve_session(s, m, **kw)[1].errors["e_t_mm"])
+                e[m].append(solve(s, method=m, **kw).errors["e_t_mm"])
         print(f"  {f'{sigma:g} / {sigma:g} / {sigma:g}':32}{np.mean(e['qr24']):>10.4f}"
               f"{np.mean(e['qr36']):>12.4f}{np.mean(e['ml']):>20.4f}")
         record("kinematics", {(f"sim_{m}_e_t_mm_sigma{sigma:g}".replace(".", "_")

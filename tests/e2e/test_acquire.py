@@ -19,7 +19,7 @@ from tmscal.config import load_config
 from tmscal.errors import SafetyError
 from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
-from tmscal.solving.solve import solve_session
+from tmscal.solving.solve import solve
 
 from ..rigs import (  # noqa: F401 (write_config re-exported for older importers)
     SeenPoses,
@@ -36,7 +36,7 @@ def check_truth(cfg_path: Path, session_path: Path, n: int) -> dict:
     s = read_session(session_path)
     assert [p.index for p in s.poses] == list(range(n))
     s.header["truth"] = {"X": truth.X.tolist(), "Y": truth.Y.tolist(), "Z": truth.Z.tolist()}
-    _, res = solve_session(s, "qr36")
+    res = solve(s, method="qr36")
     t = res.truth
     # noise: 0.05 mm fiducials, 0.05 mm / 0.05° robot; averaged frames; n poses ±100 mm/±10°
     assert t["X"]["trans_mm"] < 0.5 and t["Y"]["trans_mm"] < 0.5, t

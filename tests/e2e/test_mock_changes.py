@@ -25,7 +25,7 @@ from tmscal.geometry import invert, rotation_angle
 from tmscal.mocks.launch import build_sim_rig, spawn_mock_rig, start_mock_rig
 from tmscal.session import read_session
 from tmscal.sim import TMS_RIG_P0, tms_rig_truth
-from tmscal.solving.solve import solve_session
+from tmscal.solving.solve import solve
 
 CHANGE = {"mm": [2.0, 0.0, 0.0], "deg": [0.0, 0.0, 0.5]}
 
@@ -52,7 +52,7 @@ def test_acquire_on_a_moved_tracker_solves_the_changed_truth(tmp_path, mock_conf
     # the rig's truth is the calibrated one with the change: 2 mm along base x, 0.5° about z
     assert _trans_rot(truth.Z, calibrated.Z) == pytest.approx((2.0, 0.5), abs=1e-9)
     s.header["truth"] = truth.as_dict()
-    _, r = solve_session(s, "qr36")
+    r = solve(s, method="qr36")
     dz_t, dz_r = _trans_rot(r.Z, truth.Z)
     # noise: 0.05 mm fiducials, 0.05 mm / 0.05° robot, 10 frames per pose, 20 poses
     assert dz_t < 0.5 and dz_r < 0.05, (dz_t, dz_r)

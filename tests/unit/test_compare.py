@@ -82,7 +82,7 @@ def test_marker_only_skips_methods_that_need_the_probe(poses) -> None:
 
 def test_bad_counts_are_calibration_errors(poses) -> None:
     _, d = poses
-    with pytest.raises(CalibrationError, match="--n 49"):
+    with pytest.raises(CalibrationError, match="ns=49"):
         compare_arrays(d["A"], d["marker"], d["probe"], ["qr36"], ns=[49], folds=5)
     with pytest.raises(CalibrationError, match="unknown method 'nope'"):
         compare_arrays(d["A"], d["marker"], d["probe"], ["nope"], ns=[10])

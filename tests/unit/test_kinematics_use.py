@@ -1,4 +1,4 @@
-"""Using an identified arm (docs/kinematics.md, "Using it"): ``solve_session(kinematics=
+"""Using an identified arm (docs/kinematics.md, "Using it"): ``solve(kinematics=
 "estimate")`` on sessions of a simulated rig whose arm has hidden errors; the calibration file
 keeps the arm (its kinematics in the kinematics format, the controller frame, the seeds, the
 report) through YAML and the json export, and files without one still load; the daily check
@@ -19,6 +19,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from tmscal import solving
 from tmscal.calib import solve
 from tmscal.calib.kinematics import arm_by_name, base_from_flange
 from tmscal.calib.kinematics import estimate as est
@@ -39,7 +40,6 @@ from tmscal.poses import eq14_poses
 from tmscal.session import PoseRecord, make_header, read_session, write_session
 from tmscal.sim import TMS_RIG_P0, Noise, SimRig, make_arm, tms_rig_truth
 from tmscal.solving.kinematics import coil_placement
-from tmscal.solving.solve import solve_session
 
 HOME = np.array([np.pi, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 
@@ -72,8 +72,9 @@ def solved(tmp_path_factory: pytest.TempPathFactory):
     d = tmp_path_factory.mktemp("kinuse")
     s = d / "s.jsonl"
     rig = _session(s)
-    cal, res = solve_session(read_session(s), "ml", kinematics="estimate", level="full",
+    res = solving.solve(read_session(s), method="ml", kinematics="estimate", level="full",
                              in_sample=True)
+    cal = res.calibration
     return d, s, rig, cal, res
 
 
@@ -133,7 +134,8 @@ def test_files_without_an_arm_still_load(solved, tmp_path) -> None:
     kinematics file of selfcal identify (sensor and tool, no β) is still an ArmModel; one of a
     plain arm (β, no sensor) is an Arm."""
     d, s, _, _, _ = solved
-    plain_cal, plain_res = solve_session(read_session(s), "qr36", in_sample=True)
+    plain_res = solving.solve(read_session(s), method="qr36", in_sample=True)
+    plain_cal = plain_res.calibration
     f = tmp_path / "old.yaml"
     f.write_text(calibration_yaml(plain_cal, plain_res.to_json(), str(s), "cd" * 32))
     cal = read_calibration(f).calibration

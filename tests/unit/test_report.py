@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from tmscal import geometry as g
+from tmscal import solving
 from tmscal.calib import solve
 from tmscal.report.text import format_result, format_study
 from tmscal.session import make_header, read_session, records_from_arrays, write_session
 from tmscal.sim import simulate
 from tmscal.solving.outliers import find_outliers, outlier_threshold
-from tmscal.solving.solve import SolveResult, solve_session
+from tmscal.solving.solve import SolveResult
 from tmscal.solving.study import study_session
 
 
@@ -38,7 +39,8 @@ def rig(tmp_path_factory):
 
 def test_default_errors_are_cross_validated_and_near_the_true_hold_out(rig):
     s, _, fresh, _ = rig
-    cal, res = solve_session(s, "qr36")
+    res = solving.solve(s, method="qr36")
+    cal = res.calibration
     assert res.errors_on == "cross-validated (5 folds)" and res.n_solve == 100
     true = cal.errors(fresh["A"], fresh["marker"], fresh["probe"])
     for k in ("e_t_mm", "theta_t_deg"):
@@ -57,7 +59,7 @@ def test_cross_validation_equals_a_hand_made_contiguous_k_fold_loop(rig):
         e = solve(A[train], B[train], C[train]).errors(A[test], B[test], C[test])
         per.append([e["e_t_mm"], e["theta_t_deg"], e["bodies"]["probe"]["trans_mm"]])
     per = np.array(per)
-    _, res = solve_session(s, "qr36", folds=4)
+    res = solving.solve(s, method="qr36", folds=4)
     assert res.cv == {"folds": 4, "split": "contiguous", "fold_sizes": [25] * 4}
     got = [res.errors["e_t_mm"], res.errors["theta_t_deg"], res.errors["probe"]["trans_mm"]]
     np.testing.assert_allclose(got, per.mean(axis=0), rtol=1e-9)
@@ -68,7 +70,7 @@ def test_cross_validation_equals_a_hand_made_contiguous_k_fold_loop(rig):
 
 def test_in_sample_only_on_request_and_labelled(rig):
     s, d, _, _ = rig
-    cal, res = solve_session(s, "qr36", in_sample=True)
+    res = solving.solve(s, method="qr36", in_sample=True)
     assert res.errors_on == "in-sample" and res.errors_sd is None and res.cv is None
     e = solve(d["A"], d["marker"], d["probe"]).errors(d["A"], d["marker"], d["probe"])
     assert res.errors["e_t_mm"] == pytest.approx(e["e_t_mm"], rel=1e-12)
@@ -136,7 +138,7 @@ def test_a_pose_corrupted_on_purpose_is_the_one_outlier(tmp_path):
     truth, d = simulate(120, rng, plan="eq14")
     d["marker"][17] = d["marker"][17] @ g.make_pose(np.eye(3), [0.8, 0.0, 0.0])  # bumped tool
     s = write_sim(tmp_path / "bad.jsonl", truth, d)
-    _, res = solve_session(s, "qr36")
+    res = solving.solve(s, method="qr36")
     assert [o["index"] for o in res.outliers] == [17]
     assert {(f["body"], f["metric"]) for f in res.outliers[0]["flags"]} >= {
         ("marker", "translation")}
@@ -145,7 +147,7 @@ def test_a_pose_corrupted_on_purpose_is_the_one_outlier(tmp_path):
     assert "pose index 17: marker translation" in text
     clean = write_sim(tmp_path / "ok.jsonl", *simulate(120, np.random.default_rng(5)))
     assert find_outliers({"index": [], "marker": {"trans_mm": [], "rot_deg": []}}) == []
-    assert solve_session(clean, "qr36")[1].outliers == []
+    assert solving.solve(clean, method="qr36").outliers == []
 
 
 def test_study_reports_the_noise_floor_of_the_true_transforms(rig):

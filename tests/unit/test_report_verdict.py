@@ -23,13 +23,14 @@ from click.testing import CliRunner
 
 from tests.rigs import simulated
 from tests.unit.test_kinematics_use import _session as arm_session
+from tmscal import solving
 from tmscal.calib import solve
 from tmscal.calib.prediction import AdaptiveSettings
 from tmscal.check import verdict
 from tmscal.cli import main
 from tmscal.report.verdict import verdict_rows
 from tmscal.session import Session, make_header, read_session, records_from_arrays, write_session
-from tmscal.solving import adaptive_header, solve_session
+from tmscal.solving import adaptive_header
 from tmscal.solving.predict import predict_calibration
 
 N_POSES = 40
@@ -110,7 +111,8 @@ def plain(tmp_path_factory):
     simulated session without an adaptive run and without an arm."""
     path = _write(tmp_path_factory.mktemp("verdict") / "s.jsonl", seed=3)
     session = read_session(path)
-    cal, res = solve_session(session, "qr36", folds=FOLDS)
+    res = solving.solve(session, method="qr36", folds=FOLDS)
+    cal = res.calibration
     return path, session, cal, res, _cross_validated(session)
 
 
@@ -180,7 +182,8 @@ def test_the_prediction_is_the_one_of_the_calibration_shown(plain, method) -> No
     calibration (its method) at the settings' confidence (95 % by default), printed to 3
     significant digits."""
     _, session, _, _, _ = plain
-    cal, res = solve_session(session, method, folds=FOLDS)
+    res = solving.solve(session, method=method, folds=FOLDS)
+    cal = res.calibration
     pred, _ = predict_calibration(session, cal, res.n_solve)
     rows = verdict_rows(res, None, session)
     assert _predicted_mm(rows) == pytest.approx(pred.coil_mm, rel=6e-3)
@@ -226,7 +229,8 @@ def test_the_adaptive_run_its_target_against_the_prediction(adaptive, tmp_path, 
     max_poses and the robot time summed over the poses' phases."""
     path, settings, usable, total_s = adaptive
     session = read_session(path)
-    cal, res = solve_session(session, "qr36", folds=FOLDS)
+    res = solving.solve(session, method="qr36", folds=FOLDS)
+    cal = res.calibration
     pred = predict_calibration(session, cal, res.n_solve)[0]
     assert pred.confidence == settings.confidence  # the header's settings are the prediction's
     target = pred.coil_mm * (1.5 if reached else 0.5)
@@ -265,8 +269,9 @@ def test_no_arm_the_controllers_poses(plain) -> None:
 def test_an_estimated_arm_is_named_with_its_level(arm_rig) -> None:
     path, _ = arm_rig
     session = read_session(path)
-    cal, res = solve_session(session, "ml", kinematics="estimate", level="offsets",
+    res = solving.solve(session, method="ml", kinematics="estimate", level="offsets",
                              in_sample=True)
+    cal = res.calibration
     rows = verdict_rows(res, None, session)
     (line,) = [r for r in rows if r.startswith("arm:")]
     assert line.startswith("arm: vs060")  # the arm the session header records
@@ -281,7 +286,7 @@ def test_an_arm_from_a_kinematics_file_is_named_with_the_file(arm_rig) -> None:
     path, rig = arm_rig
     session = read_session(path)
     true_arm = rig.arm.geometry()[1]
-    _, res = solve_session(session, "qr36", folds=FOLDS, kinematics=true_arm,
+    res = solving.solve(session, method="qr36", folds=FOLDS, kinematics=true_arm,
                            kinematics_source="vs060-kin.yaml")
     (line,) = [r for r in verdict_rows(res, None, session) if r.startswith("arm:")]
     assert line.startswith("arm: vs060")

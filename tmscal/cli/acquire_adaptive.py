@@ -162,7 +162,7 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
     from ..report.text import format_result, format_robot_time, format_truth
     from ..session import read_session
     from ..solving.predict import RUN_METHOD
-    from ..solving.solve import solve_session
+    from ..solving.solve import solve
     from .app import print_json
 
     truth = build_sim_rig(cfg).truth  # the child builds the same rig from the same config
@@ -176,7 +176,7 @@ def demo(cfg: Any, cfg_path: Path, output: Path, transport: str, samples: int | 
                   quiet=as_json, replace=replace)
     session = read_session(output)
     session.header["truth"] = truth.as_dict()
-    _, result = solve_session(session, RUN_METHOD["method"],
+    result = solve(session, method=RUN_METHOD["method"],
                               options=dict(RUN_METHOD["options"]))
     true_mm = (result.truth or {}).get("coil_placement_mm")
     if as_json:

@@ -68,12 +68,40 @@ def handle_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
         except BrokenPipeError:
             stdout_closed()
         except TmscalError as e:
-            fail(_name_command(str(e)))
+            fail(as_flags(_name_command(str(e))))
         except OSError as e:
             where = f"{e.filename}: " if getattr(e, "filename", None) else ""
             fail(f"{where}{e.strerror or e}")
 
     return wrapper
+
+
+#: how a library message names the arguments of a library call (``tmscal.solving.solve``,
+#: ``compare_arrays``), and the command-line options that set them
+PARAMETER_FLAGS: list[tuple[str, str]] = [
+    (r"\bkinematics='estimate'", "--kinematics estimate"),
+    (r"\bkinematics=<an arm>", "--kinematics"),
+    (r"\bmethod='([\w-]+)'", r"--method \1"),
+    (r"\btrain=N\b", "--train"),
+    (r"\btrain=(-?\d+)", r"--train \1"),
+    (r"\bin_sample=True", "--in-sample"),
+    (r"(?<![\w.-])arm=(?=\W|$)", "--arm"),
+    (r"\blevel=(?=\W|$)", "--level"),
+    (r"\btolerances=(?=\W|$)", "--tolerance-length/--tolerance-angle"),
+    (r"\bfolds=(-?\d+)", r"--folds \1"),
+    (r"\bns=(-?\d+)", r"--n \1"),
+]
+
+
+def as_flags(msg: str) -> str:
+    """``msg`` (a library error) with the arguments it names worded as the options that set
+    them (:data:`PARAMETER_FLAGS`: ``kinematics='estimate'`` → ``--kinematics estimate``,
+    ``train=2`` → ``--train 2``)."""
+    import re
+
+    for pattern, flag in PARAMETER_FLAGS:
+        msg = re.sub(pattern, flag, msg)
+    return msg
 
 
 def _name_command(msg: str) -> str:

@@ -97,7 +97,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     from ..mocks.launch import build_sim_rig, spawn_mock_rig
     from ..report.text import format_result, format_truth
     from ..session import read_session
-    from ..solving.solve import solve_session
+    from ..solving.solve import solve
     from .live import AcquireProgress, stderr_to_log
 
     if kinematics is not None and adaptive:
@@ -138,7 +138,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
             from .kinematics import demo_report
             demo_report(session, res, as_json, verbose)
             return
-        _, result = solve_session(session, "qr36")
+        result = solve(session, method="qr36")
         if as_json:
             print_json(result.to_json())
             return

@@ -1,5 +1,5 @@
 """``tmscal demo --kinematics estimate``: the session acquired on the mock rig solved with the
-arm's kinematics estimated (``solving.solve.solve_session(kinematics="estimate")``,
+arm's kinematics estimated (``solving.solve(session, method="ml", kinematics="estimate")``,
 docs/kinematics.md), and the coil placement against the mock rig's truth through that
 calibration's flange commands, beside QR36's on the controller's nominal poses. The command's
 options live in :mod:`tmscal.cli.rig_commands`."""
@@ -19,11 +19,11 @@ def demo_report(session: Any, acquired: Any, as_json: bool, verbose: bool = Fals
     result (poses recorded, skipped, seconds). ``verbose``: list every combination of
     deviations (``report.text.format_result``)."""
     from ..report.text import format_result
-    from ..solving.solve import solve_session
+    from ..solving.solve import solve
     from .app import print_json
 
-    _, result = solve_session(session, "ml", kinematics="estimate")
-    _, nominal = solve_session(session, "qr36")
+    result = solve(session, method="ml", kinematics="estimate")
+    nominal = solve(session, method="qr36")
 
     def coil(res: Any) -> float | None:
         t = res.truth or {}

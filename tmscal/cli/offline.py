@@ -14,6 +14,7 @@ from .app import (
     INPUT_FILE,
     STRICT_HELP,
     Finite,
+    as_flags,
     check_outputs,
     handle_errors,
     main,
@@ -324,7 +325,8 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     from ..formats.calibfile import calibration_yaml
     from ..report.text import format_result, plot_residuals
     from ..session import sha256_of
-    from ..solving.solve import pose_residuals, solve_session
+    from ..solving.solve import pose_residuals
+    from ..solving.solve import solve as solve_service
 
     estimate = kinematics == "estimate"
     kin_file = kinematics if isinstance(kinematics, Path) else None
@@ -361,12 +363,14 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     session = read_session_file(session_file, strict)
     if handheld_pose is not None:
         opts.update(_handheld_options(session, handheld_pose))
-    cal, res = solve_session(session, method=method.lower(), train=train,
-                             orthonormal=orthonormal, folds=folds, in_sample=in_sample,
-                             options=opts, arm=arm, level=level,
-                             tolerances=_tolerances(tolerance_length, tolerance_angle,
-                                                    estimate),
-                             **_kinematics_args(kinematics))
+    res = solve_service(session, method=method.lower(), train=train,
+                        orthonormal=orthonormal, folds=folds, in_sample=in_sample,
+                        options=opts, arm=arm, level=level,
+                        tolerances=_tolerances(tolerance_length, tolerance_angle, estimate),
+                        **_kinematics_args(kinematics))
+    cal = res.calibration
+    if res.arm is not None and res.arm.get("named_by"):
+        res.arm["named_by"] = as_flags(res.arm["named_by"])
     if output is not None:
         from ..formats.calibfile import calibration_p0, provenance
         write_atomic(output, calibration_yaml(
@@ -377,7 +381,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
             run_plot(plot_residuals, res.residuals or pose_residuals(session, cal), res.n_solve,
                      tmp["plot"], f"{session_file.name}: {res.method.upper()} per-pose errors",
                      outliers=res.outliers)
-    pred = _adaptive_prediction(session, res)
+    pred = _adaptive_prediction(session, res, numbers=as_json)
     if as_json:
         out = res.to_json() if pred is None else {**res.to_json(), "adaptive": pred[0]}
         print_json(out if kin_file is None else {**out, "kinematics": str(kin_file)})
@@ -405,27 +409,29 @@ def _tolerances(length_mm: float | None, angle_deg: float | None, estimate: bool
 
 
 def _kinematics_args(kinematics: str | Path | None) -> dict[str, Any]:
-    """solve_session's ``kinematics`` (and ``kinematics_source``) for --kinematics."""
+    """``solving.solve``'s ``kinematics`` (and ``kinematics_source``) for --kinematics."""
     if kinematics is None or kinematics == "estimate":
         return {"kinematics": kinematics}
     from ..formats.kinfile import load_arm
     return {"kinematics": load_arm(kinematics), "kinematics_source": str(kinematics)}
 
 
-def _adaptive_prediction(session: Any, res: Any) -> tuple[dict[str, Any], str] | None:
-    """For a session recorded by ``acquire --adaptive``: the prediction that run stopped on,
-    recomputed from the session (``solving.predict.predict_session``; docs/adaptive.md), as
-    ({method, options, predicted_coil_mm, confidence, sigma_mm, n_poses, …, region,
-    robot_time_s}, its text); None for other sessions. The text names the calibration that
-    prediction is about and prints no second number: the solve result ``res``'s own
-    prediction is the written calibration's (the same one when ``res`` is solved with the
-    run's method, ``solving.predict.RUN_METHOD``)."""
+def _adaptive_prediction(session: Any, res: Any, numbers: bool
+                         ) -> tuple[dict[str, Any] | None, str] | None:
+    """For a session recorded by ``acquire --adaptive``: the prediction that run stopped on
+    (docs/adaptive.md), as ({method, options, predicted_coil_mm, confidence, sigma_mm,
+    n_poses, …, region, robot_time_s} or None, its text); None for other sessions. The text
+    names the calibration that prediction is about, prints no second number (the solve
+    result ``res``'s own prediction is the written calibration's; the same one when ``res``
+    is solved with the run's method, ``solving.predict.RUN_METHOD``) and so needs no fit:
+    only the session's robot time. With ``numbers`` (``--json``) the run's prediction is
+    recomputed from the session (``solving.predict.predict_session``: QR36 then ml, the
+    run's calibration, another fit than ``res``'s)."""
     if not isinstance(session.header.get("adaptive"), dict):
         return None
     from ..report.text import format_robot_time
-    from ..solving.predict import RUN_METHOD, predict_session
+    from ..solving.predict import RUN_METHOD, predict_session, robot_time_of
 
-    pred, info = predict_session(session)
     opts = " ".join(f"--option {k}={v}" for k, v in RUN_METHOD["options"].items())
     same = (res.method == RUN_METHOD["method"] and res.arm is None
             and (res.distortion or {}).get("model", "none")
@@ -433,7 +439,10 @@ def _adaptive_prediction(session: Any, res: Any) -> tuple[dict[str, Any], str] |
     about = ("this calibration" if same else f"the calibration tmscal solve {session.path} "
              f"--method {RUN_METHOD['method']} {opts} writes")
     text = ("adaptive acquisition (docs/adaptive.md): the run stopped on the prediction of "
-            f"{about}\n  " + format_robot_time(info["robot_time_s"]))
+            f"{about}\n  " + format_robot_time(robot_time_of(session.poses)))
+    if not numbers:
+        return None, text
+    pred, info = predict_session(session)
     return ({"method": RUN_METHOD["method"], "options": dict(RUN_METHOD["options"]),
              **pred.as_dict(), "region": info["region"],
              "robot_time_s": info["robot_time_s"]}, text)

@@ -41,7 +41,7 @@ from ..solving.solve import (
     arm_summary,
     flat_errors,
     pose_residuals,
-    solve_session,
+    solve,
     truth_errors_of,
 )
 from ..solving.study import study_session
@@ -350,7 +350,8 @@ def html_report(session: Session, sha256: str, *, method: str = "qr36",
              _section("samples", _samples(session))]
     say("calibration")
     if calib is None:
-        cal, res = solve_session(session, method=method, folds=folds)
+        res = solve(session, method=method, folds=folds)
+        cal = res.calibration
         source = (f"{res.method.upper()} solved on the {res.n_solve} usable poses of this "
                   "session (tmscal solve).")
         # res.prediction: this calibration's (the solve service's)

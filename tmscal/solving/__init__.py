@@ -3,12 +3,15 @@
 Everything that solves, evaluates or predicts from a session, and reads the session header to
 do so, lives here, below its users (``tmscal.acquisition``, ``tmscal.exports``,
 ``tmscal.stream``, ``tmscal.report`` and ``tmscal.cli``), which render or store its results;
-it imports none of them (docs/architecture.md). No I/O: sessions come in as
+it imports none of them (docs/architecture.md). Its errors name the arguments of its calls
+(``kinematics='estimate'``, ``train=N``), never a command-line option. No I/O: sessions come in as
 :class:`tmscal.session.Session` objects.
 
-- :mod:`.solve`: ``solve_session`` (the calibration and its cross-validated, held-out or
-  in-sample errors, the truth errors, the outlier poses: ``SolveResult``; with
-  ``kinematics="estimate"`` the arm's kinematics estimated with X, Y, Z), ``pose_residuals``,
+- :mod:`.solve`: ``solve`` (``solve(session, method=..., kinematics=..., ...)``, by named
+  arguments: one ``SolveResult`` carrying the calibration, its cross-validated, held-out or
+  in-sample errors, the truth errors, the outlier poses and its prediction, each computed
+  once for that calibration; with ``kinematics="estimate"`` the arm's kinematics estimated
+  with X, Y, Z), ``pose_residuals``,
   ``truth_errors_of``, ``with_kinematics`` (A recomputed from the joints under an identified
   arm model).
 - :mod:`.kinematics`: the arm in the service (docs/kinematics.md, "Using it"): a session's
@@ -37,9 +40,9 @@ from __future__ import annotations
 from .compare import compare_arrays, compare_session
 from .outliers import find_outliers
 from .predict import adaptive_header, predict_session, settings_from_header
-from .solve import SolveResult, pose_residuals, solve_session, truth_errors_of, with_kinematics
+from .solve import SolveResult, pose_residuals, solve, truth_errors_of, with_kinematics
 from .study import study_session
 
-__all__ = ["SolveResult", "solve_session", "pose_residuals", "truth_errors_of",
+__all__ = ["SolveResult", "solve", "pose_residuals", "truth_errors_of",
            "with_kinematics", "study_session", "compare_session", "compare_arrays",
            "predict_session", "adaptive_header", "settings_from_header", "find_outliers"]

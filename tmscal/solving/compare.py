@@ -103,7 +103,7 @@ def compare_session(session: Session, methods: Sequence[str] | None = None,
 
 def _folds(n: int, k: int) -> list[np.ndarray]:
     if k < 2:
-        raise CalibrationError(f"--folds {k}: the comparison needs at least 2 folds")
+        raise CalibrationError(f"folds={k}: the comparison needs at least 2 folds")
     folds = np.array_split(np.arange(n), min(k, n))
     if n - max(len(f) for f in folds) < 3:
         raise CalibrationError(f"{n} poses are too few for {k} folds (each fold must leave at "
@@ -140,7 +140,7 @@ def compare_arrays(A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
     ns = default_ns(n_train_max) if ns is None else sorted(set(int(n) for n in ns))
     too_big = [n for n in ns if n > n_train_max or n < 3]
     if too_big:
-        raise CalibrationError(f"--n {too_big[0]}: each fold leaves {n_train_max} poses to "
+        raise CalibrationError(f"ns={too_big[0]}: each fold leaves {n_train_max} poses to "
                                f"solve on (and a solve needs at least 3); use n in 3…"
                                f"{n_train_max} or fewer folds")
     out: dict[str, Any] = {"n_poses": len(A), "folds": len(fs),

@@ -45,16 +45,16 @@ def recorded_arm(session: Session) -> str | None:
 
 def choose_arm(session: Session, arm: str | None) -> tuple[Arm, str]:
     """The nominal arm of a kinematic calibration and where its name came from: ``arm`` (a
-    registry name, ``--arm``), else the one the session recorded. CalibrationError naming the
-    known arms for an unknown name, or asking for --arm when the session recorded none."""
+    registry name), else the one the session recorded. CalibrationError naming the known
+    arms for an unknown name, or asking for ``arm`` when the session recorded none."""
     if arm is not None:
-        name, source = arm, "--arm"
+        name, source = arm, "arm="
     else:
         name, source = recorded_arm(session), "the session header (devices.robot.arm)"
         if name is None:
             raise CalibrationError(
                 f"{session.path or 'session'}: the session does not say which arm recorded it "
-                "(its robot driver reported no model): name it with --arm (one of "
+                "(its robot driver reported no model): name it with arm= (one of "
                 f"{', '.join(ARMS)})")
     try:
         return arm_by_name(name, f"{source}"), source
@@ -161,7 +161,7 @@ def given_arm(session: Session, model: Arm, source: str
     if not use:
         return session, None
     where = str(session.path or "session")
-    q = session_joints(session, [p.index for p in use], f"--kinematics ({source})")
+    q = session_joints(session, [p.index for p in use], f"kinematics=<an arm> ({source})")
     _check_dof(q, model, where)
     A_rec = np.stack([p.A for p in use])
     ac = None

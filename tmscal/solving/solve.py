@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calib import Calibration, solve, truth_errors
+from ..calib import Calibration, truth_errors
+from ..calib import solve as solve_arrays
 from ..calib.diagnose import calibration_noise
 from ..calib.kinematics.calibrated import ArmCalibration
 from ..calib.kinematics.estimate import Tolerances
@@ -37,7 +38,7 @@ from .outliers import RULE as OUTLIER_RULE
 from .outliers import find_outliers
 from .predict import calibration_prediction, placement_region
 
-__all__ = ["SolveResult", "solve_session", "session_arrays", "pose_residuals",
+__all__ = ["SolveResult", "solve", "session_arrays", "pose_residuals",
            "with_kinematics", "truth_errors_of", "flat_errors", "arm_summary"]
 
 
@@ -54,18 +55,19 @@ def session_arrays(session: Session, method: str) -> tuple[np.ndarray, np.ndarra
     if need_probe and "probe" not in session.bodies:
         raise CalibrationError(f"{session.path}: marker-only session (bodies: "
                                f"{', '.join(session.bodies)}); qr36 needs a probe — use "
-                               "--method qr24")
+                               "method='qr24'")
     A, B, C, _ = session.arrays(need_probe=need_probe)
     return A, B, C
 
 
 def arm_summary(ac: ArmCalibration, named_by: str | None = None) -> dict[str, Any]:
     """What ``tmscal solve`` reports of a calibration's arm (plain types): "nominal" (its
-    registry name), "named_by" (--arm or the session header), "source" ("estimated" or the
-    kinematics file), "controller_frame" (4×4 mm), "seeds" (how many), and for an estimated
-    arm its report: level and reason, the held-out table "cv" {level: {e_t_mm, se_mm,
-    folds}}, the tolerances, the identified / weak / unidentified combinations (text, σ in
-    tolerance units), the deviations (rad, mm) and their SD (docs/kinematics.md)."""
+    registry name), "named_by" (the ``arm`` argument, "arm=", or the session header),
+    "source" ("estimated" or the kinematics file), "controller_frame" (4×4 mm), "seeds" (how
+    many), and for an estimated arm its report: level and reason, the held-out table "cv"
+    {level: {e_t_mm, se_mm, folds}}, the tolerances, the identified / weak / unidentified
+    combinations (text, σ in tolerance units), the deviations (rad, mm) and their SD
+    (docs/kinematics.md)."""
     rep = dict(ac.report or {})
     out: dict[str, Any] = {"nominal": ac.nominal.name,
                            "source": "estimated" if "deviations" in rep else
@@ -86,7 +88,7 @@ class SolveResult:
     """What ``tmscal solve`` reports. ``method`` and ``applied`` ("raw" or "orthonormal"
     matrices); the poses the reported calibration was solved on (``n_solve``) and the poses the
     errors were computed on (``n_test``), ``errors_on`` ("cross-validated (k folds)", "held-out"
-    for ``--train`` or "in-sample"), poses skipped at acquisition (``n_skipped``); X =
+    for ``train`` or "in-sample"), poses skipped at acquisition (``n_skipped``); X =
     flange_from_marker, Y = flange_from_probe (None for marker-only), Z = base_from_tracker
     (orthonormal 4×4 mm) and ``raw`` (the solver's matrices by name); ``errors`` (e_t_mm,
     theta_t_deg, per body trans_mm/rot_deg, e_z_mm/theta_z_deg for QR24 with a probe; the mean
@@ -94,7 +96,9 @@ class SolveResult:
     unless cross-validated); ``cv`` (folds, split, fold_sizes); ``truth`` ({X, Y, Z: {trans_mm,
     rot_deg}}, coil_placement_mm, coil_placement_max_mm, coil_placement_n) when the session
     knows the truth; ``outliers`` (solving.outliers.find_outliers on the per-pose errors of the
-    reported calibration). ``to_json()`` is the ``--json`` object."""
+    reported calibration); ``calibration``, the :class:`~tmscal.calib.Calibration` itself (what
+    ``formats.calibfile.calibration_yaml`` stores; not part of ``to_json``). ``to_json()`` is
+    the ``--json`` object."""
 
     method: str
     applied: str
@@ -137,6 +141,8 @@ class SolveResult:
     #: was solved on, ``NoiseModel.to_json``): what the daily check's diagnosis and
     #: ``--update`` test against (docs/lab-day.md); None when it could not be estimated
     noise_model: dict[str, Any] | None = None
+    #: the calibration these figures are of (X, Y, Z and everything the solver returned)
+    calibration: Calibration | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict[str, Any]:
         """The result as plain JSON types (matrices as nested lists, mm)."""
@@ -180,7 +186,7 @@ def with_kinematics(session: Session, model: Any, source: str = "the kinematics"
             if p.joints_rad is None:
                 raise CalibrationError(
                     f"{session.path or 'session'}: pose {p.index} has no joint angles "
-                    f"('joints_rad'); --kinematics recomputes A from them, so every pose "
+                    f"('joints_rad'); kinematics=<an arm> recomputes A from them, so every pose "
                     "must have them (record with a robot driver that reports joints)")
             if len(p.joints_rad) != n:
                 raise CalibrationError(
@@ -207,24 +213,31 @@ def _spreads(session: Session, indices: list[int], bodies: list[str]
     return [{"spread": p.spread, "samples": p.samples} for p in use]
 
 
-def solve_session(session: Session, method: str = "qr36", train: int | None = None,
-                  orthonormal: bool = False, folds: int = 5, in_sample: bool = False,
-                  options: dict[str, Any] | None = None, kinematics: Any = None,
-                  arm: str | None = None, level: str = "auto",
-                  tolerances: Tolerances | None = None,
-                  kinematics_source: str = "the kinematics file"
-                  ) -> tuple[Calibration, SolveResult]:
-    """Solve a session and estimate its errors (docs/methods.md).
+def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
+          arm: str | None = None, level: str = "auto", tolerances: Tolerances | None = None,
+          train: int | None = None, folds: int = 5, in_sample: bool = False,
+          orthonormal: bool = False, options: dict[str, Any] | None = None,
+          kinematics_source: str = "the kinematics file") -> SolveResult:
+    """Solve a session and evaluate the calibration (docs/methods.md): the one call of
+    ``tmscal solve``, by named arguments, e.g. ``solve(session, method="ml",
+    kinematics="estimate")``. Returns one :class:`SolveResult`: the calibration
+    (``.calibration``), its errors, the truth errors, the outlier poses and its predicted
+    coil-placement error (``.prediction``), each computed once, for that calibration.
 
-    The reported calibration is solved on poses [0, train) (default: all). Its errors are:
-    with ``train``, held out on the poses after it; with ``in_sample``, on the poses it was
-    solved on (optimistic); by default, ``folds``-fold cross-validated
-    (``calib.study.cross_validate``: contiguous folds, mean and SD over folds). Returns the
-    Calibration and a ``SolveResult`` (also the errors against the truth when the session has
-    one, the outlier poses, and the calibration's predicted coil-placement error,
-    ``predict.calibration_prediction``). ``options`` go to the method (``calib.solve``);
-    ``ml`` takes the tracker noise from the poses' sample spreads when every pose recorded
-    them and ``options`` set no tracker noise (as the adaptive run's prediction does).
+    The calibration is solved with ``method`` (``calib.METHODS``; ``options`` go to it, as
+    ``calib.solve`` takes them) on poses [0, ``train``) (default: all). Its errors are: with
+    ``train``, held out on the poses after it; with ``in_sample``, on the poses it was solved
+    on (optimistic); by default, ``folds``-fold cross-validated
+    (``calib.study.cross_validate``: contiguous folds, mean and SD over folds). ``ml`` takes
+    the tracker noise from the poses' sample spreads when every pose recorded them and
+    ``options`` set no tracker noise (as the adaptive run's prediction does).
+    ``orthonormal`` applies the orthonormal matrices in the errors instead of the raw ones.
+
+    The prediction (``predict.calibration_prediction``) is the calibration's own for ``ml``
+    without an arm; every other method (QR36, QR24, the classic ones) has no error model of
+    its own, so its prediction needs one ml fit on the same poses (ml's error plus where
+    this calibration places the coil relative to ml's; docs/methods.md, "Which
+    prediction"): that fit is the only other solve, and a marker-only calibration has none.
 
     ``kinematics`` (docs/kinematics.md, "Using it"): ``"estimate"`` estimates the arm's
     kinematic deviations with X, Y, Z (``method`` must be "ml"): the joints of every usable
@@ -239,24 +252,25 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     with that arm (``kinematics_source`` names it), which the calibration then carries when
     it is a registered arm the recorded poses follow (``kinematics.given_arm``). With either,
     the result also holds the same solve on the controller's poses as recorded
-    (``SolveResult.nominal``: before and after). Raises CalibrationError for unusable data,
-    bad counts, a pose without joints, an unknown arm."""
+    (``SolveResult.nominal``: before and after; a second solve, the only one). Raises
+    CalibrationError for unusable data, bad counts, a pose without joints, an unknown arm;
+    its message names the arguments (``kinematics='estimate'``, ``train=N``), which the CLI
+    words as its options."""
     options = dict(options or {})
     estimate = isinstance(kinematics, str) and kinematics == "estimate"
     if kinematics is not None and not estimate and not isinstance(kinematics, Arm):
         raise CalibrationError(f"kinematics: expected 'estimate' or an arm model, got "
                                f"{kinematics!r:.40}")
     if estimate and method != "ml":
-        raise CalibrationError(f"--kinematics estimate is the maximum-likelihood solve (ml) "
-                               f"of X, Y, Z with the arm; --method {method} does not estimate "
-                               "an arm (leave --method out)")
+        raise CalibrationError(f"kinematics='estimate' is the maximum-likelihood solve (ml) "
+                               f"of X, Y, Z with the arm; method='{method}' does not estimate "
+                               "an arm (use method='ml')")
     if not estimate and (arm is not None or level != "auto" or tolerances is not None):
-        raise CalibrationError("--arm, --level and --tolerance-length/--tolerance-angle go "
-                               "with --kinematics estimate")
+        raise CalibrationError("arm=, level= and tolerances= go with kinematics='estimate'")
     as_recorded = None
     if kinematics is not None:  # before: the same solve on the controller's poses
-        before = solve_session(session, method, train, orthonormal, folds, in_sample,
-                               options)[1]
+        before = solve(session, method=method, train=train, orthonormal=orthonormal,
+                       folds=folds, in_sample=in_sample, options=options)
         as_recorded = {"errors_on": before.errors_on, "errors": before.errors,
                    "errors_sd": before.errors_sd, "truth": before.truth}
     given = None
@@ -268,16 +282,16 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
     if n == 0:
         raise CalibrationError(f"{session.path}: no usable poses in the session")
     if train is not None and in_sample:
-        raise CalibrationError("--train and --in-sample exclude each other (--train holds "
-                               "out the poses after N; --in-sample holds out none)")
+        raise CalibrationError("train=N and in_sample=True exclude each other (train=N holds "
+                               "out the poses after N; in_sample=True holds out none)")
     n_solve = n if train is None else train
     if n_solve < 3:
         if train is None:
             raise CalibrationError(f"{session.path}: {n} usable pose{'s' if n != 1 else ''}; "
                                    "a solve needs at least 3")
-        raise CalibrationError(f"--train {train}: need at least 3 poses to solve")
+        raise CalibrationError(f"train={train}: need at least 3 poses to solve")
     if n_solve > n:
-        raise CalibrationError(f"--train {train}: the session has only {n} usable poses")
+        raise CalibrationError(f"train={train}: the session has only {n} usable poses")
     q = None
     named_by = None
     if method == "ml" and not any(k in options for k in _TRACKER_NOISE):
@@ -287,7 +301,7 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         if sp is not None:
             options["spreads"] = sp
     if estimate:
-        q = session_joints(session, idx, "--kinematics estimate")
+        q = session_joints(session, idx, "kinematics='estimate'")
         nominal, named_by = choose_arm(session, arm)
         if q.shape[1] != nominal.n_joints:
             raise CalibrationError(f"{session.path}: the poses have {q.shape[1]} joint angles; "
@@ -301,7 +315,7 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
             options["wrench"] = ws[0]
             if not np.isnan(ws[1]).any():
                 options["wrench_sigma"] = np.maximum(ws[1], SIGMA_FLOOR)
-    cal = solve(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
+    cal = solve_arrays(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
                 orthonormal=orthonormal, **per_pose_options(options, slice(0, n_solve), n))
     if given is not None:
         cal.arm = given
@@ -341,8 +355,9 @@ def solve_session(session: Session, method: str = "qr36", train: int | None = No
         prediction=calibration_prediction(session, cal, int(n_solve),
                                           per_pose_options(options, slice(0, n_solve), n)),
         noise_model=_noise_model(cal, A_eval[:n_solve], B[:n_solve],
-                                 None if C is None else C[:n_solve]))
-    return cal, res
+                                 None if C is None else C[:n_solve]),
+        calibration=cal)
+    return res
 
 
 def _noise_model(cal: Calibration, A: np.ndarray, B: np.ndarray, C: np.ndarray | None
