@@ -352,6 +352,7 @@ def html_report(session: Session, sha256: str, *, method: str = "qr36",
     if calib is None:
         res = solve(session, method=method, folds=folds)
         cal = res.calibration
+        assert cal is not None  # solve() always returns the calibration it evaluated
         source = (f"{res.method.upper()} solved on the {res.n_solve} usable poses of this "
                   "session (tmscal solve).")
         # res.prediction: this calibration's (the solve service's)
