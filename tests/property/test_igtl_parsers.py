@@ -148,7 +148,7 @@ def test_assembled_frames_are_the_frames_sent(sent: list[tuple[bool, bool]], rnd
 @fuzz_settings()
 @given(st.text(max_size=40))
 def test_any_address_override_parses_or_is_a_config_error(text: str) -> None:
-    s = IGTLSettings("10.0.0.5", 18944, 2.0, tools={"marker": "M"}, src="rig.yaml")
+    s = IGTLSettings("10.0.0.5", 18944, tools={"marker": "M"}, src="rig.yaml")
     try:
         out = s.with_address(text)
     except ConfigError as e:
