@@ -262,17 +262,22 @@ def test_identify_writes_a_kinematics_file_closer_to_the_truth(tmp_path):
 
 
 @pytest.mark.parametrize("seed", [11, 2])
-def test_identify_default_writes_the_map_arm_that_does_not_depend_on_the_kept_columns(
-        tmp_path, seed):
+def test_identify_default_is_the_kinematic_estimator_with_wrench_rows_only(tmp_path, seed):
     """The default form: errors on every length and angle (``all``), so the wrench sees part
-    of them only in combinations. The written arm fits the wrenches as well as the kept
-    columns' fit; it is the MAP model whatever equivalent columns were kept (the same arm
-    from a fit that kept θ0_3 in place of θ0_2); after a hand/eye calibration absorbs what no
-    wrench sees, its TCP error is below the nominal arm's."""
+    of them only in combinations and the lengths not at all. The written arm is the one
+    kinematic estimator's (wrench rows, no tracker rows): it fits the wrenches as well as the
+    paper's kept-columns fit; no length moves from nominal (no wrench sees one: the prior keeps
+    it, and the file says why); its deviations are the estimator's own, called directly on the
+    same data; after a hand/eye calibration absorbs what no wrench sees, its TCP error is
+    below the nominal arm's."""
     from click.testing import CliRunner
 
-    from tmscal.calib.selfcal.identify import absorbed_errors, canonical, identify
-    from tmscal.calib.selfcal.model import forward, wrench
+    from tmscal.calib.kinematics.estimate import fit_kinematics
+    from tmscal.calib.kinematics.identifiability import ZERO_WRENCH_REASON
+    from tmscal.calib.kinematics.levels import Tolerances
+    from tmscal.calib.kinematics.wrench import WrenchData
+    from tmscal.calib.selfcal.identify import absorbed_errors
+    from tmscal.calib.selfcal.model import wrench
     from tmscal.cli import main
     from tmscal.session import read_session
     from tmscal.sim.arm import make_arm
@@ -283,19 +288,25 @@ def test_identify_default_writes_the_map_arm_that_does_not_depend_on_the_kept_co
     q = selfcal_session(s_path, pair)
     r = CliRunner().invoke(main, ["selfcal", "identify", str(s_path), "-o", str(k_path)])
     assert r.exit_code == 0, r.output
-    assert "the MAP model of every parameter" in r.output
+    assert "the MAP model of every deviation" in r.output and "tool: mass" in r.output
     kf = read_kinematics(k_path)
-    assert kf.doc["identification"]["form"] == "map"
-    res = identify_session(read_session(s_path), "ur5e")
+    ident = kf.doc["identification"]
+    assert ident["form"] == "map" and ident["method"] == "wrench"
+    kept = identify_session(read_session(s_path), "ur5e", form="kept")
     w = np.array([p.wrench for p in read_session(s_path).poses])
     rms_map = np.sqrt(np.mean((wrench(kf.model, q) - w) ** 2, axis=0))
-    assert np.all(rms_map <= 1.05 * res.fit.rms + 1e-9)
-    other = [("theta0_3" if n == "theta0_2" else n) for n in res.ident.kept]
-    assert other != res.ident.kept
-    fit2 = identify(pair.nominal, q, w, res.sigma, other)
-    again = canonical(pair.nominal, q, w, res.sigma, start=fit2.model)
-    np.testing.assert_allclose(forward(again, q)[:, :3, 3], forward(kf.model, q)[:, :3, 3],
-                               atol=1e-4)
+    assert np.all(rms_map <= 1.05 * kept.rms + 1e-9)
+    lengths = [f"{k}_{i}" for i in range(1, 7) for k in ("d", "a")]
+    np.testing.assert_allclose([kf.model.deviation(n) for n in lengths],
+                               [pair.nominal.deviation(n) for n in lengths], rtol=0, atol=1e-12)
+    unseen = {t for c in ident["unidentified"] if c["reason"] == ZERO_WRENCH_REASON
+              for t in c["terms"]}
+    assert set(lengths) <= unseen
+    sig = np.array(list(ident["sigma"].values()))
+    direct = fit_kinematics(q, [], pair.nominal, "full", ([], np.eye(4)), {},
+                            Tolerances(2.0, 1.0), wrench=WrenchData.make(w, sig, len(q)))
+    np.testing.assert_allclose([kf.model.deviation(n) - pair.nominal.deviation(n)
+                                for n in direct.names], direct.delta, atol=1e-9)
     assert (absorbed_errors(pair.true, kf.model, q).mean()
             < 0.9 * absorbed_errors(pair.true, pair.nominal, q).mean())
 

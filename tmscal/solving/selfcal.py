@@ -1,13 +1,15 @@
 """Self-calibration of a recorded session (``tmscal selfcal identify``; docs/selfcal.md,
-"Running it"): the joints and averaged wrenches of a session, the channel noise, which
-parameters the gravity wrench identifies, and the identified arm (Joubair et al. 2016).
+"Running it"): the joints and averaged wrenches of a session, the channel noise, and the
+identified arm.
 
-The arm written is the maximum a posteriori model of every parameter at once
-(:func:`tmscal.calib.selfcal.identify.canonical`, ``form="map"``): what the wrench determines
-comes from the data, what it sees only in a combination (θ0_2 + θ0_3 + θ0_4 of parallel
-joints, θ0_6 and the sensor's yaw) is shared out as the prior says, so the answer does not
-depend on which of several equivalent columns the identification keeps. ``form="kept"`` gives
-the fit of the kept columns only (the others nominal), as the paper does.
+Two forms. ``form="map"`` (the default) is the one kinematic estimator with wrench rows and no
+tracker rows (:func:`tmscal.calib.selfcal.estimate.estimate_from_wrenches`): the maximum a
+posteriori model of every DH deviation under a Gaussian prior (the tolerances), with the
+combinations it identifies, weakly identifies or cannot identify and why — the same model,
+loop and analysis as ``tmscal solve --kinematics estimate`` (docs/kinematics.md), so the
+answer does not depend on a choice of columns. ``form="kept"`` is the protocol of Joubair et
+al. (2016): the parameters QR column pivoting keeps are fitted, the others stay nominal
+(:func:`tmscal.calib.selfcal.identify.identify`).
 
 Units: joints rad, wrenches [Fx, Fy, Fz N, Tx, Ty, Tz N·m] in the sensor frame, lengths mm,
 angles rad (the :meth:`ArmModel.vector` order and units).
@@ -22,14 +24,14 @@ from typing import Any
 import numpy as np
 
 from ..calib.kinematics import spec_by_name
-from ..calib.selfcal.identify import (
-    Fit,
-    Identifiability,
-    canonical,
-    identifiable,
-    identify,
-    prior_scale,
+from ..calib.kinematics.levels import Tolerances
+from ..calib.kinematics.solve import wrench_summary
+from ..calib.selfcal.estimate import (
+    WrenchEstimate,
+    combination_record,
+    estimate_from_wrenches,
 )
+from ..calib.selfcal.identify import Fit, Identifiability, identifiable, identify
 from ..calib.selfcal.model import NOMINAL, ArmModel, jacobian
 from ..errors import CalibrationError, SessionError
 from ..session import Session
@@ -42,7 +44,8 @@ CHANNEL_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
 #: the smallest channel σ used (N, N·m): a noise-free sensor (a mock without noise) would
 #: otherwise give infinite weights
 MIN_SIGMA = 1e-6
-#: the forms of the written arm: the MAP model of every parameter, or the kept columns' fit
+#: the forms of the written arm: the estimator's MAP model of every deviation, or the paper's
+#: fit of the kept columns (module docstring)
 FORMS = ("map", "kept")
 
 
@@ -80,11 +83,12 @@ def wrench_sigma(given: tuple[float, float] | None, sem: np.ndarray) -> tuple[np
 class SessionIdentification:
     """What :func:`identify_session` found: the nominal ``model0`` and its registry ``name``;
     joints ``q`` (m, n) rad and ``indices``; the channel noise ``sigma`` (6,) and its
-    ``sigma_source``; ``ident`` (which parameters the wrench identifies, and why not the
-    others); ``fit`` (the kept columns' fit, its σ and residuals); ``scale`` the covariance
-    factor max(1, reduced χ²); ``model`` the arm written (``form`` "map" or "kept");
-    ``map_std`` the posterior σ of the identified parameters under the MAP's prior (their
-    units), ``prior`` {"length_mm", "angle_deg"}."""
+    ``sigma_source``; ``form`` ("map" or "kept") and the arm written, ``model``; ``prior``
+    {"length_mm", "angle_deg"} (the estimator's tolerances). With ``form="map"``:
+    ``estimate``, the estimator's result (deviations, combinations, wrench model). With
+    ``form="kept"``: ``ident`` (which parameters QR pivoting keeps, and why not the others),
+    ``fit`` (their fit, σ and residuals) and ``scale`` the covariance factor
+    max(1, reduced χ²)."""
 
     name: str
     model0: ArmModel
@@ -92,41 +96,70 @@ class SessionIdentification:
     indices: list[int]
     sigma: np.ndarray
     sigma_source: str
-    ident: Identifiability
-    fit: Fit
-    scale: float
     form: str
     model: ArmModel
-    map_std: np.ndarray
     prior: dict[str, float]
+    estimate: WrenchEstimate | None = None
+    ident: Identifiability | None = None
+    fit: Fit | None = None
+    scale: float = 1.0
+
+    @property
+    def rms(self) -> np.ndarray:
+        """Residual RMS per channel (6,) N ×3, N·m ×3 of the written model's fit."""
+        if self.estimate is not None:
+            return self.estimate.rms
+        assert self.fit is not None
+        return self.fit.rms
+
+    @property
+    def reduced_chi2(self) -> float:
+        if self.estimate is not None:
+            return self.estimate.reduced_chi2
+        assert self.fit is not None
+        return float(self.fit.reduced_chi2)
+
+    @property
+    def iterations(self) -> int:
+        if self.estimate is not None:
+            return self.estimate.fit.iterations
+        assert self.fit is not None
+        return self.fit.iterations
 
     def record(self) -> dict[str, Any]:
-        """The kinematics file's ``identification`` mapping (formats.kinfile): the identified
-        parameters, the written model's values of them, their σ and covariance (of the kept
-        columns' fit, scaled), the nominal values, and how the model was formed."""
+        """The kinematics file's ``identification`` mapping (formats.kinfile): the estimated
+        parameters, the written model's values of them, their σ and covariance, the nominal
+        values, and how the model was formed (``method: wrench`` and the estimator's
+        combinations for the MAP form; the kept columns and why the others were not for the
+        paper's)."""
+        common = {"nominal_arm": self.name, "form": self.form, "prior": dict(self.prior),
+                  "reduced_chi2": float(self.reduced_chi2), "iterations": self.iterations,
+                  "sigma": dict(zip(CHANNELS, self.sigma.tolist(), strict=True)),
+                  "residual_rms": dict(zip(CHANNELS, self.rms.tolist(), strict=True)),
+                  "configurations": len(self.q), "poses": self.indices}
+        if self.estimate is not None:
+            est = self.estimate
+            f = est.fit
+            return {**common, "method": "wrench", "level": f.level,
+                    "tolerances": dict(self.prior), "parameters": list(f.names),
+                    "estimate": [self.model.deviation(n) for n in f.names],
+                    "nominal": [self.model0.deviation(n) for n in f.names],
+                    "std": f.sd, "covariance": est.covariance,
+                    "identified": [combination_record(c) for c in f.identified],
+                    "weak": [combination_record(c) for c in f.weak],
+                    "unidentified": [combination_record(c) for c in f.unidentified],
+                    "variance_factor": f.variance_factor,
+                    "wrench": wrench_summary(f)}
+        assert self.fit is not None and self.ident is not None
         names = self.model0.parameter_names()
         pos = [names.index(n) for n in self.fit.parameters]
         p0, p1 = self.model0.vector(), self.model.vector()
-        return {"nominal_arm": self.name, "form": self.form, "prior": dict(self.prior),
-                "parameters": self.fit.parameters, "estimate": p1[pos],
+        return {**common, "parameters": self.fit.parameters, "estimate": p1[pos],
                 "std": self.fit.std * math.sqrt(self.scale), "nominal": p0[pos],
                 "covariance": self.fit.covariance * self.scale,
                 "covariance_scale": self.scale,
-                "kept_estimate": self.fit.model.vector()[pos],
-                "not_identified": dict(self.ident.removed), "iterations": self.fit.iterations,
-                "converged": self.fit.converged, "reduced_chi2": float(self.fit.reduced_chi2),
-                "sigma": dict(zip(CHANNELS, self.sigma.tolist(), strict=True)),
-                "residual_rms": dict(zip(CHANNELS, self.fit.rms.tolist(), strict=True)),
-                "configurations": len(self.q), "poses": self.indices}
-
-
-def _posterior_std(model0: ArmModel, model: ArmModel, q: np.ndarray, sigma: np.ndarray,
-                   tau: np.ndarray, names: list[str]) -> np.ndarray:
-    """σ of ``names`` under the MAP's posterior (JᵀWJ + diag(τ⁻²))⁻¹ at ``model``."""
-    Jw = jacobian(model, q) / np.tile(sigma, len(q))[:, None]
-    P = np.linalg.inv(Jw.T @ Jw + np.diag(1.0 / tau ** 2))
-    all_names = model0.parameter_names()
-    return np.sqrt(np.clip([P[all_names.index(n), all_names.index(n)] for n in names], 0, None))
+                "not_identified": dict(self.ident.removed),
+                "converged": self.fit.converged}
 
 
 def identify_session(session: Session, arm: str, sigma: tuple[float, float] | None = None,
@@ -135,9 +168,9 @@ def identify_session(session: Session, arm: str, sigma: tuple[float, float] | No
                      where: str = "--arm") -> SessionIdentification:
     """Identify the arm named ``arm`` (a registry name; ``where`` says where it came from)
     from the session's wrenches (module docstring). ``sigma`` the channel noise (N, N·m) or
-    None (from the recorded spreads); ``form`` "map" or "kept"; the prior of the MAP form
-    ±``prior_length_mm`` mm and ±``prior_angle_deg`` deg per parameter (1 N and 0.1 N·m for
-    the weight and the bias). Raises SessionError (no usable pose, wrong joint count),
+    None (from the recorded spreads); ``form`` "map" (the estimator) or "kept" (the paper's
+    protocol); the prior of the MAP form ±``prior_length_mm`` mm and ±``prior_angle_deg``
+    deg per deviation. Raises SessionError (no usable pose, wrong joint count),
     CalibrationError (no noise, too few configurations, a failed fit), ConfigError (an
     unknown arm)."""
     if form not in FORMS:
@@ -149,6 +182,23 @@ def identify_session(session: Session, arm: str, sigma: tuple[float, float] | No
         raise SessionError(f"{src}: the poses have {q.shape[1]} joint angles; arm {arm} has "
                            f"{model0.n_joints}")
     sig, source = wrench_sigma(sigma, sem)
+    prior = {"length_mm": float(prior_length_mm), "angle_deg": float(prior_angle_deg)}
+    common: dict[str, Any] = {"name": arm, "model0": model0, "q": q, "indices": idx,
+                              "sigma": sig, "sigma_source": source, "form": form,
+                              "prior": prior}
+    if form == "map":
+        if len(q) < 4:
+            raise CalibrationError(f"{src}: {len(q)} configurations; the wrench model alone "
+                                   "has 15 parameters: record more")
+        try:
+            est = estimate_from_wrenches(model0, q, w, sig,
+                                         Tolerances(prior_length_mm, prior_angle_deg),
+                                         max_iter=max_iter)
+        except (ValueError, np.linalg.LinAlgError) as e:
+            raise CalibrationError(f"{src}: the identification failed ({e})") from None
+        except CalibrationError as e:
+            raise CalibrationError(f"{src}: {e}") from None
+        return SessionIdentification(**common, model=est.model, estimate=est)
     names = model0.parameter_names()
     ident = identifiable(jacobian(model0, q) / np.tile(sig, len(q))[:, None], names)
     if 6 * len(q) <= len(ident.kept):
@@ -156,15 +206,7 @@ def identify_session(session: Session, arm: str, sigma: tuple[float, float] | No
                                f"for {len(ident.kept)} parameters; record more")
     try:
         fit = identify(model0, q, w, sig, ident, max_iter=max_iter)
-        prior = {"length_mm": float(prior_length_mm), "angle_deg": float(prior_angle_deg)}
-        model = (fit.model if form == "kept" else
-                 canonical(model0, q, w, sig, start=fit.model, length_mm=prior_length_mm,
-                           angle_deg=prior_angle_deg, max_iter=max_iter))
-        tau = prior_scale(model0, prior_length_mm, prior_angle_deg)
-        map_std = _posterior_std(model0, model, q, sig, tau, fit.parameters)
     except (ValueError, np.linalg.LinAlgError) as e:
         raise CalibrationError(f"{src}: the identification failed ({e})") from None
-    return SessionIdentification(name=arm, model0=model0, q=q, indices=idx, sigma=sig,
-                                 sigma_source=source, ident=ident, fit=fit,
-                                 scale=max(1.0, float(fit.reduced_chi2)), form=form,
-                                 model=model, map_std=map_std, prior=prior)
+    return SessionIdentification(**common, model=fit.model, ident=ident, fit=fit,
+                                 scale=max(1.0, float(fit.reduced_chi2)))

@@ -110,9 +110,11 @@ class _Problem:
         self.names, self.tau, self.whiten = names, tau, whiten
         self.model, self.moments = distortion, moments or [None] * len(bodies)
         self.nb = len(bodies)
+        #: Z's columns: none in a wrench-only problem (no tracker rows, nothing to register)
+        self.n_z = 6 if self.nb else 0
         self.n_g = DISTORTION_MODELS[distortion]
         #: the wrench data (rows after the tracker's) and the first column of its parameters
-        self.wrench, self.c_w = wrench, 6 * (self.nb + 1) + self.n_g
+        self.wrench, self.c_w = wrench, 6 * self.nb + self.n_z + self.n_g
         #: X, (Y,) Z, the distortion and the wrench model: the parameters without a prior
         self.n_xyz = self.c_w + (len(wm.WRENCH_NAMES) if wrench is not None else 0)
 
@@ -151,7 +153,7 @@ class _Problem:
             if br.dA is not None:  # the arm: A' = A exp(ξ) with ξ = Jk δ
                 J[:, rows, self.n_xyz:] = br.dA @ Jk
         if J is not None and self.n_g:  # the distortion's few columns by central differences
-            c0 = 6 * (self.nb + 1)
+            c0 = 6 * self.nb + self.n_z
             for k in range(self.n_g):
                 e = np.zeros(self.n_g)
                 e[k] = G_STEP
@@ -181,8 +183,8 @@ class _Problem:
         def pose(T: np.ndarray, p: np.ndarray) -> np.ndarray:
             return make_pose(T[:3, :3] @ matrix_from_rotvec(p[:3]), T[:3, 3] + p[3:])
         Ws = [pose(W, d[6 * j:6 * j + 6]) for j, W in enumerate(s.Ws)]
-        Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6])
-        c0 = 6 * (self.nb + 1)
+        Z = pose(s.Z, d[6 * self.nb:6 * self.nb + 6]) if self.n_z else s.Z
+        c0 = 6 * self.nb + self.n_z
         w = None if s.w is None else s.w.step(d[self.c_w:self.n_xyz])
         return _State(Ws, Z, s.delta + d[self.n_xyz:], s.g + d[c0:c0 + self.n_g], w)
 
@@ -223,9 +225,10 @@ class KinematicFit:
     names: list[str]
     delta: np.ndarray
     sd: np.ndarray
-    X: np.ndarray
+    #: None in a wrench-only fit (no tracker rows: nothing registered)
+    X: np.ndarray | None
     Y: np.ndarray | None
-    Z: np.ndarray
+    Z: np.ndarray | None
     chi2: float
     m: int
     p_eff: float
@@ -254,6 +257,8 @@ NOISE_TOL = 0.01
 
 
 def _whitener_for(Ws: list[np.ndarray], noise: dict[str, Any], n: int) -> np.ndarray:
+    if not Ws:  # a wrench-only problem: no tracker rows to whiten
+        return np.eye(0)
     names = ["marker", "probe"][:len(Ws)]
     tracker = tracker_covs(n, names, noise)
     rs_mm = float(noise["robot_sigma_mm"])
@@ -284,6 +289,13 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     factor changes by more than :data:`NOISE_TOL` (at most :data:`NOISE_ROUNDS` rounds); the
     covariance is then that of the estimated noise, unscaled, and the information criterion
     includes the noise's log-determinant (the likelihood with the noise estimated)."""
+    if not bodies:  # the force-sensor self-calibration: wrench rows only (no X, Y, Z)
+        if wrench is None:
+            raise CalibrationError("kinematics: no tracker poses and no wrenches: nothing "
+                                   "to fit the arm to")
+        if distortion != "none":
+            raise CalibrationError("kinematics: a tracker distortion needs tracker poses")
+        noise_mode = "given"   # the wrench's σ are given; no tracker rows to estimate from
     flags = estimated_components(noise, noise_mode)
     if distortion not in DISTORTION_MODELS:
         raise CalibrationError(f"kinematics: unknown distortion {distortion!r}; expected "
@@ -319,7 +331,8 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     data_r = r[:m]
     chi2 = float(data_r @ data_r)
     Jx = J[:m, :prob.c_w]
-    sx = np.linalg.svd(Jx / np.maximum(np.linalg.norm(Jx, axis=0), 1e-300), compute_uv=False)
+    sx = np.linalg.svd(Jx / np.maximum(np.linalg.norm(Jx, axis=0), 1e-300),
+                       compute_uv=False) if prob.c_w else np.ones(1)
     if sx[-1] <= 1e-7 * sx[0]:
         raise CalibrationError("kinematics: hand/eye, coil and robot/world are not "
                                "identifiable from these poses: use more poses with more "
@@ -330,6 +343,7 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     w, V = np.linalg.eigh(H / np.outer(d, d))
     w = np.maximum(w, 1e-15 * w.max())  # rounding, not information: H is positive definite
     P = (V / w) @ V.T / np.outer(d, d)
+    P = 0.5 * (P + P.T)              # symmetric to the last bit, as a file reader checks
     Jd = J[:m]
     p_eff = float(np.trace(P @ (Jd.T @ Jd)))
     vf = chi2 / max(m - p_eff, 1.0)
@@ -337,10 +351,12 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     k = len(names)
     fit = KinematicFit(level, prob.chain(s), names, s.delta.copy(),
                        np.sqrt(np.diag(P)[prob.n_xyz:] * sc) if k else np.zeros(0),
-                       s.Ws[0], s.Ws[1] if len(s.Ws) > 1 else None, s.Z, chi2, m, p_eff, vf,
+                       s.Ws[0] if s.Ws else None, s.Ws[1] if len(s.Ws) > 1 else None,
+                       s.Z if s.Ws else None, chi2, m, p_eff, vf,
                        P * sc, iterations=its, distortion=distortion,
                        G=undistortion(distortion, s.g), noise_used=cur,
-                       noise=noise_report(noise_mode, noise, cur, comp, rounds))
+                       noise=noise_report(noise_mode, noise, cur, comp, rounds) if bodies
+                       else {"mode": "given", "rows": "wrench only", "scale_covariance": True})
     if flags.any():  # −2 ln L with the noise estimated (ml's profiled form when given)
         fit.aic = chi2 + log_det(whiten, len(q)) + 2.0 * p_eff
     else:

@@ -14,7 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Combination", "identifiability"]
+__all__ = ["Combination", "identifiability", "ZERO_WRENCH_REASON"]
+
+#: why a combination is not identifiable from gravity wrenches alone: it does not turn the
+#: flange (a length, or a rotation that another joint's undoes), and a wrench sees only how
+#: gravity turns in the sensor
+ZERO_WRENCH_REASON = "does not change the gravity wrench (it does not turn the flange)"
 
 
 @dataclass(frozen=True)
@@ -73,7 +78,7 @@ def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np
                                     "tolerance says; spread the joints further", c.vector))
         else:
             ident.append(c)
-    z_cols = list(range(6 * nb, 6 * nb + 6))
+    z_cols = list(range(6 * nb, 6 * nb + 6)) if nb else []
     x_cols = list(range(6 * nb))
     if wrench_col is not None:   # the base tilt goes with Z, the sensor rotation with X (Y)
         z_cols += [wrench_col, wrench_col + 1]
@@ -88,6 +93,12 @@ def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np
          "and the arm's overall size)", slice(0, nx))]
     if wrench_col is not None:
         reasons[-1] = (reasons[-1][0] + " (with the wrench model)", slice(0, nx))
+    if not nb:   # wrench rows only (force-sensor self-calibration): gravity sees rotations
+        reasons = [
+            (ZERO_WRENCH_REASON, None),
+            ("absorbed by the base tilt: it tilts the whole arm in gravity", z_cols),
+            ("absorbed by the sensor's rotation on the flange", x_cols),
+            ("absorbed by the base tilt and the sensor's rotation together", slice(0, nx))]
     taken = np.zeros((len(names), 0))
     unident: list[Combination] = []
     for why, cols in reasons:

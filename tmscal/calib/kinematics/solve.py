@@ -24,7 +24,7 @@ from .estimate import LEVELS, KinematicFit, Tolerances, estimate_kinematics
 from .model import Arm, base_from_flange
 from .wrench import WRENCH_NAMES, WRENCH_UNITS, WrenchData
 
-__all__ = ["solve_with_kinematics", "NOISE_DEFAULTS"]
+__all__ = ["solve_with_kinematics", "NOISE_DEFAULTS", "wrench_summary"]
 
 #: the noise model's defaults (ml's): robot repeatability and one tracker sample
 NOISE_DEFAULTS = {"robot_sigma_mm": 0.05, "robot_sigma_deg": 0.03, "tracker_sigma_mm": 0.025,
@@ -55,10 +55,10 @@ def _report(fit: KinematicFit, res: Any, tol: Tolerances) -> dict[str, Any]:
             "unidentified": combos(fit.unidentified),
             "cv": {lv: c for lv, c in res.cv.items()},
             "variance_factor": fit.variance_factor, "iterations": fit.iterations,
-            "wrench": _wrench_report(fit)}
+            "wrench": wrench_summary(fit)}
 
 
-def _wrench_report(fit: KinematicFit) -> dict[str, Any] | None:
+def wrench_summary(fit: KinematicFit) -> dict[str, Any] | None:
     """The wrench rows' parameters for the report: estimate and SD by name (rad, N, mm,
     N·m), the tool mass (kg), the rows and their χ²; None without wrench rows."""
     w = fit.wrench

@@ -169,7 +169,7 @@ def _keep_index(model: ArmModel, keep: Any) -> np.ndarray:
     return np.array(sorted(pos[k] for k in keep), dtype=int)
 
 
-def _check_data(model: ArmModel, q: Any, w: Any, sigma: Any) -> tuple[np.ndarray, ...]:
+def check_data(model: ArmModel, q: Any, w: Any, sigma: Any) -> tuple[np.ndarray, ...]:
     q = np.atleast_2d(np.asarray(q, dtype=float))
     w = np.atleast_2d(np.asarray(w, dtype=float))
     sigma = np.asarray(sigma, dtype=float)
@@ -193,7 +193,7 @@ def identify(model0: ArmModel, q: Any, wrench_meas: Any, sigma: Any, keep: Any,
     ``sigma`` (6,) (N ×3, N·m ×3), columns scaled to unit norm (h_j = 1/‖J_:,j‖, Hollerbach
     and Wampler 1996), solve, unscale. Stops when ‖Δp‖ ≤ rtol · max(‖p‖, 1) over the estimated
     parameters (their units), or after ``max_iter`` iterations (``converged`` False)."""
-    q, w, sigma = _check_data(model0, q, wrench_meas, sigma)
+    q, w, sigma = check_data(model0, q, wrench_meas, sigma)
     idx = _keep_index(model0, keep)
     names = model0.parameter_names()
     inv_s = np.tile(1.0 / sigma, len(q))
@@ -270,7 +270,7 @@ def canonical(model0: Any, q: Any, wrench_meas: Any, sigma: Any, start: Any = No
     the same data (``start``, e.g. one of their models, only speeds the solve; default
     ``model0``). Gauss–Newton with Levenberg–Marquardt damping on the stacked residuals
     [(w(p) − w_meas)/σ; (p − p0)/τ]; parameters no wrench changes stay nominal."""
-    q, w, sigma = _check_data(model0, q, wrench_meas, sigma)
+    q, w, sigma = check_data(model0, q, wrench_meas, sigma)
     p0 = model0.vector()
     tau = prior_scale(model0, length_mm, angle_deg)
     inv_s = np.tile(1.0 / sigma, len(q))
