@@ -4,7 +4,7 @@ on the paper's own MedRUE, under three error protocols (docs/selfcal.md, "Simula
     .venv/bin/python benchmarks/selfcal.py [--seeds 5] [--pool 3000]
         [--arms ur5e,vs060,medrue] [--compare-seeds 2]
 
-Per arm, protocol and seed: ``tmscal.calib.selfcal.simulate`` with its defaults (100
+Per arm, protocol and seed: ``tmscal.calib.selfcal.study.simulate`` with its defaults (100
 configurations by DETMAX, i.e. by O1, from the pool; ±2 mm / ±1° parameter errors; ±1 N /
 ±0.2 N·m wrench noise, 100 readings averaged per configuration; validation on the rest of the
 pool; the identified arm's answer independent of the kept columns) with ``errors="all"``
@@ -27,7 +27,7 @@ import time
 import numpy as np
 from figures import record
 
-from tmscal.calib.selfcal.simulate import ERRORS, PAPER, SELECTIONS, simulate
+from tmscal.calib.selfcal.study.simulate import ERRORS, PAPER, SELECTIONS, simulate
 
 
 def _mean(results: list, key: str, stat: str) -> float:

@@ -276,8 +276,8 @@ def test_identify_default_is_the_kinematic_estimator_with_wrench_rows_only(tmp_p
     from tmscal.calib.kinematics.identifiability import ZERO_WRENCH_REASON
     from tmscal.calib.kinematics.levels import Tolerances
     from tmscal.calib.kinematics.wrench import WrenchData
-    from tmscal.calib.selfcal.identify import absorbed_errors
     from tmscal.calib.selfcal.model import wrench
+    from tmscal.calib.selfcal.study.compare import absorbed_errors
     from tmscal.cli import main
     from tmscal.session import read_session
     from tmscal.sim.arm import make_arm

@@ -1,5 +1,5 @@
 """Pose selection for force-torque self-calibration (tmscal.calib.selfcal.design) and the
-simulation study (tmscal.calib.selfcal.simulate): the observability indices against hand
+simulation study (tmscal.calib.selfcal.study.simulate): the observability indices against hand
 computations, DETMAX never worse than its start and at the brute-force optimum on small pools,
 the greedy selections, the candidate pool, and the study on small seeded pools."""
 
@@ -23,7 +23,7 @@ from tmscal.calib.selfcal.design import (
     select_by_index,
 )
 from tmscal.calib.selfcal.model import UR5E
-from tmscal.calib.selfcal.simulate import SELECTIONS, simulate, stages, wrench_noise
+from tmscal.calib.selfcal.study.simulate import SELECTIONS, simulate, stages, wrench_noise
 
 from ..fuzz import fuzz_settings
 

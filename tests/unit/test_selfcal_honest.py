@@ -1,5 +1,5 @@
 """Self-calibration figures that do not depend on the protocol (issue 21): the identification's
-answer (``identify.canonical``) is the same whichever equivalent columns were kept, noise-free
+answer (``study.compare.canonical``) is the same whichever equivalent columns were kept, noise-free
 wrenches give back exactly the combinations the wrench sees, the hand/eye absorption removes
 rigid errors and nothing else, and the MedRUE model (Joubair et al. 2016) agrees with an
 independent numeric solution of its loop closure."""
@@ -13,15 +13,10 @@ import pytest
 from scipy.optimize import fsolve
 from scipy.spatial.transform import Rotation
 
-from tmscal.calib.selfcal.identify import (
-    absorbed_errors,
-    canonical,
-    identifiable,
-    identify,
-    position_errors,
-)
-from tmscal.calib.selfcal.medrue import GEOMETRY_NAMES, MEDRUE
+from tmscal.calib.selfcal.identify import identifiable, identify, position_errors
 from tmscal.calib.selfcal.model import UR5E, jacobian, pose_from_rpy, wrench
+from tmscal.calib.selfcal.study.compare import absorbed_errors, canonical
+from tmscal.calib.selfcal.study.medrue import GEOMETRY_NAMES, MEDRUE
 
 SIGMA = np.array([1 / 3] * 3 + [0.2 / 3] * 3)  # one reading, N and N·m
 

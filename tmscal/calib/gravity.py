@@ -8,7 +8,7 @@ whose centre of gravity is c (mm, sensor frame), and the sensor's bias [f0 N; τ
     f = −mg u + f0,     τ = (c · 10⁻³) × (−mg u) + τ0     [N, N·m].
 
 Used by the force-sensor self-calibration's arm models (:mod:`tmscal.calib.selfcal.model`,
-:mod:`tmscal.calib.selfcal.medrue`), the kinematic estimate's wrench rows
+:mod:`tmscal.calib.selfcal.study.medrue`), the kinematic estimate's wrench rows
 (:mod:`tmscal.calib.kinematics.wrench`) and the mock sensors (:mod:`tmscal.mocks.wrench`).
 """
 

@@ -37,7 +37,7 @@ class ArmName(click.Choice):
 
 class StudyArmName(ArmName):
     """``simulate --arm``: a registered arm's name or ``medrue``, the paper's own robot
-    (``tmscal.calib.selfcal.simulate.STUDY_ARMS``; docs/selfcal.md)."""
+    (``tmscal.calib.selfcal.study.simulate.STUDY_ARMS``; docs/selfcal.md)."""
 
     @property  # type: ignore[override]
     def choices(self) -> tuple[str, ...]:
@@ -152,8 +152,8 @@ def simulate(arm: str, errors: str, pool: int, k: int, samples: int, trials: int
     No devices; progress on stderr (docs/selfcal.md, "Simulation study")."""
     from tqdm import tqdm
 
-    from ..calib.selfcal.simulate import simulate as run_study
-    from ..calib.selfcal.simulate import stages
+    from ..calib.selfcal.study.simulate import simulate as run_study
+    from ..calib.selfcal.study.simulate import stages
 
     if k >= pool:
         raise click.BadParameter(f"{k} must be below --pool ({pool}): the pool also supplies "

@@ -152,7 +152,7 @@ VS060 = NOMINAL["vs060"]
 def forward(model: Any, q: Any) -> np.ndarray:
     """World ← flange (…, 4, 4) mm at joints q (…, n): the DH chain of a serial arm
     (``tmscal.calib.kinematics.forward``), or another mechanism's own ``forward`` (the probe
-    frame of :class:`~tmscal.calib.selfcal.medrue.MedRUE`)."""
+    frame of :class:`~tmscal.calib.selfcal.study.medrue.MedRUE`)."""
     if isinstance(model, Arm):
         return _serial_forward(model, q)
     return model.forward(q)

@@ -19,12 +19,12 @@ The protocol:
 4. 100 configurations chosen by O1 (DETMAX: maximising det(JᵀJ) is maximising O1 at a fixed
    count) from the pool; their wrenches from the true arm plus noise of ±1 N and ±0.2 N·m;
 5. identification from the nominal start, and its answer made independent of the columns it
-   kept (:func:`~tmscal.calib.selfcal.identify.canonical`: of the models with the fitted
+   kept (:func:`~tmscal.calib.selfcal.study.compare.canonical`: of the models with the fitted
    wrenches, the one with the smallest deviation from the nominal in units of ±2 mm / ±1°);
    validation on the rest of the pool: the TCP position error (mm, world frame, the flange
    origin unless ``tcp_mm``) between the true arm and the nominal one (before) and the
    identified one (after), mean, max and SD — raw, and after a hand/eye calibration absorbs
-   what it can (:func:`~tmscal.calib.selfcal.identify.absorbed_errors`: the best rigid base
+   what it can (:func:`~tmscal.calib.selfcal.study.compare.absorbed_errors`: the best rigid base
    transform and TCP offset; what a TMS rig's X, Y, Z would take up);
 6. the index comparison (the paper's Table 4): the same with the configurations chosen
    greedily by each of O1…O5, by DETMAX and at random.
@@ -47,19 +47,12 @@ from typing import Any
 
 import numpy as np
 
-from .design import INDICES, candidate_pool, detmax, information, observability, scale_columns
-from .design import select_by_index as _select_by_index
-from .identify import (
-    ZERO_REASON,
-    absorbed_errors,
-    canonical,
-    error_stats,
-    identifiable,
-    identify,
-    position_errors,
-)
+from ..design import INDICES, candidate_pool, detmax, information, observability, scale_columns
+from ..design import select_by_index as _select_by_index
+from ..identify import ZERO_REASON, error_stats, identifiable, identify, position_errors
+from ..model import NOMINAL, jacobian, perturb, wrench
+from .compare import absorbed_errors, canonical
 from .medrue import MEDRUE
-from .model import NOMINAL, jacobian, perturb, wrench
 
 __all__ = ["PAPER", "SimulationResult", "simulate", "wrench_noise", "SELECTIONS", "stages",
            "STUDY_ARMS", "ERRORS"]
@@ -71,7 +64,7 @@ PAPER = {"length_mm": 2.0, "angle_deg": 1.0, "force_n": 1.0, "torque_nm": 0.2, "
          "pool": 40000, "before_mean_mm": 8.9135, "after_mean_mm": 0.2771,
          "before_max_mm": 12.0, "after_max_mm": 0.320, "identifiable": 29, "parameters": 46}
 
-#: the prior of :func:`~tmscal.calib.selfcal.identify.canonical`: the standard deviation of
+#: the prior of :func:`~tmscal.calib.selfcal.study.compare.canonical`: the standard deviation of
 #: the protocol's uniform ±2 mm / ±1° errors (half-width / √3)
 PRIOR = {"length_mm": PAPER["length_mm"] / np.sqrt(3.0),
          "angle_deg": PAPER["angle_deg"] / np.sqrt(3.0)}

@@ -40,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from ..gravity import G_STANDARD, gravity_wrench
-from ..kinematics import pose_from_rpy, rpy_from_matrix
+from ...gravity import G_STANDARD, gravity_wrench
+from ...kinematics import pose_from_rpy, rpy_from_matrix
 
 __all__ = ["MedRUE", "MEDRUE", "GEOMETRY_NAMES", "five_bar_point"]
 
