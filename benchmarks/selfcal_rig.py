@@ -122,7 +122,14 @@ def run(errors: str, poses: int, k: int) -> list[tuple[str, str, tuple[float, ..
         s_path, sc_path, kin = tmp / "s.jsonl", tmp / "sc.jsonl", tmp / "kin.yaml"
         with spawn_mock_rig(cfg_path, transport="tcp") as mp:
             ep = mp.endpoints
-            acquire(cfg, s_path, tracker_port=ep["tracker"], robot_host=ep["robot"])
+            # the hand/eye run reads the wrist sensor too: point the config at the mock's
+            host, _, port = ep["ft"].rpartition(":")
+            data = yaml.safe_load(cfg_path.read_text())
+            data["ft"].update(host=host, port=int(port))
+            he_path = tmp / "rig-handeye.yaml"
+            he_path.write_text(yaml.safe_dump(data))
+            acquire(load_config(he_path), s_path, tracker_port=ep["tracker"],
+                    robot_host=ep["robot"])
             _tmscal("selfcal", "acquire", cfg_path, "-o", sc_path, "--k", k,
                     "--robot-host", ep["robot"], "--ft-host", ep["ft"])
         # the paper's errors sit on the columns the fit keeps: its kept-column fit, as the
