@@ -1,7 +1,7 @@
 """The ``tmscal`` command line (click). Thin: parses, calls library functions, prints.
 
 The group, the shared argument types and the one rule for output files live here; the
-commands are in :mod:`tmscal.cli.offline` (simulate, solve, study),
+commands are in :mod:`tmscal.cli.simulate`, :mod:`tmscal.cli.solve`, :mod:`tmscal.cli.study`,
 :mod:`tmscal.cli.rig_commands` (mock, track, robot, acquire), and compare, demo, export,
 report, stream, selftest, selfcal and selfcal_rig (the ``selfcal`` group), one module each.
 
@@ -16,5 +16,5 @@ from .app import main
 __all__ = ["main"]
 
 # every command module registers its commands on ``main``
-from . import check, compare, demo, export, offline, report, rig_commands  # noqa: E402,F401,I001
-from . import selfcal, selfcal_rig, selftest, stream  # noqa: E402,F401,I001
+from . import check, compare, demo, export, report, rig_commands  # noqa: E402,F401,I001
+from . import selfcal, selfcal_rig, selftest, simulate, solve, stream, study  # noqa: E402,F401,I001
