@@ -9,7 +9,7 @@ The group, the shared argument types and the one rule for output files live in
 progress display and stderr capture (``progress``), ``track``'s live table
 (``track_table``), the Ctrl-C handling (``stopping``), the adaptive acquisition
 (``acquire_adaptive``), the re-registration of ``acquire --update`` (``reregister``) and
-the report of ``demo --kinematics`` (``kinematics``).
+the report of ``demo --kinematics`` (``demo_kinematics``).
 
 Every expected failure (bad input, device error, safety refusal) prints one line
 ``error: …`` naming the problem and exits non-zero; no tracebacks.

@@ -135,7 +135,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
         session = read_session(output)
         session.header["truth"] = truth.as_dict()
         if kinematics is not None:
-            from .kinematics import demo_report
+            from .demo_kinematics import demo_report
             demo_report(session, res, as_json, verbose)
             return
         result = solve(session, method="qr36")
