@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tmscal.acquisition.skips import SkipWatch
-from tmscal.cli.live import AcquireProgress, fit, stderr_to_log
+from tmscal.cli.progress import AcquireProgress, fit, stderr_to_log
 from tmscal.config import RunConfig, parse_config
 from tmscal.errors import ConfigError
 from tmscal.session import PoseRecord, seen_text, skip_cause

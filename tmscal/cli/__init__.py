@@ -1,9 +1,15 @@
 """The ``tmscal`` command line (click). Thin: parses, calls library functions, prints.
 
-The group, the shared argument types and the one rule for output files live here; the
-commands are in :mod:`tmscal.cli.offline` (simulate, solve, study),
-:mod:`tmscal.cli.rig_commands` (mock, track, robot, acquire), and compare, demo, export,
-report, stream, selftest, selfcal and selfcal_rig (the ``selfcal`` group), one module each.
+The group, the shared argument types and the one rule for output files live in
+:mod:`tmscal.cli.app`. Each command is in the module of its name (``tmscal.cli.acquire``,
+``check``, ``compare``, ``demo``, ``export``, ``mock``, ``report``, ``robot``, ``selftest``,
+``simulate``, ``solve``, ``stream``, ``study``, ``track``); the ``selfcal`` group and its
+``simulate`` are in :mod:`tmscal.cli.selfcal`, its ``acquire`` and ``identify`` in
+:mod:`tmscal.cli.selfcal_rig`. The other modules hold what several commands share: the
+progress display and stderr capture (``progress``), ``track``'s live table
+(``track_table``), the Ctrl-C handling (``stopping``), the adaptive acquisition
+(``acquire_adaptive``), the re-registration of ``acquire --update`` (``reregister``) and
+the report of ``demo --kinematics`` (``demo_kinematics``).
 
 Every expected failure (bad input, device error, safety refusal) prints one line
 ``error: …`` naming the problem and exits non-zero; no tracebacks.
@@ -16,5 +22,5 @@ from .app import main
 __all__ = ["main"]
 
 # every command module registers its commands on ``main``
-from . import check, compare, demo, export, offline, report, rig_commands  # noqa: E402,F401,I001
-from . import selfcal, selfcal_rig, selftest, stream  # noqa: E402,F401,I001
+from . import acquire, check, compare, demo, export, mock, report, robot  # noqa: E402,F401,I001
+from . import selfcal, selfcal_rig, selftest, simulate, solve, stream, study, track  # noqa: E402,F401,I001

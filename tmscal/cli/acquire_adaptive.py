@@ -1,7 +1,7 @@
 """The adaptive parts of ``tmscal acquire --adaptive`` and ``tmscal demo --adaptive``
 (docs/adaptive.md): running the loop with a progress display (the bars and a line per
 prediction), the end-of-run report, and the demo's comparison with the mock rig's truth. The
-commands live in :mod:`tmscal.cli.rig_commands`; the run in
+commands live in :mod:`tmscal.cli.acquire` and :mod:`tmscal.cli.demo`; the run in
 :mod:`tmscal.acquisition.adaptive_run`."""
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ def run(cfg: Any, output: Path, *, resume: bool, overrides: dict[str, Any],
     stderr unless ``quiet``); returns its AcquireResult."""
     from ..acquisition.adaptive_run import acquire_adaptive, settings_for
     from ..acquisition.progress import ProgressGroup
-    from .live import AcquireProgress, stderr_to_log
+    from .progress import AcquireProgress, stderr_to_log
 
     settings = None if resume else settings_for(cfg, **overrides)
     with stderr_to_log(), AcquireProgress(sys.stderr) as bar:

@@ -2,7 +2,7 @@
 session, no fitting (:mod:`tmscal.check`), and with ``--tolerance-mm`` /
 ``--tolerance-deg`` its verdict: a PASS or FAIL line, in the JSON as "verdict", and the exit
 status (0 PASS, ``EXIT_CHECK_FAILED`` FAIL) so that a lab can script it before each TMS
-session. The options are the ``solve`` command's (:mod:`tmscal.cli.offline`)."""
+session. The options are the ``solve`` command's (:mod:`tmscal.cli.solve`)."""
 
 from __future__ import annotations
 

@@ -98,7 +98,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
     from ..report.text import format_result, format_truth
     from ..session import read_session
     from ..solving.solve import solve
-    from .live import AcquireProgress, stderr_to_log
+    from .progress import AcquireProgress, stderr_to_log
 
     if kinematics is not None and adaptive:
         raise click.BadParameter("--kinematics estimate solves the session once it is "
@@ -135,7 +135,7 @@ def demo(config: Path | None, kinematics: str | None, poses: int | None, samples
         session = read_session(output)
         session.header["truth"] = truth.as_dict()
         if kinematics is not None:
-            from .kinematics import demo_report
+            from .demo_kinematics import demo_report
             demo_report(session, res, as_json, verbose)
             return
         result = solve(session, method="qr36")

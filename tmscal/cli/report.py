@@ -19,7 +19,7 @@ from .app import (
     read_session_file,
     write_atomic,
 )
-from .offline import MethodChoice
+from .solve import MethodChoice
 
 
 @main.command()

@@ -1,7 +1,7 @@
 """``tmscal acquire CONFIG -o TODAY --calib CAL --update z``: the re-registration at the rig
 (:mod:`tmscal.acquisition.reregister`, docs/lab-day.md "Re-registering at the rig"), then the
 update of ``solve --calib --update`` on its session, written beside it. The options are the
-``acquire`` command's (:mod:`tmscal.cli.rig_commands`)."""
+``acquire`` command's (:mod:`tmscal.cli.acquire`)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def acquire_update(config: Path, output: Path, calib_file: Path | None,
     from ..errors import CalibrationError
     from ..formats.calibfile import read_calibration
     from .check import _update, calibration_origin
-    from .live import AcquireProgress, stderr_to_log
+    from .progress import AcquireProgress, stderr_to_log
 
     if not update:
         raise click.BadParameter("only with --update", param_hint="--update-output")

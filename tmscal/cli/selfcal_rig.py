@@ -93,8 +93,9 @@ def acquire(config: Path, output: Path, resume: bool, arm: str | None, k: int, p
     from ..acquisition.selfcal import acquire_selfcal
     from ..config import load_config
     from ..net import split_endpoint
-    from .live import AcquireProgress, stderr_to_log
-    from .rig_commands import StopFlag, check_replaceable
+    from .acquire import check_replaceable
+    from .progress import AcquireProgress, stderr_to_log
+    from .stopping import StopFlag
 
     if same_file(output, config):
         raise click.BadParameter(f"{output} is the config file; it is never written over",

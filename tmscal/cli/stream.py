@@ -22,7 +22,7 @@ class _Status:
     second), one plain line every ``PLAIN_STATUS_S`` seconds elsewhere."""
 
     def __init__(self, stream: TextIO, tools: list[str]) -> None:
-        from .live import isatty, terminal_width
+        from .progress import isatty, terminal_width
 
         self.stream, self.tools = stream, tools
         self.tty = isatty(stream)
@@ -30,7 +30,7 @@ class _Status:
         self._last = -1e9
 
     def text(self, st: Any) -> str:
-        from .live import fit
+        from .progress import fit
 
         rate = f"{st.rate_hz:.1f} Hz" if st.rate_hz else "… Hz"
         client = (("clients " if ", " in st.peer else "client ") + st.peer if st.peer
@@ -161,7 +161,7 @@ def stream(config: Path, calib_file: Path, port: int, host: str, allow_remote: b
     from ..config import load_config
     from ..exports import load_calibration
     from ..stream import TRANSFORMS, StreamServer, coil_source, stream_frames
-    from .rig_commands import StopFlag, close_quietly
+    from .stopping import StopFlag, close_quietly
 
     _check_host(host, allow_remote)
     cfg = load_config(config)

@@ -2,7 +2,7 @@
 arm's kinematics estimated (``solving.solve(session, method="ml", kinematics="estimate")``,
 docs/kinematics.md), and the coil placement against the mock rig's truth through that
 calibration's flange commands, beside QR36's on the controller's nominal poses. The command's
-options live in :mod:`tmscal.cli.rig_commands`."""
+options live in :mod:`tmscal.cli.demo`."""
 
 from __future__ import annotations
 

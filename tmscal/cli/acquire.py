@@ -1,282 +1,30 @@
-"""Commands at the rig (or against ``tmscal mock``): ``mock``, ``track``, ``robot``,
-``acquire`` (``demo`` is in :mod:`tmscal.cli.demo`)."""
+"""``tmscal acquire``: record a session at the rig (or against ``tmscal mock``), its dry run
+and its summary (``--adaptive`` is :mod:`tmscal.cli.acquire_adaptive`, ``--update``
+:mod:`tmscal.cli.reregister`)."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import click
-import numpy as np
 
-from ..escape import value_text
 from .acquire_adaptive import adaptive_options, check_adaptive_flags
 from .app import (
     EXIT_INTERRUPTED,
     INPUT_FILE,
     ROBOT_HOST_HELP,
     TRACKER_PORT_HELP,
-    Finite,
     check_outputs,
     fail,
     handle_errors,
     main,
-    old_spelling,
     same_file,
 )
 from .check import calibration_origin
-
-# --- rig commands: mock, track, robot, acquire ------------------------------------------------
-
-def _matrix_text(T: np.ndarray) -> str:
-    from ..report.text import format_matrix
-    return format_matrix(T)
-
-
-#: how the roll/pitch/yaw angles printed by _pose_line compose (DENSO's P-type; --move-to)
-RPY_CONVENTION = "R = Rz(yaw)·Ry(pitch)·Rx(roll), fixed base axes, as DENSO's P-type"
-
-
-def _pose_line(T: np.ndarray) -> str:
-    """Position (mm) and roll/pitch/yaw (deg, ``RPY_CONVENTION``) of a 4×4 pose in mm; the
-    labels never reuse a UR pendant's rx ry rz, which there mean a rotation vector."""
-    from ..geometry import denso_p_from_matrix
-    p = denso_p_from_matrix(T)
-    return (f"x {p[0]:9.2f}  y {p[1]:9.2f}  z {p[2]:9.2f} mm   "
-            f"roll/pitch/yaw {p[3]:.3f} {p[4]:.3f} {p[5]:.3f} deg")
-
-
-def _pendant_line(T: np.ndarray, rb: Any) -> str | None:
-    """For a UR: the TCP pose as its teach pendant shows it (X Y Z mm, RX RY RZ the rotation
-    vector in rad; Universal Robots, PolyScope manual, Move screen), else None."""
-    from ..geometry import rotvec_pose_from_matrix
-    tcp = getattr(rb, "flange_from_tcp", None)
-    if tcp is None:
-        return None
-    v = rotvec_pose_from_matrix(T @ np.asarray(tcp, dtype=float))
-    return (f"UR pendant (TCP): X {v[0] * 1000:.2f}  Y {v[1] * 1000:.2f}  Z {v[2] * 1000:.2f} "
-            f"mm   RX {v[3]:.4f}  RY {v[4]:.4f}  RZ {v[5]:.4f} rad (rotation vector)")
-
-
-def _echo_pose(label: str, T: np.ndarray, rb: Any = None) -> None:
-    """``label`` and the pose on one line, the angle convention (and, for a UR, the pendant's
-    view) indented below."""
-    click.echo(f"{label}: {_pose_line(T)}")
-    click.echo(f"  angles: {RPY_CONVENTION}")
-    pendant = _pendant_line(T, rb) if rb is not None else None
-    if pendant:
-        click.echo("  " + pendant)
-
-
-class StopFlag:
-    """First SIGINT/SIGTERM sets the flag (finish the pose in flight); a second SIGINT raises
-    KeyboardInterrupt."""
-
-    def __init__(self, quiet: bool = False) -> None:
-        self.set = False
-        self.quiet = quiet
-
-    def __call__(self) -> bool:
-        return self.set
-
-    def install(self) -> None:
-        import signal
-
-        def handler(signum: int, frame: Any) -> None:
-            if self.set and signum == signal.SIGINT:
-                raise KeyboardInterrupt
-            self.set = True
-            if not self.quiet:
-                click.echo("\nstopping after the pose in flight (Ctrl-C again to abort now)",
-                           err=True)
-
-        signal.signal(signal.SIGINT, handler)
-        signal.signal(signal.SIGTERM, handler)
-
-
-@main.command()
-@click.argument("config", type=INPUT_FILE)
-@click.option("--transport", type=click.Choice(["config", "pty", "tcp"]), default="config",
-              show_default=True,
-              help="Tracker transport: config = TCP at the config's tracker address when it "
-                   "is a host and port (else a pty); pty = a new /dev/pts; tcp = an "
-                   "ephemeral loopback port. A tracker that speaks TCP only (igtl) is served "
-                   "on TCP.")
-@click.option("--json", "as_json", is_flag=True,
-              help='Print the endpoints as one JSON object on the first line, e.g. '
-                   '{"tracker": "/dev/pts/7", "robot": "127.0.0.2"}.')
-@handle_errors
-def mock(config: Path, transport: str, as_json: bool) -> None:
-    """Serve the mock devices of a rig config (one shared sim rig) until Ctrl-C / SIGTERM."""
-    import signal
-    import threading
-
-    from ..config import load_config
-    from ..mocks.launch import start_mock_rig
-
-    cfg = load_config(config)
-    done = threading.Event()
-    signal.signal(signal.SIGINT, lambda *a: done.set())
-    signal.signal(signal.SIGTERM, lambda *a: done.set())
-    with start_mock_rig(cfg, tracker_transport=transport) as mr:
-        if as_json:
-            click.echo(json.dumps(mr.endpoints), nl=True)
-        else:
-            for k, v in mr.endpoints.items():
-                click.echo(f"{k:<8} {v}")
-            click.echo("serving; Ctrl-C to stop")
-        sys.stdout.flush()
-        while not done.wait(0.2):
-            pass
-
-
-@main.command()
-@click.argument("config", type=INPUT_FILE)
-@click.option("--tracker-port", default=None, help=TRACKER_PORT_HELP)
-@click.option("--port", "old_port", default=None, hidden=True)
-@click.option("--frames", type=click.IntRange(1), default=None,
-              help="Stop after this many distinct frames (default: until Ctrl-C).")
-@click.option("--plain", is_flag=True,
-              help="Print every frame's lines one after another instead of a table redrawn "
-                   "in place (the default off a terminal).")
-@handle_errors
-def track(config: Path, tracker_port: str | None, old_port: str | None, frames: int | None,
-          plain: bool) -> None:
-    """Connect to the tracker, list the tools and show a live table: per tool whether it is
-    seen, its position (mm) and rotation (rotation vector, deg) in the tracker frame, the
-    tracker's RMS fit error (mm), volume flags, and the tracker's frame rate (Hz).
-
-    Ctrl-C stops after the frame being read and closes the tracker; a second Ctrl-C
-    abandons the read in flight."""
-    from ..acquisition.devices import make_tracker
-    from ..config import load_config
-    from .live import TrackView
-
-    port = old_spelling(tracker_port, old_port, "--tracker-port", "--port")
-    cfg = load_config(config)
-    stop = StopFlag(quiet=True)
-    stop.install()
-    tr = make_tracker(cfg, port)
-    tr.open()
-    interrupted = False
-    try:
-        ident = tr.identity()
-        click.echo("tracker: " + ", ".join(f"{k} {value_text(v)}" for k, v in ident.items()
-                                           if v))
-        handles = getattr(tr, "handles", {})  # an NDI's port handles
-        tools = ident.get("tools")
-        names = tools if isinstance(tools, dict) else {}
-        for name in tr.tools:
-            h = handles.get(name)
-            if h is None and name in names:  # what the driver knows it by (a TRANSFORM name)
-                click.echo(f"  tool {name:<8} device {names[name]}")
-            else:
-                click.echo(f"  tool {name:<8} handle {h if h is not None else '?'}")
-        view = TrackView(sys.stdout, plain=plain)
-        view.header()
-        frames_in = tr.distinct_frames(frames, stall_s=5.0)
-        for fr in frames_in:
-            view.show(fr)
-            if stop():
-                break
-        frames_in.close()
-        view.finish()
-    except KeyboardInterrupt:  # a second Ctrl-C, during a read: the link's state is unknown
-        interrupted = True
-    finally:
-        if interrupted:
-            close_quietly(tr)
-        else:
-            tr.close()
-
-
-def close_quietly(dev: Any) -> None:
-    """Close a device whose link was interrupted mid-reply: its stop command may meet the
-    rest of that reply, so the drivers' warnings and errors are held back."""
-    import logging
-
-    drivers = logging.getLogger("tmscal.drivers")
-    level = drivers.level
-    drivers.setLevel(logging.CRITICAL)
-    try:
-        dev.close()
-    except Exception:  # the process is ending on the user's request
-        pass
-    finally:
-        drivers.setLevel(level)
-
-
-@main.command()
-@click.argument("config", type=INPUT_FILE)
-@click.option("--robot-host", default=None, help=ROBOT_HOST_HELP)
-@click.option("--host", "old_host", default=None, hidden=True)
-@click.option("--move-to", "move_to", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
-              help="Jog the flange to this pose after a confirmation: x, y, z in mm and "
-                   "roll, pitch, yaw in degrees with R = Rz(yaw)·Ry(pitch)·Rx(roll) about the "
-                   "fixed base axes (DENSO's P-type; NOT a UR pendant's rotation vector), in "
-                   "the robot base frame. The config's safety envelope applies around the "
-                   "current pose (with --calib: around the calibration's P0). 'p0' with "
-                   "--calib: back to the P0 where the calibration was made, always allowed "
-                   "inside the workspace box at the speed caps.")
-@click.option("--calib", "calib_file", type=INPUT_FILE, default=None, metavar="CALIB",
-              help="The calibration whose P0 --move-to p0 goes back to (docs/safety.md).")
-@click.option("--speed", type=Finite(0, lo_open=True), default=None,
-              help="Jog speed, mm/s (capped by safety.max_speed_mm_s).")
-@click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
-@handle_errors
-def robot(config: Path, robot_host: str | None, old_host: str | None, move_to: str | None,
-          calib_file: Path | None, speed: float | None, yes: bool) -> None:
-    """Connect to the robot, report its identity and flange pose; optionally jog."""
-    from ..acquisition.devices import envelope_for, make_robot
-    from ..config import load_config
-    from ..geometry import matrix_from_denso_p
-    from ..safety.origin import return_envelope
-
-    host = old_spelling(robot_host, old_host, "--robot-host", "--host")
-    target = None
-    origin = calibration_origin(calib_file)
-    back = move_to is not None and move_to.strip().lower() == "p0"
-    if back:
-        if origin is None:
-            raise click.BadParameter("'p0' is the calibration's P0: give --calib CALIB",
-                                     param_hint="--move-to")
-        target = np.array(origin.pose, dtype=float)
-    elif move_to is not None:  # parsed before anything connects
-        try:
-            vals = [float(v) for v in move_to.split(",")]
-            if len(vals) != 6 or not np.isfinite(vals).all():
-                raise ValueError
-        except ValueError:
-            raise click.BadParameter(f"{move_to!r}: expected 6 finite numbers "
-                                     "X,Y,Z,ROLL,PITCH,YAW (mm, deg)",
-                                     param_hint="--move-to") from None
-        target = matrix_from_denso_p(vals)
-    cfg = load_config(config, check_files=False)  # the robot needs no tracker files
-    with make_robot(cfg, envelope_for(cfg, None), host) as rb:
-        click.echo("robot: " + ", ".join(f"{k} {value_text(v)}"
-                                         for k, v in rb.identity().items() if v))
-        here = rb.flange_pose()
-        _echo_pose("flange (base ← flange)", here, rb)
-        click.echo(_matrix_text(here))
-        if target is None:
-            return
-        if origin is None:
-            rb.envelope = envelope_for(cfg, here)
-        elif back:  # the way back: the box and the caps only
-            rb.envelope = return_envelope(envelope_for(cfg, origin.pose), origin.pose, here)
-        else:
-            rb.envelope = envelope_for(cfg, origin.pose)
-        rb.envelope.check_pose(target, "--move-to target")
-        v = speed if speed is not None else rb.speed_mm_s
-        _echo_pose("target", target, rb)
-        if not yes and not click.confirm(f"move the flange to the target at {v} mm/s?",
-                                         default=False):
-            click.echo("not moved")
-            return
-        rb.move_to(target, v)
-        _echo_pose("arrived", rb.flange_pose(), rb)
+from .robot import RPY_CONVENTION, pose_line
+from .stopping import StopFlag
 
 
 @main.command()
@@ -340,7 +88,7 @@ def acquire(config: Path, output: Path, resume: bool, poses: int | None,
     from ..acquisition.engine import AcquisitionStopped
     from ..acquisition.run import acquire as run_acquire
     from ..config import load_config
-    from .live import AcquireProgress, stderr_to_log
+    from .progress import AcquireProgress, stderr_to_log
 
     if same_file(output, config):  # an existing session is the run's to resume, never this
         raise click.BadParameter(f"{output} is the config file; it is never written over",
@@ -465,7 +213,7 @@ def _dry_run(cfg: Any, poses: int | None, samples: int | None, robot_host: str |
                 if a is not None else f"plan {d.spec.kind}: {d.spec.n} poses")
         click.echo(f"{what}, seed {d.spec.seed}, around P0 ({d.p0_source}):")
         if d.p0_known:
-            click.echo("  P0 " + _pose_line(d.spec.p0))
+            click.echo("  P0 " + pose_line(d.spec.p0))
             click.echo(f"     angles: {RPY_CONVENTION}")
         frame = "" if d.p0_known else " (in P0's flange frame)"
         click.echo(f"  offsets from P0{frame}: x {s['x_range_mm'][0]:.1f}…"
