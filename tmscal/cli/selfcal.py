@@ -2,7 +2,8 @@
 sensor (Joubair et al. 2016; docs/selfcal.md).
 
 The group lives here with ``simulate`` (the simulation study, no devices); ``acquire`` and
-``identify`` (the rig side) register on the same group from :mod:`tmscal.cli.selfcal_rig`.
+``identify`` register on the same group from :mod:`tmscal.cli.selfcal_acquire` and
+:mod:`tmscal.cli.selfcal_identify`.
 """
 
 from __future__ import annotations
