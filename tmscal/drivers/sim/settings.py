@@ -102,11 +102,12 @@ class SimTrackerSettings(TrackerSettings):
                                     "et al. 2018)", "mm", 5),
         "drop_tool": Option(str, null=True, default=None,
                             help="inject a fault: this tool (one of `tools`) is reported "
-                                 "missing from the `drop_after_moves`-th motion of the rig "
-                                 "on; null: none"),
+                                 "missing once the rig has made more than "
+                                 "`drop_after_moves` motions; null: none"),
         "drop_after_moves": Option(int, lo=0, hi=MAX_MOVES_SEEN, default=0,
-                                   help="with `drop_tool`: the motions of the rig (since it "
-                                        "was made) before the tool is dropped"),
+                                   help="with `drop_tool`: the rig's motions (since it was "
+                                        "made) the tool is still seen after; a plan from P0 "
+                                        "sees it at its first k poses"),
     }
 
     @classmethod

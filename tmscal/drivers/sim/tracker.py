@@ -30,7 +30,7 @@ class SimTracker(Tracker):
     (Hz) is nominal (every read is a new frame). ``seed``, ``truth``, ``arm``, ``arm_errors``:
     the rig's, as the robot's (:class:`~tmscal.drivers.sim.channel.RigSpec`);
     ``fiducial_sigma_mm`` (mm): the tracker's noise. ``drop_tool``: a tool reported missing in
-    every frame once the rig has made ``drop_after_moves`` motions (None: none)."""
+    every frame once the rig has made more than ``drop_after_moves`` motions (None: none)."""
 
     name = "sim"
 
@@ -87,7 +87,7 @@ class SimTracker(Tracker):
     def _read(self) -> TrackerFrame:
         self._frame += 1
         dropped = (self.drop_tool if self.drop_tool is not None
-                   and len(self._rig.moves) >= self.drop_after_moves else None)
+                   and len(self._rig.moves) > self.drop_after_moves else None)
         tools = {t: (ToolState(pose=None, missing=True) if t == dropped
                      else ToolState(pose=self._rig.observe(body)))
                  for t, body in self.bodies.items()}
