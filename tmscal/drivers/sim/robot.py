@@ -34,7 +34,9 @@ class SimRobot(Robot):
     ``host`` is accepted (the robot section always has one) and ignored; ``envelope``,
     ``speed_mm_s`` (mm/s), ``accel_mm_s2`` (mm/s²) as for every robot. ``seed``, ``truth``,
     ``arm``, ``arm_errors``: the rig's (:class:`~tmscal.drivers.sim.channel.RigSpec`);
-    ``rot_sigma_deg`` (deg) and ``trans_sigma_mm`` (mm): the positioning error per move.
+    ``rot_sigma_deg`` (deg) and ``trans_sigma_mm`` (mm): the positioning error per move;
+    ``read_rot_sigma_deg`` (deg) and ``read_trans_sigma_mm`` (mm): the jitter of every
+    reported pose, drawn per read.
     ``fail_after_moves`` k: after k motions since ``open()`` the next fails, and every one
     after it until the robot is opened again (``fault``: ``protective_stop`` raises
     ``RobotFault``; ``connection_lost`` raises ``ConnectionLost``, and so does every read).
@@ -50,11 +52,14 @@ class SimRobot(Robot):
                  arm_errors: str = _OPT["arm_errors"],
                  rot_sigma_deg: float = _OPT["rot_sigma_deg"],
                  trans_sigma_mm: float = _OPT["trans_sigma_mm"],
+                 read_rot_sigma_deg: float = _OPT["read_rot_sigma_deg"],
+                 read_trans_sigma_mm: float = _OPT["read_trans_sigma_mm"],
                  fail_after_moves: int | None = _OPT["fail_after_moves"],
                  fault: str = _OPT["fault"]) -> None:
         o = SimRobotSettings.check_options(
             "SimRobot", channel=channel, seed=seed, truth=truth, arm=arm,
             arm_errors=arm_errors, rot_sigma_deg=rot_sigma_deg, trans_sigma_mm=trans_sigma_mm,
+            read_rot_sigma_deg=read_rot_sigma_deg, read_trans_sigma_mm=read_trans_sigma_mm,
             fail_after_moves=fail_after_moves, fault=fault)
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         self.host = host
@@ -62,6 +67,8 @@ class SimRobot(Robot):
         self.spec = RigSpec(o["seed"], o["truth"], o["arm"], o["arm_errors"])
         self.rot_sigma_deg: float = o["rot_sigma_deg"]
         self.trans_sigma_mm: float = o["trans_sigma_mm"]
+        self.read_rot_sigma_deg: float = o["read_rot_sigma_deg"]
+        self.read_trans_sigma_mm: float = o["read_trans_sigma_mm"]
         self.fail_after_moves: int | None = o["fail_after_moves"]
         self.fault: str = o["fault"]
         self.moves_sent = 0
@@ -76,7 +83,9 @@ class SimRobot(Robot):
     def _open(self) -> None:
         rig = attach(self.channel, self.spec, "robot")
         rig.noise = replace(rig.noise, robot_rot_sigma_deg=self.rot_sigma_deg,
-                            robot_trans_sigma_mm=self.trans_sigma_mm)
+                            robot_trans_sigma_mm=self.trans_sigma_mm,
+                            robot_read_rot_sigma_deg=self.read_rot_sigma_deg,
+                            robot_read_trans_sigma_mm=self.read_trans_sigma_mm)
         self._rig, self.moves_sent, self._tripped = rig, 0, False
 
     def _close(self) -> None:

@@ -6,7 +6,8 @@ The rig's own options (``RIG_OPTIONS``: the channel, seed, truth and arm) are de
 and taken by both drivers: a robot and a tracker on one ``channel`` share one sim rig, and
 must then give it the same seed, truth and arm (refused when they are opened otherwise).
 Each driver adds the noise and faults of its own side: the robot's positioning error per
-move (``rot_sigma_deg`` degrees, ``trans_sigma_mm`` mm) and a fault after k motions; the
+move (``rot_sigma_deg`` degrees, ``trans_sigma_mm`` mm), the jitter of its reported pose per
+read (``read_rot_sigma_deg``, ``read_trans_sigma_mm``) and a fault after k motions; the
 tracker's fiducial noise (``fiducial_sigma_mm`` mm) and a tool dropped after k motions.
 
 The sim tracker's ``tools`` map our tool name to a body of the rig (``marker`` or
@@ -64,14 +65,16 @@ RIG_OPTIONS: Mapping[str, Option] = {
 }
 
 
-def _noise(help: str, unit: str, hi: float) -> Option:
-    return Option(float, lo=0, hi=hi, default=0.05, unit=unit, help=help)
+def _noise(help: str, unit: str, hi: float, default: float = 0.05) -> Option:
+    """A noise σ option in 0…``hi`` ``unit`` (default: Wang et al. 2018's 0.05)."""
+    return Option(float, lo=0, hi=hi, default=default, unit=unit, help=help)
 
 
 @dataclass(frozen=True)
 class SimRobotSettings(RobotSettings):
     """The sim robot's options: the rig's (``RIG_OPTIONS``), its positioning error per move,
-    and a fault after ``fail_after_moves`` motions. No keys of its own."""
+    the jitter of its reported pose per read, and a fault after ``fail_after_moves``
+    motions. No keys of its own."""
 
     OPTIONS: ClassVar[Mapping[str, Option]] = {
         **RIG_OPTIONS,
@@ -79,6 +82,11 @@ class SimRobotSettings(RobotSettings):
                                 "random axis, N(0, σ) degrees (Wang et al. 2018)", "deg", 10),
         "trans_sigma_mm": _noise("the robot's positioning error per move: a translation, "
                                  "N(0, σ) mm per axis", "mm", 10),
+        "read_rot_sigma_deg": _noise("jitter of every reported flange pose: a rotation about a "
+                                     "random axis, N(0, σ) degrees, drawn per read", "deg", 10,
+                                     0.0),
+        "read_trans_sigma_mm": _noise("jitter of every reported flange pose: a translation, "
+                                      "N(0, σ) mm per axis, drawn per read", "mm", 10, 0.0),
         "fail_after_moves": Option(int, lo=0, hi=INT_BOUND - 1, null=True, default=None,
                                    help="inject a fault: after this many motions since "
                                         "`open()` (a move split through P0 is three) the "
