@@ -34,6 +34,7 @@ from tmscal.geometry import invert, make_pose, rotvec_from_matrix
 from tmscal.session import read_session
 from tmscal.sim import TMS_RIG_P0, tms_rig_truth
 
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 SAFETY = {"max_offset_mm": 200, "max_rotation_deg": 20, "workspace_min_mm": [100, -400, 0],
           "workspace_max_mm": [900, 400, 800], "max_speed_mm_s": 250, "max_accel_mm_s2": 1500,
           "tool_points_mm": [[3, 5, 110]]}
@@ -88,7 +89,13 @@ def _errors(T: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 # --- acquire → solve -------------------------------------------------------------------------
 
 def test_acquire_then_solve_recovers_the_rigs_truth(tmp_path):
-    cfg = write(tmp_path, sim_config("acquire-solve"))
+    """The shipped configs/sim.yaml, shortened to 30 poses of 10 frames, on a channel of
+    this test's own."""
+    data = yaml.safe_load((CONFIGS / "sim.yaml").read_text(encoding="utf-8"))
+    for kind in ("robot", "tracker"):
+        data[kind]["options"]["channel"] = "acquire-solve"
+    data["plan"]["poses"], data["sampling"]["samples"] = 30, 10
+    cfg = write(tmp_path, data)
     out = tmp_path / "s.jsonl"
     r = run("acquire", cfg, "-o", out)
     assert r.exit_code == 0, r.output
