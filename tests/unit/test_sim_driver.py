@@ -324,3 +324,20 @@ def test_an_arm_reports_joints_and_no_arm_says_which_option():
     with SimRobot(channel="arm") as rob, pytest.raises(NotImplementedError,
                                                        match="robot.options.arm"):
         rob.joint_positions()
+
+
+# --- the acceptance suite ---------------------------------------------------------------------
+
+def test_selftest_on_the_sim_rig_passes_and_judges_no_timing(tmp_path):
+    """``tmscal selftest`` on the shipped sim config: connect, tools, the small move and
+    reconnect pass; the frame rate is reported, not judged, and the stop mid-move is skipped
+    (a sim move takes no time), each saying so."""
+    report = tmp_path / "report.txt"
+    r = run("selftest", "--rig", CONFIGS / "sim.yaml", "--report", report)
+    assert r.exit_code == 0, r.output
+    assert "PASS (4 passed, 0 failed, 1 skipped)" in r.output
+    assert "frame rate reported only (an in-process sim device)" in r.output
+    assert "SKIP  stop while moving: an in-process sim device completes a move at once" in \
+        r.output
+    text = report.read_text(encoding="utf-8")
+    assert "in-process sim devices" in text and "rate_error" not in text

@@ -44,6 +44,7 @@ class SimRobot(Robot):
     the motions that reached the rig since ``open()``."""
 
     name = "sim"
+    real_time = False
 
     def __init__(self, host: str = "", *, envelope: Envelope | None = None,
                  speed_mm_s: float = 100.0, accel_mm_s2: float = 500.0,

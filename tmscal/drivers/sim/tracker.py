@@ -33,6 +33,7 @@ class SimTracker(Tracker):
     every frame once the rig has made more than ``drop_after_moves`` motions (None: none)."""
 
     name = "sim"
+    real_time = False
 
     def __init__(self, tools: Mapping[str, str], frame_rate_hz: float = 60.0, *,
                  channel: str = _OPT["channel"], seed: int = _OPT["seed"],
