@@ -341,3 +341,11 @@ def test_selftest_on_the_sim_rig_passes_and_judges_no_timing(tmp_path):
         r.output
     text = report.read_text(encoding="utf-8")
     assert "in-process sim devices" in text and "rate_error" not in text
+
+
+def test_tmscal_mock_refuses_a_sim_config_naming_the_driver_key(tmp_path):
+    """A sim driver speaks no protocol: there is nothing for ``tmscal mock`` to serve."""
+    cfg = write(tmp_path, sim_config("no-mock", mock={"seed": 1}))
+    r = run("mock", cfg)
+    assert r.exit_code != 0
+    assert "key 'robot.driver': driver 'sim' has no mock to serve" in r.output, r.output

@@ -64,7 +64,8 @@ class RigSelftest:
                                     clock_hint="")
         self.meta: dict[str, Any] = {
             "host": platform.node(), "devices": self._devices_note(started_mocks),
-            "settings": ", ".join(f"{k}={v}" for k, v in asdict(self.settings).items())}
+            "settings": ", ".join(f"{k}={v}" for k, v in asdict(self.settings).items()
+                                  if k not in ("clock", "clock_hint"))}
         self.checks: list[Check] = []
 
     def _devices_note(self, started: bool) -> str:

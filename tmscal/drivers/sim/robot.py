@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ...sim import SimRig
 from ..base import ConnectionLost, Envelope, Robot, RobotFault
 from .channel import RigSpec, attach, detach
 from .settings import SimRobotSettings
@@ -73,11 +74,11 @@ class SimRobot(Robot):
         self.fail_after_moves: int | None = o["fail_after_moves"]
         self.fault: str = o["fault"]
         self.moves_sent = 0
-        self._rig: Any = None
+        self._rig: SimRig | None = None
         self._tripped = False
 
     @property
-    def rig(self) -> Any:
+    def rig(self) -> SimRig | None:
         """The :class:`~tmscal.sim.SimRig` moved (None until ``open()``)."""
         return self._rig
 
@@ -105,22 +106,27 @@ class SimRobot(Robot):
             raise ConnectionLost(f"sim: connection lost (injected after "
                                  f"{self.fail_after_moves} motions)", device=self.name)
 
-    def _flange_pose(self) -> np.ndarray:
+    def _on(self) -> SimRig:
+        """The rig, or ConnectionLost after the injected fault of that kind."""
         self._lost()
-        return np.asarray(self._rig.reported_flange(), dtype=np.float64)
+        assert self._rig is not None  # the base class calls the hooks only while open
+        return self._rig
+
+    def _flange_pose(self) -> np.ndarray:
+        return np.asarray(self._on().reported_flange(), dtype=np.float64)
 
     def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
-        self._lost()
+        rig = self._on()
         k = self.fail_after_moves
         if self._tripped or (k is not None and self.moves_sent >= k):
             self._tripped = True
             self._lost()
             raise RobotFault(f"sim: protective stop (injected after {k} motions); nothing "
                              "moved", device=self.name)
-        if self._rig.reach(pose) is None:
+        if rig.reach(pose) is None:
             raise RobotFault(f"sim: pose {np.round(pose[:3, 3], 1).tolist()} mm is out of the "
                              f"{self.spec.arm} arm's reach; nothing moved", device=self.name)
-        self._rig.move_flange(pose)
+        rig.move_flange(pose)
         self.moves_sent += 1
 
     def joint_positions(self) -> np.ndarray:

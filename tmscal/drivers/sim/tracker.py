@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
+from ...sim import SimRig
 from ..base import ToolState, Tracker, TrackerFrame
 from .channel import RigSpec, attach, detach
 from .settings import RIG_BODIES, SimTrackerSettings
@@ -62,11 +63,11 @@ class SimTracker(Tracker):
         self.fiducial_sigma_mm: float = o["fiducial_sigma_mm"]
         self.drop_tool: str | None = o["drop_tool"]
         self.drop_after_moves: int = o["drop_after_moves"]
-        self._rig: Any = None
+        self._rig: SimRig | None = None
         self._frame = 0
 
     @property
-    def rig(self) -> Any:
+    def rig(self) -> SimRig | None:
         """The :class:`~tmscal.sim.SimRig` observed (None until ``open()``)."""
         return self._rig
 
@@ -86,10 +87,12 @@ class SimTracker(Tracker):
                 "truth": self.spec.truth, "tools": dict(self.bodies)}
 
     def _read(self) -> TrackerFrame:
+        rig = self._rig
+        assert rig is not None  # the base class calls the hook only while open
         self._frame += 1
         dropped = (self.drop_tool if self.drop_tool is not None
-                   and len(self._rig.moves) > self.drop_after_moves else None)
+                   and len(rig.moves) > self.drop_after_moves else None)
         tools = {t: (ToolState(pose=None, missing=True) if t == dropped
-                     else ToolState(pose=self._rig.observe(body)))
+                     else ToolState(pose=rig.observe(body)))
                  for t, body in self.bodies.items()}
         return TrackerFrame(frame=self._frame, host_time=time.monotonic(), tools=tools)
