@@ -66,7 +66,10 @@ class SimRobot(Robot):
         super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
         self.host = host
         self.channel: str = o["channel"]
-        self.spec = RigSpec(o["seed"], o["truth"], o["arm"], o["arm_errors"])
+        #: the rig options as given (the option names), and the rig they make
+        self.seed, self.truth, self.arm, self.arm_errors = (o["seed"], o["truth"], o["arm"],
+                                                            o["arm_errors"])
+        self.spec = RigSpec(self.seed, self.truth, self.arm, self.arm_errors)
         self.rot_sigma_deg: float = o["rot_sigma_deg"]
         self.trans_sigma_mm: float = o["trans_sigma_mm"]
         self.read_rot_sigma_deg: float = o["read_rot_sigma_deg"]

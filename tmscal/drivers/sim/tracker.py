@@ -59,7 +59,10 @@ class SimTracker(Tracker):
         super().__init__(list(tools), frame_rate_hz)
         self.bodies = dict(tools)
         self.channel: str = o["channel"]
-        self.spec = RigSpec(o["seed"], o["truth"], o["arm"], o["arm_errors"])
+        #: the rig options as given (the option names), and the rig they make
+        self.seed, self.truth, self.arm, self.arm_errors = (o["seed"], o["truth"], o["arm"],
+                                                            o["arm_errors"])
+        self.spec = RigSpec(self.seed, self.truth, self.arm, self.arm_errors)
         self.fiducial_sigma_mm: float = o["fiducial_sigma_mm"]
         self.drop_tool: str | None = o["drop_tool"]
         self.drop_after_moves: int = o["drop_after_moves"]
