@@ -1,6 +1,7 @@
 """The one driver registry: driver name → ``DriverSpec`` (what kind of device it is, which
 class drives it, which class reads its config keys, which mock serves it, its default port and
-its pip extra).
+its pip extra). Within a kind a name is one driver; one name may serve several kinds (``sim``:
+the in-process robot and tracker), so lookups take the kind the config section gives.
 
 A ground module (it imports only ``tmscal.errors``), so every layer may ask it: the config
 parser for the names valid in ``robot.driver``, ``tracker.driver`` and ``ft.driver``
@@ -35,7 +36,7 @@ from typing import Any
 
 from .errors import ConfigError, MissingExtraError
 
-__all__ = ["DriverSpec", "BUILTIN", "ENTRY_POINT_GROUP", "KINDS", "register", "get_spec",
+__all__ = ["DriverSpec", "BUILTIN", "ENTRY_POINT_GROUP", "KINDS", "register", "slot", "get_spec",
            "driver_names", "driver_class", "alternatives", "is_registered"]
 
 #: the entry-point group third-party drivers register in
@@ -161,22 +162,49 @@ BUILTIN: tuple[DriverSpec, ...] = (
                mock="tmscal.mocks.ur:URMock", mock_faults="tmscal.mocks.ur:URFaults",
                extra="ur", requires=("rtde_receive",),
                settings="tmscal.drivers.ur.settings:URWrenchSettings"),
+    # in-process: the sim rig in this process, no wire protocol (so no mock); one name for
+    # the robot and the tracker, which share a rig by channel (docs/devices.md)
+    DriverSpec("sim", "robot", "tmscal.drivers.sim.robot:SimRobot",
+               settings="tmscal.drivers.sim.settings:SimRobotSettings"),
+    DriverSpec("sim", "tracker", "tmscal.drivers.sim.tracker:SimTracker",
+               settings="tmscal.drivers.sim.settings:SimTrackerSettings"),
 )
 
-#: name → spec, in registration order (built-ins first, then entry points)
-SPECS: dict[str, DriverSpec] = {s.name: s for s in BUILTIN}
+def slot(spec: DriverSpec, specs: dict[str, DriverSpec] | None = None) -> str:
+    """The key of ``spec`` in ``SPECS``: its name, or ``"<name>/<kind>"`` when the name is
+    held by a driver of another kind (one name may serve a robot and a tracker, as ``sim``
+    does; within a kind a name is one driver)."""
+    specs = SPECS if specs is None else specs
+    held = specs.get(spec.name)
+    return spec.name if held is None or held.kind == spec.kind else f"{spec.name}/{spec.kind}"
+
+
+def _lookup(name: str, kind: str | None) -> DriverSpec | None:
+    """The registered spec of ``name`` (of ``kind``, when given; else the first registered
+    of that name), or None."""
+    spec = SPECS.get(name)
+    if kind is None or (spec is not None and spec.kind == kind):
+        return spec
+    return SPECS.get(f"{name}/{kind}")
+
+
+#: key (``slot``) → spec, in registration order (built-ins first, then entry points)
+SPECS: dict[str, DriverSpec] = {}
+for _s in BUILTIN:
+    SPECS[slot(_s)] = _s
 _entry_points_loaded = False
 _lock = threading.Lock()
 
 
 def register(spec: DriverSpec, replace: bool = False) -> DriverSpec:
-    """Add ``spec`` to the registry; a name already taken is a ``ConfigError`` unless
-    ``replace``. Returns the spec."""
+    """Add ``spec`` to the registry; a name already taken by a driver of its kind is a
+    ``ConfigError`` unless ``replace``. Returns the spec."""
     if not isinstance(spec, DriverSpec):
         raise ConfigError(f"not a DriverSpec: {spec!r}")
-    if spec.name in SPECS and not replace and SPECS[spec.name] != spec:
+    key = slot(spec)
+    if key in SPECS and not replace and SPECS[key] != spec:
         raise ConfigError(f"driver {spec.name!r} is registered twice")
-    SPECS[spec.name] = spec
+    SPECS[key] = spec
     return spec
 
 
@@ -204,11 +232,12 @@ def _load_entry_points(entry_points: Callable[..., Iterable[Any]] | None = None)
         eps = (entry_points or importlib.metadata.entry_points)(group=ENTRY_POINT_GROUP)
         specs = [_spec_from_entry_point(ep) for ep in eps]
         for spec in specs:
-            if spec.name in SPECS and SPECS[spec.name] != spec:
+            key = slot(spec)
+            if key in SPECS and SPECS[key] != spec:
                 raise ConfigError(f"entry point {spec.name!r} (group {ENTRY_POINT_GROUP!r}) "
                                   "reuses the name of a registered driver")
         for spec in specs:
-            SPECS[spec.name] = spec
+            SPECS[slot(spec)] = spec
         _entry_points_loaded = True
 
 
@@ -216,16 +245,16 @@ def driver_names(kind: str | None = None) -> list[str]:
     """Every registered driver name (entry points included), in registration order; only
     those of ``kind`` ("robot", "tracker" or "ft") when given."""
     _load_entry_points()
-    return [n for n, s in SPECS.items() if kind is None or s.kind == kind]
+    names = [s.name for s in SPECS.values() if kind is None or s.kind == kind]
+    return list(dict.fromkeys(names))
 
 
 def is_registered(name: str, kind: str | None = None) -> bool:
     """True when ``name`` is registered (of ``kind``, when given). Entry points are loaded
     only when the name is not among the drivers registered so far."""
-    if name not in SPECS:
+    if _lookup(name, kind) is None:
         driver_names()
-    spec = SPECS.get(name)
-    return spec is not None and (kind is None or spec.kind == kind)
+    return _lookup(name, kind) is not None
 
 
 def alternatives(names: Iterable[str]) -> str:
@@ -235,20 +264,22 @@ def alternatives(names: Iterable[str]) -> str:
 
 
 def get_spec(name: str, kind: str | None = None) -> DriverSpec:
-    """The spec registered under ``name``. An unknown name (or one of another ``kind``) is a
+    """The spec registered under ``name`` (of ``kind``, when given; without it the first
+    registered of that name). An unknown name (or one of another ``kind``) is a
     ``ConfigError`` listing the known ones."""
-    spec = SPECS.get(name)
+    spec = _lookup(name, kind)
     if spec is None:
         _load_entry_points()
-        spec = SPECS.get(name)
-    if spec is None or (kind is not None and spec.kind != kind):
+        spec = _lookup(name, kind)
+    if spec is None:
         known = ", ".join(sorted(driver_names(kind)))
         label = "driver" if kind is None else f"{kind} driver"
         raise ConfigError(f"unknown {label} {name!r}; known {label}s: {known}")
     return spec
 
 
-def driver_class(name: str) -> type:
-    """The driver class registered under ``name``; unknown names raise ``ConfigError`` listing
-    the known ones, a missing extra ``MissingExtraError``."""
-    return get_spec(name).load()
+def driver_class(name: str, kind: str | None = None) -> type:
+    """The driver class registered under ``name`` (of ``kind``, when given: ``sim`` is a
+    robot and a tracker; without it, the first registered); unknown names raise
+    ``ConfigError`` listing the known ones, a missing extra ``MissingExtraError``."""
+    return get_spec(name, kind).load()

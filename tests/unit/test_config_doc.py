@@ -14,20 +14,23 @@ import pytest
 
 from tmscal import registry
 from tmscal.config import settings_class
-from tmscal.config.doc import main, option_default, option_type, options_table, render
+from tmscal.config.doc import main, marker, option_default, option_type, options_table, render
 from tmscal.config.settings import Option
 
 REPO = Path(__file__).resolve().parents[2]
 DOC = REPO / "docs" / "configs.md"
 DECLARED = [(s.kind, s.name) for s in registry.BUILTIN
             if settings_class(s.kind, s.name).OPTIONS]
-#: the required arguments of each built-in driver, to build one (nothing is opened)
+IDS = [marker(k, n) for k, n in DECLARED]
+#: the required arguments of each built-in driver (by its docs marker), to build one
+#: (nothing is opened)
 REQUIRED: dict[str, dict[str, Any]] = {
     "ur": {"host": "192.0.2.1"}, "denso": {}, "franka": {"host": "192.0.2.1"},
     "ndi": {"port": "/dev/ttyUSB0", "tools": {"marker": None}},
     "igtl": {"host": "192.0.2.1", "tools": {"marker": "MarkerToTracker"}},
     "ati": {"host": "192.0.2.1", "counts_per_force": 1e6, "counts_per_torque": 1e6},
     "ur_wrench": {"host": "192.0.2.1"},
+    "sim/robot": {}, "sim/tracker": {"tools": {"marker": "marker"}},
 }
 
 
@@ -37,10 +40,23 @@ def test_docs_configs_tables_are_the_declarations() -> None:
                                   "drivers' OPTIONS; run python -m tmscal.config.doc")
 
 
-@pytest.mark.parametrize("kind, name", DECLARED, ids=[n for _, n in DECLARED])
+@pytest.mark.parametrize("kind, name", DECLARED, ids=IDS)
 def test_every_driver_with_options_has_a_generated_table(kind: str, name: str) -> None:
     text = DOC.read_text(encoding="utf-8")
-    assert f"<!-- options: {name} " in text and f"<!-- /options: {name} -->" in text
+    m = marker(kind, name)
+    assert f"<!-- options: {m} " in text and f"<!-- /options: {m} -->" in text
+
+
+def test_a_name_of_two_kinds_is_marked_with_its_kind() -> None:
+    """``sim`` is a robot and a tracker: each table is its own kind's declaration."""
+    assert (marker("robot", "sim"), marker("tracker", "sim"), marker("robot", "ur")) == \
+        ("sim/robot", "sim/tracker", "ur")
+    robot = render("<!-- options: sim/robot x -->\n<!-- /options: sim/robot -->")
+    tracker = render("<!-- options: sim/tracker x -->\n<!-- /options: sim/tracker -->")
+    assert "`fail_after_moves`" in robot and "`fail_after_moves`" not in tracker
+    assert "`drop_tool`" in tracker and "`drop_tool`" not in robot
+    with pytest.raises(ValueError, match="no built-in driver 'sim'"):
+        render("<!-- options: sim x -->\n<!-- /options: sim -->")
 
 
 def test_render_replaces_a_stale_table_and_keeps_the_rest(tmp_path: Path) -> None:
@@ -79,7 +95,7 @@ def test_the_columns() -> None:
     assert table.splitlines()[2] == "| `a` | number > 0 | s | 2 | wait |"
 
 
-@pytest.mark.parametrize("kind, name", DECLARED, ids=[n for _, n in DECLARED])
+@pytest.mark.parametrize("kind, name", DECLARED, ids=IDS)
 def test_every_option_is_a_constructor_argument_with_the_declared_default(kind: str,
                                                                         name: str) -> None:
     declared = settings_class(kind, name).OPTIONS or {}
@@ -89,7 +105,7 @@ def test_every_option_is_a_constructor_argument_with_the_declared_default(kind: 
         assert params[k].default == o.default, k
         assert o.help, f"{name}: option {k!r} has no help for the docs"
         assert o.check(o.default, "src", k) == o.default, k   # the default is in range
-        assert registry.get_spec(name, kind).load()(**REQUIRED[name])  # builds at defaults
+        assert registry.get_spec(name, kind).load()(**REQUIRED[marker(kind, name)])  # defaults
 
 
 def _outside(o: Option) -> list[Any]:
@@ -107,16 +123,17 @@ def _outside(o: Option) -> list[Any]:
     return bad
 
 
-@pytest.mark.parametrize("kind, name", DECLARED, ids=[n for _, n in DECLARED])
+@pytest.mark.parametrize("kind, name", DECLARED, ids=IDS)
 def test_the_constructor_checks_the_declared_ranges(kind: str, name: str) -> None:
     """The driver refuses what the declaration refuses, naming the option, and takes the
     declaration's bounds themselves: its range is the declared one, not a copy."""
     declared = settings_class(kind, name).OPTIONS or {}
     cls = registry.get_spec(name, kind).load()
+    required = REQUIRED[marker(kind, name)]
     for k, o in declared.items():
         for v in _outside(o):
             with pytest.raises(ValueError, match=rf"{cls.__name__}: {k}: expected"):
-                cls(**REQUIRED[name], **{k: v})
+                cls(**required, **{k: v})
         for v in (o.lo, o.hi):
             if v is not None:
-                assert getattr(cls(**REQUIRED[name], **{k: v}), k, v) == v
+                assert getattr(cls(**required, **{k: v}), k, v) == v

@@ -17,8 +17,9 @@ from tmscal import registry
 from tmscal.acquisition.devices import envelope_for, make_robot, make_tracker
 from tmscal.acquisition.plan import plan_summary
 from tmscal.config import SAFETY_KEYS, load_config, parse_config
-from tmscal.drivers.base import Envelope, Robot
+from tmscal.drivers.base import Envelope
 from tmscal.drivers.ndi.settings import tracker_port_problem
+from tmscal.drivers.sim.robot import SimRobot
 from tmscal.errors import ConfigError, SafetyError
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -160,55 +161,23 @@ def test_tracker_options_cannot_name_own_keys(key):
     key_error(data, f"tracker.options.{key}")
 
 
-class FakeRobot(Robot):
-    """A recording robot driver, registered under "ur" for these tests."""
-
-    name = "fake"
-
-    def __init__(self, host="", envelope=None, speed_mm_s=100.0, accel_mm_s2=500.0, **opts):
-        super().__init__(envelope=envelope, speed_mm_s=speed_mm_s, accel_mm_s2=accel_mm_s2)
-        self.host = host
-        self.opts = opts
-
-    def _open(self):
-        pass
-
-    def _close(self):
-        pass
-
-    def _flange_pose(self):
-        return np.eye(4)
-
-    def _move_to(self, pose, speed_mm_s, accel_mm_s2):
-        raise AssertionError("not used")
-
-    def _stop(self):
-        pass
+#: the in-process sim robot (tmscal/drivers/sim/), a device without a wire, for the checks of
+#: make_robot
+SIM_ROBOT = {**ROBOT, "driver": "sim"}
 
 
-def _fake_driver(monkeypatch, name, target):
-    """Register ``target`` ("module:Class") as the driver class of ``name`` for one test."""
-    spec = dataclasses.replace(registry.SPECS[name], cls=target, requires=())
-    monkeypatch.setitem(registry.SPECS, name, spec)
-
-
-@pytest.fixture
-def fake_ur(monkeypatch):
-    _fake_driver(monkeypatch, "ur", f"{__name__}:FakeRobot")
-
-
-def test_make_robot_refuses_options_defensively(fake_ur):
-    cfg = parse_config(rig(), "rig.yaml")
+def test_make_robot_refuses_options_defensively():
+    cfg = parse_config(rig(robot=SIM_ROBOT), "rig.yaml")
     for key, value in (("envelope", None), ("speed_mm_s", 2000), ("accel_mm_s2", 1e5)):
         cfg.robot.options = {key: value}  # as if the parser had been bypassed
         with pytest.raises(ConfigError, match=rf"key 'robot.options.{key}'"):
             make_robot(cfg)
 
 
-def test_make_robot_always_carries_the_config_envelope(fake_ur):
-    cfg = parse_config(rig(robot={**ROBOT, "options": {"upload_script": True}}), "rig.yaml")
+def test_make_robot_always_carries_the_config_envelope():
+    cfg = parse_config(rig(robot={**SIM_ROBOT, "options": {"seed": 3}}), "rig.yaml")
     r = make_robot(cfg)
-    assert isinstance(r, FakeRobot) and r.opts == {"upload_script": True}
+    assert isinstance(r, SimRobot) and r.spec.seed == 3   # the options reach the driver
     assert r.envelope.max_speed_mm_s == 250 and r.envelope.max_accel_mm_s2 == 1500
     assert r.envelope.box_min_mm == (100, -400, 0) and r.envelope.box_max_mm == (900, 400, 800)
     np.testing.assert_array_equal(r.envelope.tool_points_mm, [[3, 5, 110]])
@@ -228,8 +197,9 @@ def test_make_robot_always_carries_the_config_envelope(fake_ur):
             make_robot(cfg, loose)
 
 
-class Dropper(FakeRobot):
-    """A driver that loses the envelope it was given."""
+class Dropper(SimRobot):
+    """A broken driver that loses the envelope it was given (no real driver does; the sim
+    robot cannot be told to, so this one test keeps a subclass)."""
 
     def __init__(self, **kw):
         kw["envelope"] = None
@@ -237,9 +207,10 @@ class Dropper(FakeRobot):
 
 
 def test_make_robot_refuses_a_driver_that_drops_the_envelope(monkeypatch):
-    _fake_driver(monkeypatch, "ur", f"{__name__}:Dropper")
+    spec = dataclasses.replace(registry.get_spec("sim", "robot"), cls=f"{__name__}:Dropper")
+    monkeypatch.setitem(registry.SPECS, registry.slot(spec), spec)
     with pytest.raises(SafetyError, match="did not take"):
-        make_robot(parse_config(rig(), "rig.yaml"))
+        make_robot(parse_config(rig(robot=SIM_ROBOT), "rig.yaml"))
 
 
 # --- tracker.port: no file-writing URL handlers ----------------------------------------------

@@ -18,10 +18,11 @@ DOC = (REPO / "docs" / "configs.md").read_text(encoding="utf-8")
 BUILTIN = [(s.kind, s.name) for s in registry.BUILTIN]
 
 
-def driver_paragraph(doc: str, name: str) -> str:
-    """The text of docs/configs.md about driver ``name``: from its bold ``**`name`**`` to the
+def driver_paragraph(doc: str, name: str, kind: str | None = None) -> str:
+    """The text of docs/configs.md about driver ``name``: from its bold ``**`name`**`` (the
+    first in the section ``## `kind```, when given: ``sim`` is a robot and a tracker) to the
     next driver's or the next section."""
-    start = doc.index(f"**`{name}`**")
+    start = doc.index(f"**`{name}`**", doc.index(f"## `{kind}`") if kind else 0)
     nxt = re.compile(r"^\*\*`[\w-]+`\*\*|^## ", re.M).search(doc, start + 1)
     return doc[start:nxt.start() if nxt else None]
 
@@ -39,7 +40,7 @@ def test_every_builtin_driver_has_keys_or_options_to_document():
 
 @pytest.mark.parametrize("kind, name", BUILTIN, ids=[n for _, n in BUILTIN])
 def test_every_settings_key_of_every_driver_is_in_docs_configs(kind, name):
-    text = driver_paragraph(DOC, name)
+    text = driver_paragraph(DOC, name, kind)
     missing = [k for k in settings_keys(kind, name) if f"`{k}`" not in text]
     assert not missing, f"docs/configs.md, driver {name!r}: no row or mention of {missing}"
 
@@ -48,6 +49,8 @@ def test_the_paragraph_finder_stops_at_the_next_driver():
     doc = "**`a`** owns `x`.\n\n**`b`** owns `y`.\n\n## next\n`z`"
     assert driver_paragraph(doc, "a") == "**`a`** owns `x`.\n\n"
     assert driver_paragraph(doc, "b") == "**`b`** owns `y`.\n\n"
+    two = "## `robot`\n**`a`** `x`\n## `tracker`\n**`a`** `y`\n"
+    assert driver_paragraph(two, "a", "tracker") == "**`a`** `y`\n"
 
 
 def test_every_shipped_config_is_listed():

@@ -13,21 +13,30 @@ from tmscal.drivers.base import ConfigError, ForceTorque, Robot, Tracker, driver
 from tmscal.errors import MissingExtraError
 from tmscal.registry import DriverSpec
 
-BUILTIN = [s.name for s in registry.BUILTIN]
+BUILTIN = [(s.kind, s.name) for s in registry.BUILTIN]
+IDS = [f"{n}/{k}" for k, n in BUILTIN]
+#: the drivers without a protocol-level mock: in-process, they speak no wire protocol
+IN_PROCESS = {"sim"}
 
 
-@pytest.mark.parametrize("name", BUILTIN)
-def test_registered_driver_fills_its_contract(name):
-    spec = registry.get_spec(name)
-    cls = driver_class(name)
+@pytest.mark.parametrize("kind, name", BUILTIN, ids=IDS)
+def test_registered_driver_fills_its_contract(kind, name):
+    spec = registry.get_spec(name, kind)
+    cls = driver_class(name, kind)
+    assert spec.kind == kind
     assert issubclass(cls, {"robot": Robot, "tracker": Tracker, "ft": ForceTorque}[spec.kind])
     assert not inspect.isabstract(cls), f"{cls.__name__} leaves hooks unimplemented"
     assert cls.name == name
 
 
-@pytest.mark.parametrize("name", BUILTIN)
-def test_registered_mock_loads(name):
-    spec = registry.get_spec(name)
+@pytest.mark.parametrize("kind, name", BUILTIN, ids=IDS)
+def test_registered_mock_loads(kind, name):
+    spec = registry.get_spec(name, kind)
+    if name in IN_PROCESS:
+        assert spec.mock is None
+        with pytest.raises(ConfigError, match=f"driver '{name}' has no mock"):
+            spec.load_mock()
+        return
     assert spec.mock is not None and inspect.isclass(spec.load_mock())
     assert inspect.isclass(spec.load_mock("mock_faults"))
     if spec.mock_volume is not None:
@@ -36,9 +45,32 @@ def test_registered_mock_loads(name):
 
 def test_names_by_kind():
     assert registry.driver_names("robot")[:2] == ["ur", "denso"]
-    assert registry.driver_names("tracker") == ["ndi", "igtl"]
+    assert registry.driver_names("tracker") == ["ndi", "igtl", "sim"]
     with pytest.raises(ConfigError, match=r"unknown tracker driver 'ur'; known tracker drivers"):
         registry.get_spec("ur", "tracker")
+
+
+def test_one_name_may_serve_two_kinds():
+    """``sim`` is a robot and a tracker: each lookup by kind finds its own; without a kind
+    the first registered (the robot); every name is listed once."""
+    assert registry.get_spec("sim", "robot").cls.endswith(":SimRobot")
+    assert registry.get_spec("sim", "tracker").cls.endswith(":SimTracker")
+    assert registry.get_spec("sim").kind == "robot"
+    assert registry.is_registered("sim", "tracker") and not registry.is_registered("sim", "ft")
+    names = registry.driver_names()
+    assert len(names) == len(set(names)) and "sim" in names
+    with pytest.raises(ConfigError, match="unknown ft driver 'sim'"):
+        registry.get_spec("sim", "ft")
+
+
+def test_a_name_is_one_driver_within_its_kind(entry_points):
+    other = DriverSpec("sim", "tracker", "x.y:Z")
+    with pytest.raises(ConfigError, match="driver 'sim' is registered twice"):
+        registry.register(other)
+    # a new kind under a taken name gets its own slot and takes nothing from the others
+    ft = registry.register(DriverSpec("sim", "ft", "x.y:FT"))
+    assert registry.slot(ft) == "sim/ft" and registry.get_spec("sim", "ft") is ft
+    assert registry.get_spec("sim", "tracker").cls.endswith(":SimTracker")
 
 
 KUKA = DriverSpec("kuka", "robot", "tmscal.drivers.denso.robot:DensoRobot", default_port=7000)
@@ -67,7 +99,7 @@ def _ep(name, value):
 def test_entry_point_registers_a_driver(entry_points, value):
     entry_points.append(_ep("kuka", value))
     assert registry.get_spec("kuka", "robot") is KUKA
-    assert registry.driver_names("robot") == ["ur", "denso", "franka", "kuka"]
+    assert registry.driver_names("robot") == ["ur", "denso", "franka", "sim", "kuka"]
 
 
 @pytest.mark.parametrize("value, match", [
@@ -119,40 +151,35 @@ def test_spec_is_checked():
 
 def test_unknown_driver_lists_the_known_ones():
     with pytest.raises(ConfigError, match=r"unknown driver 'kuka'; known drivers: ati, denso, "
-                                          r"franka, igtl, ndi, ur, ur_wrench"):
+                                          r"franka, igtl, ndi, sim, ur, ur_wrench"):
         driver_class("kuka")
 
 
-def test_robot_refuses_before_sending(monkeypatch):
-    """The base class checks the envelope and speed before the driver's hook runs."""
+def test_robot_refuses_before_sending():
+    """The base class checks the envelope and speed before the driver's hook runs: the sim
+    robot's rig sees only the move that passed."""
     import numpy as np
 
     from tmscal.drivers.base import Envelope
+    from tmscal.drivers.sim.robot import SimRobot
     from tmscal.errors import SafetyError
+    from tmscal.sim import TMS_RIG_P0
 
-    sent = []
-
-    class Probe(Robot):
-        name = "probe"
-
-        def _open(self): ...
-        def _close(self): ...
-        def _flange_pose(self): return np.eye(4)
-        def _move_to(self, pose, speed_mm_s, accel_mm_s2): sent.append((pose, speed_mm_s))
-        def _stop(self): ...
-
-    env = Envelope(center=np.eye(4), max_offset_mm=10, max_speed_mm_s=50)
-    with Probe(envelope=env, speed_mm_s=20) as r:
-        far = np.eye(4)
-        far[0, 3] = 11
+    env = Envelope(center=TMS_RIG_P0, max_offset_mm=10, max_speed_mm_s=50)
+    with SimRobot(envelope=env, speed_mm_s=20, channel="refuses-before-sending") as r:
+        far = TMS_RIG_P0.copy()
+        far[0, 3] += 11
         with pytest.raises(SafetyError, match="offset from P0 11.0 mm > max_offset_mm 10"):
             r.move_to(far)
         with pytest.raises(SafetyError, match="speed 60.0 mm/s > max_speed_mm_s 50"):
-            r.move_to(np.eye(4), 60.0)
-        near = np.eye(4)
-        near[0, 3] = 9
-        r.move_to(near)
-    assert len(sent) == 1 and sent[0][1] == 20
+            r.move_to(TMS_RIG_P0, 60.0)
+        assert len(r.rig.moves) == 0 and r.moves_sent == 0
+        near = TMS_RIG_P0.copy()
+        near[0, 3] += 9
+        route = r.move_to(near)
+        assert [leg.speed_mm_s for leg in route.legs] == [20]
+        assert len(r.rig.moves) == 1
+        np.testing.assert_array_equal(r.rig.moves[0], near)
 
 
 def test_config_accepts_an_entry_point_driver_and_builtins_despite_a_broken_one(entry_points):

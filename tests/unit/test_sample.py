@@ -1,9 +1,14 @@
 """sample_pose averages: the recorded pose's scatter shrinks as 1/√n with the sample count.
 
-A small in-test tracker and robot (subclasses of the driver contracts) return frames with
-Gaussian noise of known sigma around known poses; over many seeded repetitions the standard
-deviation of the averaged pose's error must match sigma/√n. Recording the first sample instead
-of the mean (or any estimator that does not average) fails these checks.
+A small in-test tracker (a subclass of the driver contract) returns frames with Gaussian noise
+of known sigma around known poses, and the in-process sim robot (``tmscal.drivers.sim``) stands
+still at the sim rig's P0 and reports it with read jitter of known sigma
+(``read_trans_sigma_mm``); over many seeded repetitions the standard deviation of the averaged
+pose's error must match sigma/√n. Recording the first sample instead of the mean (or any
+estimator that does not average) fails these checks.
+
+The tracker stays a fake: its noise is Gaussian on the pose itself, so sigma/√n is exact; the
+sim tracker's noise is on the tool's fiducials, through Horn's fit, with no closed-form sigma.
 """
 
 from __future__ import annotations
@@ -13,8 +18,10 @@ import pytest
 
 from tmscal.acquisition.sample import sample_pose
 from tmscal.config import SamplingConfig
-from tmscal.drivers.base import Robot, ToolState, Tracker, TrackerFrame
+from tmscal.drivers.base import ToolState, Tracker, TrackerFrame
+from tmscal.drivers.sim.robot import SimRobot
 from tmscal.geometry import make_pose, matrix_from_rotvec, random_rotation, rotvec_from_matrix
+from tmscal.sim import TMS_RIG_P0
 
 SIGMA_T_MM = 0.25      # per-axis translation noise of a tracked tool
 SIGMA_R_RAD = 1e-3     # per-axis rotation noise of a tracked tool (rotation vector)
@@ -23,7 +30,7 @@ REPS = 300             # repetitions per sample count
 _RNG0 = np.random.default_rng(20240611)
 TRUE = {"marker": make_pose(random_rotation(_RNG0), [120.0, -40.0, 1500.0]),
         "probe": make_pose(random_rotation(_RNG0), [80.0, 10.0, 1480.0])}
-TRUE_A = make_pose(random_rotation(_RNG0), [500.0, 20.0, 400.0])
+TRUE_A = TMS_RIG_P0      # where the sim robot stands (base_from_flange, mm)
 
 
 def _noisy(T: np.ndarray, rng: np.random.Generator, s_t: float, s_r: float) -> np.ndarray:
@@ -55,29 +62,11 @@ class NoisyTracker(Tracker):
         return TrackerFrame(frame=self.frame, host_time=0.0, tools=tools)
 
 
-class NoisyRobot(Robot):
-    """Holds still at TRUE_A; every read reports it with Gaussian translation noise."""
-
-    name = "noisy-test-robot"
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        super().__init__()
-        self.rng = rng
-
-    def _open(self) -> None:
-        pass
-
-    def _close(self) -> None:
-        pass
-
-    def _flange_pose(self) -> np.ndarray:
-        return _noisy(TRUE_A, self.rng, SIGMA_A_MM, 0.0)
-
-    def _move_to(self, pose: np.ndarray, speed_mm_s: float, accel_mm_s2: float) -> None:
-        pass
-
-    def _stop(self) -> None:
-        pass
+def _robot(seed: int) -> SimRobot:
+    """The sim robot at TRUE_A: no positioning error, every read jittered by N(0, SIGMA_A_MM)
+    mm per axis (its rig's own, seeded random numbers)."""
+    return SimRobot(channel=f"test-sample-{seed}", seed=seed, rot_sigma_deg=0.0,
+                    trans_sigma_mm=0.0, read_trans_sigma_mm=SIGMA_A_MM)
 
 
 def _errors(n: int, seed: int) -> dict[str, np.ndarray]:
@@ -85,7 +74,7 @@ def _errors(n: int, seed: int) -> dict[str, np.ndarray]:
     of the averaged marker, probe and A, rotation-vector errors (rad) of the averaged marker,
     the recorded A counts, and the recorded marker spreads (mm)."""
     rng = np.random.default_rng(seed)
-    tr, rob = NoisyTracker(rng).open(), NoisyRobot(rng).open()
+    tr, rob = NoisyTracker(rng).open(), _robot(seed).open()
     out: dict[str, list] = {"marker": [], "probe": [], "A": [], "rot": [], "nA": [],
                             "spread": []}
     for _ in range(REPS):
@@ -97,6 +86,7 @@ def _errors(n: int, seed: int) -> dict[str, np.ndarray]:
         out["rot"].append(rotvec_from_matrix(TRUE["marker"][:3, :3].T @ s.bodies["marker"][:3, :3]))
         out["nA"].append(s.samples["A"])
         out["spread"].append(s.spread["marker"]["trans_mm"])
+    rob.close()
     return {k: np.asarray(v) for k, v in out.items()}
 
 
@@ -163,7 +153,7 @@ def test_samples_by_need_reach_the_standard_error_they_were_asked_for(sem):
     # sem_mm over REPS seeded runs (relative SE ≈ 1/√(2·3·REPS) ≈ 2.4 %; stopping when the
     # sample spread happens to be low adds a little: the margin is 12 %)
     rng = np.random.default_rng(int(1000 * sem))
-    tr, rob = NoisyTracker(rng).open(), NoisyRobot(rng).open()
+    tr, rob = NoisyTracker(rng).open(), _robot(int(1000 * sem)).open()
     err, counts = [], []
     for _ in range(REPS):
         s = sample_pose(rob, tr, SamplingConfig(samples=1000, settle_s=0.0, sem_mm=sem,
@@ -171,6 +161,7 @@ def test_samples_by_need_reach_the_standard_error_they_were_asked_for(sem):
         assert s.problem is None and s.samples["marker"] == s.frames < 1000
         err.append(np.linalg.norm(s.bodies["marker"][:3, 3] - TRUE["marker"][:3, 3]))
         counts.append(s.frames)
+    rob.close()
     rms = float(np.sqrt(np.mean(np.square(err))))
     assert abs(rms / sem - 1) < 0.12, f"RMS error {rms:.4f} mm for sem_mm {sem}"
     want = 3 * SIGMA_T_MM ** 2 / sem ** 2

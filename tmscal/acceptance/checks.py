@@ -64,7 +64,8 @@ class Settings:
     ``stop_move_s``: the length and the planned duration of the move that is stopped (its
     speed is ``stop_mm / stop_move_s``, never above ``robot.speed_mm_s``); ``stop_after``:
     the share of ``stop_move_s`` after which ``stop()`` is called; ``real_time``: False on the
-    mock's fast clock (no frame-rate verdict, no stop check)."""
+    mock's fast clock or an in-process sim device (no frame-rate verdict, no stop check),
+    ``clock`` naming which in the notes and ``clock_hint`` what to use instead ("": none)."""
 
     frames: int = 100
     rate_tolerance: float = 0.10
@@ -75,6 +76,8 @@ class Settings:
     stop_move_s: float = 2.0
     stop_after: float = 0.25
     real_time: bool = True
+    clock: str = "the mock's fast clock"
+    clock_hint: str = "use mock.clock: real"
 
 
 @dataclass
@@ -176,7 +179,7 @@ def check_tools(tracker: Any, min_share: float, s: Settings) -> Check:
                 f"{t} seen in {k} of {len(frames)} frames" for t, k in seen.items())
                 + f", below sampling.min_share {min_share:g}")
         if not s.real_time:
-            return Check("tools", "pass", v, "frame rate reported only (the mock's fast clock)")
+            return Check("tools", "pass", v, f"frame rate reported only ({s.clock})")
         off = abs(rate / tracker.frame_rate_hz - 1.0)
         v["rate_error"] = round(off, 4)
         if not off <= s.rate_tolerance:
@@ -280,10 +283,12 @@ def check_stop(robot: Any, cfg: RigConfig, s: Settings) -> Check:
     """Start a ``s.stop_mm`` move planned to take ``s.stop_move_s``, call ``stop()`` after
     ``s.stop_after`` of it: the move must end (a halted move may raise) and the flange must be
     short of the target by more than ``s.pos_tol_mm``; then the flange is moved back to the
-    start. Skipped on the mock's fast clock, where every move completes at once."""
+    start. Skipped on the mock's fast clock and on an in-process sim robot, where every move
+    completes at once."""
     if not s.real_time:
-        return Check("stop", "skip", {}, "the mock's fast clock completes a move at once, so "
-                     "stop() cannot land mid-move (use mock.clock: real)")
+        hint = f" ({s.clock_hint})" if s.clock_hint else ""
+        return Check("stop", "skip", {}, f"{s.clock} completes a move at once, so stop() "
+                     f"cannot land mid-move{hint}")
 
     def run(v: dict[str, Any]) -> Check:
         p0, target, axis = _step_target(robot, cfg, s.stop_mm)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import datetime as dt
 import os
 import platform
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,28 +44,35 @@ class RigSelftest:
     "robot": host or host:port}, as ``tmscal mock --json`` prints them), None to use the
     config's own addresses (a real rig, or mocks already running); ``started_mocks`` says
     which for the report. ``frames`` and ``rate_tolerance`` go to :class:`Settings`; the
-    mock's fast clock (``mock.clock: fast``) turns the frame-rate verdict and the stop check
-    off. The devices are not opened here: the connect check opens them, :meth:`close`
-    closes them. ``checks`` holds the checks run so far, in order."""
+    mock's fast clock (``mock.clock: fast``) and an in-process device (``real_time`` False:
+    the ``sim`` drivers) turn the frame-rate verdict and the stop check off. The devices are
+    not opened here: the connect check opens them, :meth:`close` closes them. ``checks``
+    holds the checks run so far, in order."""
 
     def __init__(self, path: str | os.PathLike[str], endpoints: dict[str, str] | None = None,
                  started_mocks: bool = False, frames: int = 100,
                  rate_tolerance: float = 0.10) -> None:
         self.path = Path(path)
         self.cfg: RigConfig = load_config(self.path)
+        self.tracker, self.robot = self._devices(endpoints)
         fast = self.cfg.mock is not None and self.cfg.mock.clock == "fast"
-        self.settings = Settings(frames=frames, real_time=not fast,
+        sim = any(d is not None and not d.real_time for d in (self.tracker, self.robot))
+        self.settings = Settings(frames=frames, real_time=not (fast or sim),
                                  rate_tolerance=rate_tolerance)
+        if sim and not fast:
+            self.settings = replace(self.settings, clock="an in-process sim device",
+                                    clock_hint="")
         self.meta: dict[str, Any] = {
             "host": platform.node(), "devices": self._devices_note(started_mocks),
-            "settings": ", ".join(f"{k}={v}" for k, v in asdict(self.settings).items())}
-        self.tracker, self.robot = self._devices(endpoints)
+            "settings": ", ".join(f"{k}={v}" for k, v in asdict(self.settings).items()
+                                  if k not in ("clock", "clock_hint"))}
         self.checks: list[Check] = []
 
     def _devices_note(self, started: bool) -> str:
         m = self.cfg.mock
         if m is None:
-            return "the rig's devices"
+            sim = any(d is not None and not d.real_time for d in (self.tracker, self.robot))
+            return "in-process sim devices (docs/devices.md)" if sim else "the rig's devices"
         return (f"mocks started for the checks (clock: {m.clock})" if started
                 else f"mocks already running (clock: {m.clock})")
 

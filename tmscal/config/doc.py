@@ -9,6 +9,9 @@ driver between two marker comments::
     ...
     <!-- /options: ur -->
 
+A name that serves several kinds (``sim``: a robot and a tracker) is marked with its kind,
+``<!-- options: sim/robot ... -->`` (``marker``).
+
 ``render(text)`` gives the text with every such block rendered again; ``python -m
 tmscal.config.doc [PATH]`` rewrites PATH (default ``docs/configs.md``) and ``--check``
 exits with status 1, writing nothing, when the file differs from what the declarations
@@ -27,9 +30,9 @@ from .. import registry
 from .devices import settings_class
 from .settings import Option, _n
 
-__all__ = ["option_type", "option_default", "options_table", "render", "main"]
+__all__ = ["option_type", "option_default", "options_table", "marker", "render", "main"]
 
-_BLOCK = re.compile(r"(?P<open><!-- options: (?P<name>[\w-]+) [^\n]*-->\n)"
+_BLOCK = re.compile(r"(?P<open><!-- options: (?P<name>[\w/-]+) [^\n]*-->\n)"
                     r"(?P<body>.*?)"
                     r"(?P<close><!-- /options: (?P=name) -->)", re.S)
 
@@ -80,12 +83,19 @@ def options_table(options: Mapping[str, Option]) -> str:
     return "\n".join(rows) + "\n"
 
 
+def marker(kind: str, name: str) -> str:
+    """The name of built-in driver ``name`` of ``kind`` in a docs marker: ``name``, or
+    ``name/kind`` when the name serves several kinds."""
+    kinds = [s.kind for s in registry.BUILTIN if s.name == name]
+    return name if len(kinds) == 1 else f"{name}/{kind}"
+
+
 def _declared(name: str) -> Mapping[str, Option]:
-    """Registered driver ``name``'s declared options (ValueError: no such driver, or none
-    declared)."""
+    """The declared options of the built-in driver a marker names (``marker``: its name, or
+    ``name/kind``); ValueError: no such driver, or none declared."""
     for spec in registry.BUILTIN:
-        if spec.name == name:
-            declared = settings_class(spec.kind, name).OPTIONS
+        if marker(spec.kind, spec.name) == name:
+            declared = settings_class(spec.kind, spec.name).OPTIONS
             if declared is None:
                 raise ValueError(f"driver {name!r} declares no options")
             return declared

@@ -91,6 +91,10 @@ class _Device(ABC):
     """Lifecycle shared by trackers and robots: open in ``__enter__``/``open()``, close once."""
 
     name: str = "device"
+    #: False for a device whose time is not the wall clock (the in-process ``sim`` drivers: a
+    #: move ends at once, frames come as fast as they are read), so that checks of timing
+    #: (the acceptance suite's frame rate and stop mid-move) are not judged on it
+    real_time: bool = True
 
     def __init__(self) -> None:
         self._opened = False

@@ -146,6 +146,17 @@ class MockRig:
         self.close()
 
 
+def _check_mocked(cfg: RigConfig) -> None:
+    """Refuse (``ConfigError`` naming ``<kind>.driver``) a device whose driver has no mock:
+    an in-process driver (``sim``) speaks no protocol, so there is nothing to serve."""
+    for kind in ("robot", "tracker", "ft"):
+        section = getattr(cfg, kind)
+        if section is not None and get_spec(section.driver, kind).mock is None:
+            raise ConfigError(f"{cfg.path}: key '{kind}.driver': driver {section.driver!r} has "
+                              "no mock to serve (an in-process driver needs none: run the "
+                              "config directly; docs/devices.md, \"sim (in-process)\")")
+
+
 def _check_endpoints(cfg: RigConfig, tracker_transport: str,
                      robot_host: str | None) -> tuple[str, int] | None:
     """Refuse (``ConfigError``) a mock endpoint that is not on loopback, before anything
@@ -200,6 +211,7 @@ def start_mock_rig(cfg: RigConfig, tracker_transport: str = "config",
     m = cfg.mock
     if m is None:
         raise ConfigError(f"{cfg.path}: key 'mock': this config has no mock rig to serve")
+    _check_mocked(cfg)
     tracker_url = _check_endpoints(cfg, tracker_transport, robot_host)
     clock = FAST if m.clock == "fast" else REAL_TIME
     mr = MockRig(build_sim_rig(cfg))
