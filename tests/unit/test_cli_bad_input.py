@@ -149,3 +149,25 @@ def test_bad_input_gives_one_error_line_and_changes_nothing(work, case, line, wo
     assert len(err) == 1 and err[0].startswith("error: "), r.stderr
     assert word.lower() in err[0].lower(), err[0]
     assert _snapshot(work) == before
+
+
+@pytest.mark.parametrize("library, cli", [
+    ("s.jsonl: already exists; resume it (resume=True) or choose another file",
+     "s.jsonl: already exists; resume it (--resume) or choose another file"),
+    ("rig.yaml: name the arm's nominal model (arm=)", "rig.yaml: name the arm's nominal model "
+     "(--arm)"),
+    ("recorded for arm 'ur5e'; arm='vs060' was given; resume with",
+     "recorded for arm 'ur5e'; --arm vs060 was given; resume with"),
+    ("P0 is the calibration's, cal.yaml (origin=), not where the arm was left",
+     "P0 is the calibration's, cal.yaml (--calib), not where the arm was left"),
+    ("(plan.start: current); give origin=CAL to run around",
+     "(plan.start: current); give --calib CAL to run around"),
+    ("kinematics='estimate' needs joints", "--kinematics estimate needs joints"),
+])
+def test_library_messages_name_parameters_and_the_cli_words_them_as_its_options(library, cli):
+    """The acquisition and solve layers name the arguments of their calls; the command line
+    translates each to the option that sets it (cli.app.as_flags), and leaves the rest."""
+    from tmscal.cli.app import as_flags
+
+    assert "--" not in library
+    assert as_flags(library) == cli

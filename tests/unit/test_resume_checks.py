@@ -211,7 +211,7 @@ def test_a_header_draw_out_of_range_is_a_session_error(selfcal, change):
 
 
 @pytest.mark.parametrize("arm, header_arm, said", [
-    ("vs060", "ur5e", "the session was recorded for arm 'ur5e'; --arm says 'vs060'"),
+    ("vs060", "ur5e", "the session was recorded for arm 'ur5e'; arm='vs060' was given"),
     (None, "kuka_kr6", "the header's selfcal.arm"),
 ])
 def test_a_resume_needs_the_sessions_arm(tmp_path, selfcal, arm, header_arm, said):

@@ -213,7 +213,7 @@ class Engine:
         if self.replace:
             check_not_locked(self.out)
         elif self.out.exists():
-            raise SessionError(f"{self.out}: already exists; use --resume to continue it, or "
+            raise SessionError(f"{self.out}: already exists; resume it (resume=True) or "
                                "choose another file")
         strategy.prepare()
         dev.open(envelope_for(self.cfg, None))  # speed caps and the box, until P0 is known

@@ -157,7 +157,7 @@ class PlanStrategy(Strategy):
                 self.start_notes.append("WARNING: " + warning)
             return p0
         if o is not None:
-            self.start_notes.append(f"P0 is the calibration's, {o.where()} (--calib), not "
+            self.start_notes.append(f"P0 is the calibration's, {o.where()} (origin=), not "
                                     "where the arm was left")
             self.where_hint = ("move it back with: tmscal robot CONFIG --calib CAL --move-to "
                                "p0")
@@ -165,7 +165,7 @@ class PlanStrategy(Strategy):
         here = super().start_pose(dev)
         x, y, z = (float(v) for v in here[:3, 3])
         self.start_notes.append(f"P0 is where the flange was at the start, ({x:.1f}, {y:.1f}, "
-                                f"{z:.1f}) mm (plan.start: current); give --calib CAL to run "
+                                f"{z:.1f}) mm (plan.start: current); give origin=CAL to run "
                                 "around the calibration's P0 instead")
         return here
 

@@ -402,7 +402,7 @@ class SelfcalStrategy(Strategy):
 
     def prepare(self) -> None:
         if self.arm is None:
-            raise ConfigError(f"{self.cfg.path}: name the arm's nominal model (--arm)")
+            raise ConfigError(f"{self.cfg.path}: name the arm's nominal model (arm=)")
         self.model = nominal_arm(self.arm)
 
     def _use(self, plan: SelfcalPlan) -> None:
@@ -426,7 +426,7 @@ class SelfcalStrategy(Strategy):
             raise SessionError(str(e)) from None
         if self.arm is not None and nominal_arm(self.arm).name != model.name:
             raise SessionError(f"{session.path}: the session was recorded for arm "
-                               f"{plan.arm!r}; --arm says {self.arm!r}; {RESUME_HINT}")
+                               f"{plan.arm!r}; arm={self.arm!r} was given; {RESUME_HINT}")
         poses, self._notes = rederive_poses(plan, model, session.path)
         return poses, (f"arm {plan.arm!r}'s nominal forward kinematics at the header's "
                        "joints")

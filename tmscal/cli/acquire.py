@@ -16,6 +16,7 @@ from .app import (
     INPUT_FILE,
     ROBOT_HOST_HELP,
     TRACKER_PORT_HELP,
+    as_flags,
     check_outputs,
     fail,
     handle_errors,
@@ -174,7 +175,7 @@ def _acquire_summary(res: Any, config: Path, output: Path, tracker_port: str | N
                f"skipped, of {res.total} planned; {res.new_poses} new in "
                f"{res.elapsed_s:.1f} s; device faults recovered: {res.faults}")
     for note in res.notes:
-        click.echo(f"note: {note}")
+        click.echo(f"note: {as_flags(note)}")
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
     click.echo(f"next: tmscal solve {output} --method qr36 -o {output.with_suffix('.yaml')}")

@@ -13,7 +13,7 @@ from typing import Any
 import click
 
 from ..acquisition.progress import Progress
-from .app import Finite
+from .app import Finite, as_flags
 
 #: the command-line overrides of the ``adaptive:`` section (option → AdaptiveSettings field)
 OVERRIDES = ("target_mm", "confidence", "max_poses", "bootstrap")
@@ -135,7 +135,7 @@ def summary(res: Any, config: Path | None, output: Path, tracker_port: str | Non
         click.echo("  " + format_prediction(res.prediction, _region(res.settings)))
     click.echo("  " + format_robot_time(res.robot_time_s))
     for note in res.notes:
-        click.echo(f"note: {note}")
+        click.echo(f"note: {as_flags(note)}")
     if res.stopped:
         click.echo("resume with: " + resume_command(config, output, tracker_port, robot_host))
     from ..solving.predict import RUN_METHOD

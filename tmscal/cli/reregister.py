@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from .app import EXIT_INTERRUPTED, check_outputs, fail
+from .app import EXIT_INTERRUPTED, as_flags, check_outputs, fail
 
 __all__ = ["acquire_update"]
 
@@ -79,7 +79,7 @@ def acquire_update(config: Path, output: Path, calib_file: Path | None,
                + (f" ({rt:.1f} s of robot time)" if rt is not None else "")
                + f"; {res.message}")
     for note in res.notes:
-        click.echo(f"note: {note}")
+        click.echo(f"note: {as_flags(note)}")
     if res.stopped:
         click.echo(f"stopped early; re-register from what was recorded with: tmscal solve "
                    f"{output} --calib {calib_file} --update {' --update '.join(update)} -o "
