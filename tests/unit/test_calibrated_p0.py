@@ -130,8 +130,7 @@ def test_the_way_back_is_allowed_and_nothing_else_is() -> None:
 def test_a_run_with_a_calibration_starts_at_its_p0(mock_config) -> None:
     cfg = load_config(mock_config("mock-ur-polaris.yaml"))
     o = CalibratedP0(_moved(TMS_RIG_P0, (20.0, 0.0, 0.0)), "eq14", 50.0, 10.0)
-    s = PlanStrategy(cfg)
-    s.origin = o
+    s = PlanStrategy(cfg, origin=o)
     p0 = s.start_pose(None)        # type: ignore[arg-type]  (no robot is read)
     assert np.array_equal(p0, o.pose) and "the calibration's" in s.start_notes[0]
     assert "--move-to p0" in s.where_hint
@@ -140,8 +139,7 @@ def test_a_run_with_a_calibration_starts_at_its_p0(mock_config) -> None:
 def test_a_fixed_start_elsewhere_is_warned_about(mock_config) -> None:
     start = _moved(TMS_RIG_P0, (0.0, 0.0, 30.0))
     cfg = load_config(mock_config("mock-ur-polaris.yaml", plan={"start": start.tolist()}))
-    s = PlanStrategy(cfg)
-    s.origin = CalibratedP0(TMS_RIG_P0, "eq14", 50.0, 10.0)
+    s = PlanStrategy(cfg, origin=CalibratedP0(TMS_RIG_P0, "eq14", 50.0, 10.0))
     assert np.array_equal(s.start_pose(None), start)   # type: ignore[arg-type]
     assert s.start_notes[0].startswith("WARNING:") and "30.0 mm" in s.start_notes[0]
 

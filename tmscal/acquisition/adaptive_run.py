@@ -223,8 +223,9 @@ class AdaptiveStrategy(PlanStrategy):
     damaged = "those poses are not acquired again"
 
     def __init__(self, cfg: RigConfig, settings: AdaptiveSettings | None = None,
-                 overrides: dict[str, Any] | None = None, samples: int | None = None) -> None:
-        super().__init__(cfg, None, samples)
+                 overrides: dict[str, Any] | None = None, samples: int | None = None, *,
+                 origin: CalibratedP0 | None = None) -> None:
+        super().__init__(cfg, None, samples, origin=origin)
         self.adaptive = settings
         self.overrides = dict(overrides or {})
         self._notes: list[str] = []
@@ -352,6 +353,5 @@ def acquire_adaptive(cfg: RigConfig, output: str | Path, *,
     engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
-    strategy = AdaptiveStrategy(cfg, settings, overrides, samples)
-    strategy.origin = origin
+    strategy = AdaptiveStrategy(cfg, settings, overrides, samples, origin=origin)
     return engine.run(strategy, progress)

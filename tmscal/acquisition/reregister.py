@@ -86,8 +86,9 @@ class ReregisterStrategy(PlanStrategy):
     damaged = None
 
     def __init__(self, cfg: RigConfig, cal: Calibration, noise: dg.NoiseModel,
-                 settings: ReregisterSettings, samples: int | None = None) -> None:
-        super().__init__(cfg, settings.pool, samples)
+                 settings: ReregisterSettings, samples: int | None = None, *,
+                 origin: Any = None) -> None:
+        super().__init__(cfg, settings.pool, samples, origin=origin)
         self.cal, self.noise, self.rr = cal, noise, settings
         self.stop: str | None = None
         self.spread: dict[str, float] | None = None
@@ -191,6 +192,5 @@ def reregister(cfg: RigConfig, output: Any, cal: Calibration, noise: dg.NoiseMod
     engine = Engine(cfg, output, resume=False, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
-    strategy = ReregisterStrategy(cfg, cal, noise, settings, samples)
-    strategy.origin = origin
+    strategy = ReregisterStrategy(cfg, cal, noise, settings, samples, origin=origin)
     return engine.run(strategy, progress)

@@ -126,14 +126,14 @@ class PlanStrategy(Strategy):
     moves_in_order = True
 
     def __init__(self, cfg: RigConfig, poses: int | None = None,
-                 samples: int | None = None) -> None:
+                 samples: int | None = None, *, origin: CalibratedP0 | None = None) -> None:
         super().__init__(cfg)
         self.n = poses
         self.samples = samples
         self.spec: PlanSpec | None = None
         self.st: SamplingSettings | None = None
         #: the calibration's P0 the run is made around (``acquire --calib``), or None
-        self.origin: CalibratedP0 | None = None
+        self.origin = origin
 
     def check(self) -> None:
         cfg = self.cfg
@@ -254,6 +254,5 @@ def acquire(cfg: RigConfig, output: str | Path, *, resume: bool = False, replace
     engine = Engine(cfg, output, resume=resume, replace=replace,
                     endpoints=Endpoints(tracker_port, robot_host, robot_port),
                     should_stop=should_stop, sleep=sleep)
-    strategy = PlanStrategy(cfg, poses, samples)
-    strategy.origin = origin
+    strategy = PlanStrategy(cfg, poses, samples, origin=origin)
     return engine.run(strategy, progress)
