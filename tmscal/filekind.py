@@ -33,6 +33,8 @@ KINDS: dict[str, tuple[str, str]] = {
     "invesalius": ("an InVesalius robot co-registration file",
                    "tmscal export --format invesalius"),
     "report": ("an HTML report", "tmscal report"),
+    "measurements": ("a measurement CSV", "joints and measured poses, one row per pose, for "
+                     "tmscal import"),
 }
 
 #: the words a message uses for the command; the CLI puts the command's name in their place
