@@ -222,7 +222,8 @@ def _excursion(best: _Design, k: int, up: bool, failures: set[frozenset[int]],
     (add) or down (delete), then toward k again — except from a design in the failure set,
     where it goes further away. Returns the design it ends on, the designs it visited and
     whether it was cut off for exceeding ``max_len`` points away from k."""
-    d, path = best.copy(), []
+    d = best.copy()
+    path: list[frozenset[int]] = []
     seen: set[frozenset[int]] = set()
     N = len(d.B)
 
