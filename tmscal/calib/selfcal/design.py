@@ -24,6 +24,7 @@ is M = JᵀJ = Σ JᵢᵀJᵢ.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -312,7 +313,7 @@ def detmax(J_blocks: np.ndarray, k: int, start: np.ndarray | list[int] | None = 
 
 
 def select_by_index(J_blocks: np.ndarray, k: int, index: str = "O1", seed_size: int | None = None,
-                    rng: np.random.Generator | int | None = None,
+                    rng: np.random.Generator | int | Sequence[int] | None = None,
                     candidates_per_step: int = 256) -> np.ndarray:
     """Greedy selection of ``k`` configurations by one observability index, for the
     comparison of the indices (Joubair et al. 2016, Table 4).
