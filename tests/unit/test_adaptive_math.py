@@ -114,6 +114,22 @@ def test_minimum_poses_is_where_the_information_becomes_full_rank(bodies: int) -
     assert np.all(np.isfinite(cov))
 
 
+def test_probe_poses_with_a_marker_only_calibration_are_refused() -> None:
+    """``predict`` with ``calibration`` an ml solve on the marker alone (no Y) and probe poses
+    C: a CalibrationError naming it, not a None Y inside ml's problem; the same calibration
+    without C predicts the marker's placement."""
+    s = Session(rig(4), samples=5)
+    for P in POOL[:15]:
+        s.measure(P)
+    A, B, C = s.arrays()
+    cal = solve(A, B, None, method="ml", distortion=ad.PREDICTION_DISTORTION)
+    assert cal.Y is None and "covariance_parts" in cal.extra
+    with pytest.raises(CalibrationError, match="marker-only"):
+        ad.predict(A, B, C, REGION, ad.AdaptiveSettings(), calibration=cal)
+    pred = ad.predict(A, B, None, REGION, ad.AdaptiveSettings(), calibration=cal)
+    assert pred.calibration is cal and np.isfinite(pred.coil_mm)
+
+
 # --- the placement Jacobian against calib.bound's error model ---
 
 @pytest.mark.parametrize("model,g0", [("none", None), ("axis", np.array([1e-3, -1e-3, 0.0])),

@@ -39,7 +39,9 @@ def envelope_for(cfg: RigConfig, p0: np.ndarray | None) -> Envelope:
     return Envelope(center=p0, max_offset_mm=s.max_offset_mm,
                     max_rotation_deg=s.max_rotation_deg, box_min_mm=s.workspace_min_mm,
                     box_max_mm=s.workspace_max_mm, max_speed_mm_s=s.max_speed_mm_s,
-                    max_accel_mm_s2=s.max_accel_mm_s2, tool_points_mm=s.tool_points_mm)
+                    max_accel_mm_s2=s.max_accel_mm_s2,
+                    tool_points_mm=None if s.tool_points_mm is None
+                    else np.asarray(s.tool_points_mm, dtype=np.float64))
 
 
 def _looser(env: Envelope, cfg_env: Envelope) -> str | None:

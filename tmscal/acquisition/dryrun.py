@@ -178,6 +178,8 @@ def dry_run(cfg: RigConfig, poses: int | None = None, samples: int | None = None
                 if current:
                     p0, src = rb.flange_pose(), "current flange pose"
                 else:
+                    # not current: plan.start is a pose, or the calibration's origin set it
+                    assert fixed is not None
                     p0 = fixed
                 if cfg.plan.kind == JOINTS_KIND:
                     joints = joints_spec(cfg, rb, p0)

@@ -140,7 +140,9 @@ def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s:
     travel = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     per_pose = settle_s + samples / frame_rate_hz
     flange = poses[:, :3, 3]
-    box = envelope is not None and envelope.box_min_mm is not None
+    # an Envelope has both box corners or neither
+    box_min = None if envelope is None else envelope.box_min_mm
+    box_max = None if envelope is None else envelope.box_max_mm
     tools = None
     if envelope is not None and envelope.tool_points_mm is not None and len(poses):
         q = np.asarray(envelope.tool_points_mm, dtype=np.float64)
@@ -161,8 +163,8 @@ def plan_summary(poses: np.ndarray, p0: np.ndarray, speed_mm_s: float, settle_s:
         "motion_s": travel / speed_mm_s,
         "sampling_s": per_pose * len(poses),
         "duration_s": travel / speed_mm_s + per_pose * len(poses),
-        "box_min_mm": [float(x) for x in envelope.box_min_mm] if box else None,
-        "box_max_mm": [float(x) for x in envelope.box_max_mm] if box else None,
+        "box_min_mm": None if box_min is None else [float(x) for x in box_min],
+        "box_max_mm": None if box_max is None else [float(x) for x in box_max],
         "flange_min_mm": extent(flange, np.min),
         "flange_max_mm": extent(flange, np.max),
         "tool_min_mm": extent(tools, np.min),

@@ -62,7 +62,8 @@ def _record(i: int, P: np.ndarray, s: PoseSample, t: float,
         samples["wrench"] = w.n
     return PoseRecord(index=i, A=s.A, B=s.bodies.get("marker"), C=s.bodies.get("probe"),
                       commanded=P, time=t, samples=samples, spread=s.spread,
-                      skipped=s.problem, joints_rad=s.joints,
+                      skipped=s.problem,
+                      joints_rad=None if s.joints is None else s.joints.tolist(),
                       wrench=None if w is None else w.mean.tolist(),
                       wrench_spread=None if w is None else w.spread.tolist())
 
@@ -211,7 +212,10 @@ class PlanStrategy(Strategy):
         check_plan_matches(self.cfg, session, self.spec)
         joints = self.spec.joints
         if joints is not None:
-            joints = replace(joints, span_deg=self.cfg.plan.span_deg, pool=self.cfg.plan.pool)
+            # check_plan_matches found the config's span_deg and pool equal to the header's
+            span_deg, pool = self.cfg.plan.span_deg, self.cfg.plan.pool
+            assert span_deg is not None and pool is not None
+            joints = replace(joints, span_deg=span_deg, pool=pool)
         derived = PlanSpec.from_config(self.cfg.plan, self.spec.p0, self.spec.n, joints)
         try:
             poses = self._poses(derived)

@@ -52,7 +52,7 @@ import numpy as np
 
 from ..config import SETTLE_MODES, SamplingConfig
 from ..config.run import check_sampling
-from ..drivers.base import ForceTorque, Robot, Tracker
+from ..drivers.base import ForceTorque, Robot, ToolState, Tracker
 from ..errors import ConfigError
 from ..geometry import angle_between, pose_mean
 from ..timing import Deadline
@@ -176,19 +176,24 @@ class _Settled:
     last_frame: int | None = None
 
 
-def _window_verdict(window: deque, names: list[str], tol_mm: float | None
-                    ) -> list[tuple[str, float, float]]:
+def _window_verdict(window: deque[dict[str, np.ndarray | None]], names: list[str],
+                    tol_mm: float | None) -> list[tuple[str, float, float]]:
     """The bodies that are not still over ``window`` (frames of {body: position or None}),
     as (body, spread mm, tolerance mm); empty when every judged body is still."""
     moving = []
     for b in names:
-        pts = [f[b] for f in window if f[b] is not None]
+        pts = [p for f in window if (p := f[b]) is not None]
         if len(pts) < _MIN_JUDGED:
             continue
         spread, tol = stillness(np.stack(pts), tol_mm)
         if not spread <= tol:
             moving.append((b, spread, tol))
     return moving
+
+
+def _usable_position(t: ToolState) -> np.ndarray | None:
+    """The tool's position (3,) mm in the tracker frame when it is usable, else None."""
+    return t.pose[:3, 3].copy() if t.usable and t.pose is not None else None
 
 
 def _wait_until_still(tracker: Tracker, settle_s: float, still_window_s: float,
@@ -207,8 +212,7 @@ def _wait_until_still(tracker: Tracker, settle_s: float, still_window_s: float,
             None, timeout_s=settle_s + max_frames_factor * w / rate + 5.0,
             max_reads=int(budget * max_frames_factor + 10) * 50):
         last = fr.frame
-        window.append({b: (fr.tools[b].pose[:3, 3].copy() if fr.tools[b].usable
-                           and fr.tools[b].pose is not None else None) for b in names})
+        window.append({b: _usable_position(fr.tools[b]) for b in names})
         if len(window) < w:
             continue
         moving = _window_verdict(window, names, tol_mm)
@@ -249,7 +253,8 @@ class _Running:
 
 def _collect(robot: Robot, tracker: Tracker, n_samples: int, sem_mm: float | None,
              floor: int, robot_reads: int, max_frames_factor: float,
-             skip_frame: int | None) -> tuple[dict, dict, list, list]:
+             skip_frame: int | None
+             ) -> tuple[dict[str, list[np.ndarray]], dict[str, int], list[np.ndarray], list[int]]:
     """Read frames (never ``skip_frame``, the last one read while settling) until
     ``n_samples`` frames, or with ``sem_mm`` until every body has ``floor`` usable frames and
     a standard error ≤ sem_mm. Returns (usable poses per body, unusable counts per body,
@@ -286,8 +291,10 @@ def _collect(robot: Robot, tracker: Tracker, n_samples: int, sem_mm: float | Non
     return got, flags, A_reads, frames
 
 
-def _average(names: list[str], got: dict, A_reads: list, n_frames: int, min_share: float
-             ) -> tuple[dict, dict, dict, dict, list[str]]:
+def _average(names: list[str], got: dict[str, list[np.ndarray]], A_reads: list[np.ndarray],
+             n_frames: int, min_share: float
+             ) -> tuple[dict[str, np.ndarray | None], dict[str, int], dict[str, dict[str, float]],
+                        dict[str, float], list[str]]:
     """Mean poses, counts, spreads and usable shares per body; the problems found."""
     A = pose_mean(np.stack(A_reads))
     out: dict[str, np.ndarray | None] = {"A": A}

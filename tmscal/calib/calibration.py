@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -22,7 +22,18 @@ from .ml_model import undistort
 if TYPE_CHECKING:
     from .kinematics.calibrated import ArmCalibration
 
-__all__ = ["Applied", "Calibration"]
+__all__ = ["Applied", "Calibration", "Matrices"]
+
+
+class Matrices(TypedDict):
+    """The matrices a calibration applies or exports (4×4 mm): X = flange_from_marker, Y =
+    flange_from_probe (None for marker-only data), Z = base_from_tracker, Z_probe = QR24's
+    separate base_from_tracker of the probe (None otherwise)."""
+
+    X: np.ndarray
+    Y: np.ndarray | None
+    Z: np.ndarray
+    Z_probe: np.ndarray | None
 
 
 class Applied(StrEnum):
@@ -72,7 +83,7 @@ class Calibration:
     #: when the calibration takes the controller's poses as they are
     arm: ArmCalibration | None = None
 
-    def used(self) -> dict[str, np.ndarray | None]:
+    def used(self) -> Matrices:
         """The matrices applied: {"X", "Y", "Z", "Z_probe"} (raw or orthonormal).
 
         With a tracker ``distortion`` (measured positions = D · true), the applied Z undoes
@@ -81,15 +92,15 @@ class Calibration:
         if self.applied == Applied.RAW:
             return {"X": self.X_raw, "Y": self.Y_raw, "Z": self.Z_raw,
                     "Z_probe": self.Z_probe_raw}
-        out = {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
+        out: Matrices = {"X": self.X, "Y": self.Y, "Z": self.Z, "Z_probe": self.Z_probe}
         if self.distortion is not None and self.distortion.get("matrix") is not None:
             G4 = np.eye(4)
             G4[:3, :3] = np.linalg.inv(np.asarray(self.distortion["matrix"], dtype=float))
-            out = {k: (None if v is None else v @ G4) if k in ("Z", "Z_probe") else v
-                   for k, v in out.items()}
+            ZP = out["Z_probe"]
+            out["Z"], out["Z_probe"] = out["Z"] @ G4, None if ZP is None else ZP @ G4
         return out
 
-    def exported(self) -> dict[str, np.ndarray | None]:
+    def exported(self) -> Matrices:
         """The matrices that leave tmscal: {"X", "Y", "Z", "Z_probe"}, the orthonormal ones
         (rigid 4×4 mm: rotations projected to SO(3), translations re-solved), whichever set
         the calibration :attr:`applied`. Every export format, ``tmscal stream`` and the
@@ -111,14 +122,15 @@ class Calibration:
         return invert(self.X) @ self.Y
 
     def placement(self, C: np.ndarray, body: str = "probe"
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """(targets, Y, Z) with which a robot places the coil at measured tracker poses C
         (n, 4, 4) mm of ``body``: the applied Y and Z; with a tracker ``distortion``, the
         poses undistorted first (``ml_model.undistort``) and the rigid Y, Z, so that no scale
         of the distortion leaks into the commanded flange pose Z C Y⁻¹. ``body`` "probe":
         C are probe poses, the coil's own (targets = C'); "marker": C are marker poses B and
         the targets are the coil on them, B' · X⁻¹ · Y (:meth:`marker_from_coil`; B'
-        undistorted, the marker ← coil offset rigid as calibrated)."""
+        undistorted, the marker ← coil offset rigid as calibrated). Y is None for a
+        marker-only calibration (body "probe"; "marker" raises CalibrationError)."""
         if body not in ("probe", "marker"):
             raise ValueError(f"body must be 'probe' or 'marker', got {body!r}")
         C = np.asarray(C, dtype=float)
@@ -131,7 +143,7 @@ class Calibration:
             targets, Y, Z = C, u["Y"], u["Z"]
         if body == "marker":
             targets = targets @ self.marker_from_coil()
-        return targets, Y, Z  # type: ignore[return-value]
+        return targets, Y, Z
 
     def flange_command(self, C: np.ndarray, seeds: Any = None, body: str = "probe"
                        ) -> np.ndarray:
@@ -148,6 +160,9 @@ class Calibration:
             raise CalibrationError("a marker-only calibration has no coil (Y): it cannot "
                                    "place the coil")
         targets, Y, Z = self.placement(np.asarray(C, dtype=float).reshape(-1, 4, 4), body)
+        # self.Y is set, and with it the raw Y the RAW calibration applies: every solver and
+        # parse_calibration (a missing raw.Y is the rigid one) set Y_raw with Y
+        assert Y is not None
         A = orthonormalize(Z @ targets @ np.linalg.inv(Y))
         return A if self.arm is None else self.arm.command(A, seeds)
 
@@ -165,7 +180,7 @@ class Calibration:
         return self.arm.robot_poses(joints)
 
     def holdout_frames(self, B: np.ndarray, C: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray | None]]:
+                       ) -> tuple[np.ndarray, np.ndarray | None, Matrices]:
         """(B, C, matrices) as :meth:`errors` compares them: the measured tracker poses B, C
         (n, 4, 4) mm and the applied matrices {"X", "Y", "Z", "Z_probe"} (:meth:`used`);
         with a tracker ``distortion`` the poses undistorted (positions by D⁻¹, orientations
@@ -182,8 +197,8 @@ class Calibration:
             M = d.get("tool_moments") or {}
             B = undistort(B, G, "affine", M.get("marker"))
             C = None if C is None else undistort(C, G, "affine", M.get("probe"))
-            u = {k: v @ G4 if k in ("Z", "Z_probe") and v is not None else v
-                 for k, v in u.items()}  # Z without the G it carries
+            ZP = u["Z_probe"]  # Z without the G it carries (a new dict: used()'s stays as it is)
+            u = {**u, "Z": u["Z"] @ G4, "Z_probe": None if ZP is None else ZP @ G4}
         return B, C, u
 
     def errors(self, A: np.ndarray, B: np.ndarray, C: np.ndarray | None = None

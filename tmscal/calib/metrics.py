@@ -68,7 +68,7 @@ def holdout_errors(A: np.ndarray, bodies: Mapping[str, np.ndarray],
     return out
 
 
-def truth_errors(estimates: Mapping[str, np.ndarray], truth: Mapping[str, np.ndarray]
+def truth_errors(estimates: Mapping[str, np.ndarray | None], truth: Mapping[str, np.ndarray]
                  ) -> dict[str, dict[str, float]]:
     """‖t̂ − t‖ (mm) and the rotation angle between estimate and truth (deg) for each
     transform present in both (e.g. "X", "Y", "Z"); estimates are orthonormalised first."""

@@ -245,7 +245,12 @@ def _problem_of(cal: Calibration, A: np.ndarray, bodies: list[np.ndarray]) -> Pr
     d = cal.distortion or {}
     model = d.get("model", "none")
     G = np.asarray(d.get("undistort", np.eye(3)), dtype=float)
-    Ws = [cal.X] if len(bodies) == 1 else [cal.X, cal.Y]
+    if len(bodies) == 1:
+        Ws = [cal.X]
+    elif cal.Y is None:  # predict checks it first: a marker-only calibration has no probe
+        raise CalibrationError("a marker-only calibration (no Y) with probe poses")
+    else:
+        Ws = [cal.X, cal.Y]
     tm = d.get("tool_moments") or {}
     moments = [tm.get(nm) for nm in ("marker", "probe")[:len(bodies)]]
     return Problem(A, bodies, Ws, cal.Z, model, g_of(model, G), moments)
@@ -331,7 +336,8 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     σ_t, σ_r the robot's estimated translation (mm) and rotation (rad per axis) noise.
     ``coil_mm`` is the ``settings.confidence`` quantile of mean_r ‖e_r‖ over
     :data:`MC_DRAWS` draws with a fixed seed, ``sigma_mm`` the RMS of e_r. CalibrationError
-    when the poses do not determine the calibration.
+    when the poses do not determine the calibration, or for probe poses ``C`` with a
+    marker-only ``calibration`` (no Y).
 
     ``calibration``: an ``ml`` Calibration already solved on these poses with these
     ``ml_options`` (it is not solved again; its own distortion model is the prediction's).
@@ -352,6 +358,10 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
                                f"{' with an arm' if calibration.arm is not None else ''}")
     else:
         cal = calibration
+    W = cal.X if C is None else cal.Y  # flange ← the body placed
+    if W is None:
+        raise CalibrationError("predict: probe poses C given with a marker-only calibration "
+                               "(no Y): nothing to place the coil with")
     bodies = [np.asarray(B, dtype=float)] + ([] if C is None else [np.asarray(C, dtype=float)])
     A = np.asarray(A, dtype=float)
     prob = _problem_of(cal, A, bodies)
@@ -384,7 +394,7 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     sig_r = float(np.radians(nz["robot_sigma_deg"]))
     var_model = 0.0
     if model_error:
-        tY = (cal.Y if C is not None else cal.X)[:3, 3]
+        tY = W[:3, 3]
         z = rng.standard_normal((len(region), 3, MC_DRAWS)) * (sig_t * f["robot_trans"])
         wv = rng.standard_normal((len(region), 3, MC_DRAWS)) * (sig_r * f["robot_rot"])
         m = z + np.cross(wv, tY[None, :, None], axis=1)
@@ -396,12 +406,13 @@ def predict(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, region: np.ndarr
     o = {**_ml_defaults(), **opts}
     tracker = tracker_covs(len(A), names, o).mean(axis=0) * float(nz["tracker_factor"])
     noise = (sig_t, sig_r, tracker)
-    other = placed is not None and placed is not cal
+    shown = cal if placed is None else placed
+    other = shown is not cal
     return Prediction(coil_mm=coil,
                       sigma_mm=float(np.sqrt(max(v, 0.0) * np.sum(P * Q) + var_model
                                              + var_offset)),
                       confidence=settings.confidence, n_poses=len(A),
-                      calibration=placed if other else cal,
+                      calibration=shown,
                       problem=prob, covariance=P, variance_factor=v, dof=dof, region_q=Q,
                       noise=noise, draws_mm=draws,
                       model_error_mm=float(np.sqrt(var_model)),

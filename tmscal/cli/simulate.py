@@ -12,7 +12,7 @@ from .app import FORCE_HELP, Finite, check_outputs, handle_errors, main
 from .selfcal import ArmName
 
 
-class _Triple(click.ParamType):
+class _Triple(click.ParamType[tuple[float, float, float], Any]):
     """Three comma-separated finite numbers in [lo, hi] ('1.001,1,1'); with ``broadcast`` one
     number stands for all three."""
 
@@ -94,8 +94,8 @@ class _Triple(click.ParamType):
 @handle_errors
 def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
              fiducial_sigma: float, robot_rot_sigma: float, robot_trans_sigma: float,
-             radius: float | None, rotation: float, tracker_scale: tuple[float, ...],
-             tracker_shear: tuple[float, ...], marker_only: bool, arm: str | None,
+             radius: float | None, rotation: float, tracker_scale: tuple[float, float, float],
+             tracker_shear: tuple[float, float, float], marker_only: bool, arm: str | None,
              kinematic_errors: str | None, force: bool) -> None:
     """Write a simulated session (the simulation of Wang et al. 2018, docs/methods.md); the
     header carries the truth (and the tracker distortion, when one is simulated).
@@ -115,7 +115,7 @@ def simulate(output: Path, poses: int, plan: str, seed: int, samples: int,
     check_outputs({"--output": output}, [], force)
     rng = np.random.default_rng(seed)
     noise = Noise(fiducial_sigma, robot_rot_sigma, robot_trans_sigma,
-                  tracker_scale=tuple(tracker_scale), tracker_shear=tuple(tracker_shear))
+                  tracker_scale=tracker_scale, tracker_shear=tracker_shear)  # _Triple's tuples
     pair = None if arm is None else make_arm(arm, errors, seed)
     try:
         truth, d = run_sim(poses, rng, plan=plan, noise=noise, samples=samples,

@@ -118,7 +118,9 @@ def _port_attrs(settings: NDISettings | None) -> list[str]:
 def _device(cf: CalibrationFile, driver: str | None,
             settings: TrackerSettings | None) -> list[str]:
     cfg = (cf.doc.get("provenance") or {}).get("config") or {}
-    tracker = cfg.get("tracker") if isinstance(cfg.get("tracker"), dict) else {}
+    tracker = cfg.get("tracker")
+    if not isinstance(tracker, dict):
+        tracker = {}
     roms = _roms(driver, settings)
     bodies = ["marker", "probe"] if cf.calibration.Y is not None else ["marker"]
     if roms is None:
@@ -166,8 +168,9 @@ def render(cf: CalibrationFile) -> str:
              'Description="CoilMarker (and the calibration Probe) tracked; the calibration in '
              'CoordinateDefinitions" />',
              *_device(cf, driver, settings), "  </DataCollection>", "  <CoordinateDefinitions>"]
-    exported = dict(cal.exported())  # rigid, as every export (docs/exports.md)
-    exported["CoilToMarker"] = cal.marker_from_coil() if cal.Y is not None else None
+    e = cal.exported()  # rigid, as every export (docs/exports.md)
+    exported = {"X": e["X"], "Z": e["Z"],
+                "CoilToMarker": cal.marker_from_coil() if cal.Y is not None else None}
     for k, (a, b) in FRAMES.items():
         M = exported[k]
         if M is None:

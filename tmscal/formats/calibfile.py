@@ -245,7 +245,7 @@ def calibration_yaml(cal: Calibration, evaluation: Mapping[str, Any], session_pa
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
 
 
-def _list(M: Any) -> list | None:
+def _list(M: Any) -> list[Any] | None:
     return None if M is None else np.asarray(M, dtype=float).tolist()
 
 
@@ -300,14 +300,20 @@ def parse_calibration(doc: Any, src: str = "<calibration>") -> Calibration:
     raw: dict[str, np.ndarray | None] = {}
     for k in _MATRICES:
         v = raw_doc.get(k)
-        raw[k] = mats[k] if v is None else _matrix(v, src, f"raw.{k}", rigid=False)
-        if v is not None and mats[k] is None:
+        if v is None:
+            raw[k] = mats[k]
+            continue
+        raw[k] = r = _matrix(v, src, f"raw.{k}", rigid=False)
+        if mats[k] is None:
             if k == "Z_probe":  # files from before Z_probe was written: project it
-                mats[k] = orthonormalize(raw[k])
+                mats[k] = orthonormalize(r)
             else:
                 raise _bad(src, k, f"missing, but raw.{k} is given")
+    X, Z, X_raw, Z_raw = mats["X"], mats["Z"], raw["X"], raw["Z"]
+    # X and Z are required above; a missing raw.X or raw.Z is the rigid one
+    assert X is not None and Z is not None and X_raw is not None and Z_raw is not None
     cov = doc.get("covariance")
-    cal = Calibration(method, n, X=mats["X"], Z=mats["Z"], X_raw=raw["X"], Z_raw=raw["Z"],
+    cal = Calibration(method, n, X=X, Z=Z, X_raw=X_raw, Z_raw=Z_raw,
                       Y=mats["Y"], Y_raw=raw["Y"], Z_probe=mats["Z_probe"],
                       Z_probe_raw=raw["Z_probe"], applied=applied,
                       covariance=None if cov is None else _number_matrix(cov, src,

@@ -15,7 +15,7 @@ the same source, so they agree with each other and with the rig.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -24,9 +24,16 @@ from ..sim.rig import SimRig
 
 __all__ = ["FALLBACK_TOOL", "URWrenchOutputs", "gravity_wrench_source"]
 
+
+
+class _Tool(TypedDict):
+    mass_kg: float
+    cog_mm: tuple[float, float, float]
+
+
 #: the tool of a rig without a kinematic arm: mass (kg) and centre of gravity (mm, sensor
 #: frame), a TMS coil-sized load
-FALLBACK_TOOL = {"mass_kg": 1.5, "cog_mm": (0.0, 0.0, 60.0)}
+FALLBACK_TOOL: _Tool = {"mass_kg": 1.5, "cog_mm": (0.0, 0.0, 60.0)}
 
 
 def gravity_wrench_source(rig: SimRig) -> Callable[[], np.ndarray]:

@@ -57,7 +57,7 @@ def format_compare(res: dict[str, Any]) -> str:
             if n in r.get("failed", {}):
                 row += "  (failed on some folds)"
             lines.append(row)
-        if bkey:
+        if bkey and bound:  # a bound key only comes with a bound (_bound_key)
             lines.append(f"  {n:>4}  {'bound':<9}{'':>56}{bound[bkey][i]:>14.4f}")
         lines.append("")
     if any("handheld_B" in handheld_options(m, np.eye(4)[None], np.eye(4)[None])

@@ -109,10 +109,12 @@ class Session:
                and (p.C is not None or not need_probe)]
         if not use:
             return np.zeros((0, 4, 4)), np.zeros((0, 4, 4)), None, []
-        A = np.stack([p.A for p in use])
-        B = np.stack([p.B for p in use])
+        # every pose in ``use`` has A and B (and C when has_c): the filters drop nothing, they
+        # only tell the type checker so
+        A = np.stack([p.A for p in use if p.A is not None])
+        B = np.stack([p.B for p in use if p.B is not None])
         has_c = all(p.C is not None for p in use)
-        C = np.stack([p.C for p in use]) if has_c else None
+        C = np.stack([p.C for p in use if p.C is not None]) if has_c else None
         return A, B, C, [p.index for p in use]
 
     def joints(self, indices: list[int], missing: str = "the robot's driver did not report "

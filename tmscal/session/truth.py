@@ -121,8 +121,9 @@ def _check_arm(d: Any, where: str) -> Any:
         raise BadLine(f"field '{where}.base' must be a 4×4 matrix, not null")
     flange = parse_matrix(d.get("flange"), f"{where}.flange")
     try:
-        return Arm(name=d["name"], dh=dh, base=base, joint_limits_rad=lim,
-                   convention=convention, flange=np.eye(4) if flange is None else flange,
-                   beta=beta)
+        return Arm(name=d["name"], dh=np.asarray(dh, dtype=float), base=base,
+                   joint_limits_rad=np.asarray(lim, dtype=float), convention=convention,
+                   flange=np.eye(4) if flange is None else flange,
+                   beta=None if beta is None else np.asarray(beta, dtype=float))
     except ValueError as e:
         raise BadLine(f"field '{where}': {e}") from None

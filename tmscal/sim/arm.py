@@ -189,6 +189,7 @@ def reach(model: ArmModel, target: np.ndarray, q_now: np.ndarray | None,
     seeds = ([] if q_now is None else [np.asarray(q_now, dtype=np.float64)]) \
         + [np.array(home_q, dtype=np.float64)]
     lim = model.joint_limits_rad
+    assert lim is not None  # Arm.__post_init__ sets ±2π for limits given as None
     seeds += list(np.random.default_rng(1).uniform(lim[:, 0], lim[:, 1],
                                                    (_EXTRA_SEEDS, model.n_joints)))
     for q0 in seeds:
@@ -207,6 +208,7 @@ def _identifiable_names(arm: str) -> tuple[str, ...]:
     model = NOMINAL[arm]
     rng = np.random.default_rng(12345)
     lim = model.joint_limits_rad
+    assert lim is not None  # Arm.__post_init__ sets ±2π for limits given as None
     q = rng.uniform(lim[:, 0], lim[:, 1], (_IDENT_CONFIGS, model.n_joints))
     return tuple(identifiable(jacobian(model, q), model.parameter_names()).kept)
 
@@ -233,6 +235,7 @@ def _realistic(arm: str, rng: np.random.Generator) -> tuple[ArmModel, list[str]]
     sd = np.array([sigma_l if u == "mm" else sigma_a for u in nominal.geometry_units()])
     p = nominal.geometry_vector() + rng.normal(0.0, 1.0, len(sd)) * sd
     parallel = parallel_joints(nominal)
+    assert nominal.beta is not None  # Arm.__post_init__ sets zeros for a β given as None
     beta = nominal.beta.copy()
     beta[[i - 1 for i in parallel]] += rng.normal(0.0, sigma_a, len(parallel))
     true = replace(nominal.with_geometry(p), beta=beta)

@@ -83,6 +83,7 @@ def _with_arm(n: int, rng: np.random.Generator, plan: str, noise: Noise, truth: 
     arm = truth.arm
     rig = SimRig(truth, noise=noise, rng=rng, start=TMS_RIG_P0, arm=arm)
     lim = arm.nominal.joint_limits_rad
+    assert lim is not None  # Arm.__post_init__ sets ±2π for limits given as None
     out: dict[str, np.ndarray] = {"commanded": np.empty((n, 4, 4)), "A": np.empty((n, 4, 4)),
                                   "joints": np.empty((n, arm.nominal.n_joints))}
     for b in rig.bodies:

@@ -181,8 +181,8 @@ def _compare_method(m: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None,
                 per_fold.setdefault(k, []).append(v)
             if progress is not None:
                 progress(1)
-        for k, v in per_fold.items():
-            rows.setdefault(k, [[] for _ in ns])[ns.index(n)] = v
+        for k, series in per_fold.items():
+            rows.setdefault(k, [[] for _ in ns])[ns.index(n)] = series
     if len(failed) == len(ns) and not rows:
         raise CalibrationError(next(iter(failed.values())))
     res: dict[str, Any] = {"n": list(ns), "failed": failed}

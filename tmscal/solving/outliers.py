@@ -19,10 +19,10 @@ Psychology 49(4):764–766.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["K", "FLOOR", "RULE", "outlier_threshold", "find_outliers"]
 
@@ -34,7 +34,7 @@ RULE = ("log e > median(log e) + 3 · 1.4826 · MAD(log e), per body and per tra
 _SERIES = (("trans_mm", "translation", "mm"), ("rot_deg", "rotation", "deg"))
 
 
-def outlier_threshold(values: Sequence[float], k: float = K) -> float:
+def outlier_threshold(values: ArrayLike, k: float = K) -> float:
     """The value above which a per-pose error is an outlier: exp(median(log v) + k · 1.4826 ·
     MAD(log v)), in the unit of ``values``; inf for fewer than 3 values above ``FLOOR``."""
     v = np.asarray(values, dtype=float)

@@ -24,6 +24,7 @@ is M = JᵀJ = Σ JᵢᵀJᵢ.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -222,7 +223,8 @@ def _excursion(best: _Design, k: int, up: bool, failures: set[frozenset[int]],
     (add) or down (delete), then toward k again — except from a design in the failure set,
     where it goes further away. Returns the design it ends on, the designs it visited and
     whether it was cut off for exceeding ``max_len`` points away from k."""
-    d, path = best.copy(), []
+    d = best.copy()
+    path: list[frozenset[int]] = []
     seen: set[frozenset[int]] = set()
     N = len(d.B)
 
@@ -311,7 +313,7 @@ def detmax(J_blocks: np.ndarray, k: int, start: np.ndarray | list[int] | None = 
 
 
 def select_by_index(J_blocks: np.ndarray, k: int, index: str = "O1", seed_size: int | None = None,
-                    rng: np.random.Generator | int | None = None,
+                    rng: np.random.Generator | int | Sequence[int] | None = None,
                     candidates_per_step: int = 256) -> np.ndarray:
     """Greedy selection of ``k`` configurations by one observability index, for the
     comparison of the indices (Joubair et al. 2016, Table 4).

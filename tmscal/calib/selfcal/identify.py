@@ -211,7 +211,7 @@ def identify(model0: ArmModel, q: Any, wrench_meas: Any, sigma: Any, keep: Any,
     sol = levenberg_marquardt(
         evaluate, p, moved, max_iter=max_iter, lam0=1e-3, lam_max=1e12, ftol=0.0,
         small_step=lambda pv, dx: bool(np.linalg.norm(dx)
-                                       <= rtol * max(np.linalg.norm(pv[idx]), 1.0)))
+                                       <= rtol * max(float(np.linalg.norm(pv[idx])), 1.0)))
     p, r, it, converged = sol.state, sol.residuals, sol.iterations, sol.converged
     cost = sol.cost
     model = model0.with_vector(p)

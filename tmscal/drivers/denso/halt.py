@@ -14,6 +14,8 @@ a bound (:data:`~tmscal.drivers.denso.client.KEEPALIVE_REARMS`): a controller th
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from functools import partial
 
 from ...errors import DeviceError, DeviceTimeout
 from ...timing import Deadline
@@ -92,13 +94,13 @@ class HaltLink:
     def close(self, release: bool = True) -> None:
         """Release the handles (best effort, bounded) and close the connection."""
         c = self.client
-        steps = []
+        steps: list[tuple[str, Callable[[], None]]] = []
         if release and c.connected:
             if self._robot is not None:
-                steps.append(("Robot_Release", lambda h=self._robot: c.robot_release(h)))
+                steps.append(("Robot_Release", partial(c.robot_release, self._robot)))
             if self._ctrl is not None:
                 steps.append(("Controller_Disconnect",
-                              lambda h=self._ctrl: c.controller_disconnect(h)))
+                              partial(c.controller_disconnect, self._ctrl)))
             steps.append(("Service_Stop", c.service_stop))
         close_down(c, steps, "DENSO halt connection")
         self._ctrl = self._robot = None

@@ -33,9 +33,9 @@ import logging
 import math
 import re
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -48,6 +48,8 @@ from .settings import FrankaSettings
 
 #: the options' defaults, declared once in FrankaSettings.OPTIONS
 _OPT = FrankaSettings.defaults()
+
+_T = TypeVar("_T")
 
 log = logging.getLogger(__name__)
 
@@ -184,12 +186,12 @@ class FrankaRobot(Robot):
             return None
         return arm_from_urdf(urdf)
 
-    def joint_positions(self) -> list[float]:
+    def joint_positions(self) -> np.ndarray:
         """The seven joint angles now (rad), for the session or a check."""
         if not self._opened:
             raise DeviceError(f"{self.name}: joint_positions() on a robot that is not open")
         with self._translated("read the joint state"):
-            return [float(v) for v in self._robot.state.q]
+            return np.array([float(v) for v in self._robot.state.q], dtype=np.float64)
 
     # --- robot hooks --------------------------------------------------------------------------
 
@@ -292,7 +294,7 @@ class FrankaRobot(Robot):
                 self._recover(what)
             raise err from e
 
-    def _convert(self, fn: Any, what: str) -> np.ndarray:
+    def _convert(self, fn: Callable[[], _T], what: str) -> _T:
         try:
             return fn()
         except ValueError as e:

@@ -337,7 +337,8 @@ class URRobot(RTDECalls, Robot):
         sensor = self._wrench_sensors.get(kind)
         if sensor is None:
             sensor = URWrench(self.host, kind, frequency_hz=self.frequency_hz,
-                              timeout_s=self.timeout_s).open()
+                              timeout_s=self.timeout_s)
+            sensor.open()  # returns the sensor itself, typed as the base _Device
             self._wrench_sensors[kind] = sensor
         return sensor.read(n).mean(axis=0)
 

@@ -187,13 +187,13 @@ class FrankaMock(MockDevice):
 
     def _start(self) -> str:
         franky_sim, mj, gripper_mod, pin = _sim_modules()
-        from franky_sim import DEFAULT_INITIAL_JOINT_POS
+        from franky_sim import DEFAULT_INITIAL_JOINT_POS, SimulationServer
         q0 = self.initial_q
         if q0 is None:
             q0 = flange_ik(self.rig.reported_flange(), DEFAULT_INITIAL_JOINT_POS).tolist()
         robot_server, _ = _loopback_servers(franky_sim, gripper_mod)
 
-        class Server(franky_sim.SimulationServer):
+        class Server(SimulationServer):
             def init(self) -> None:  # as SimulationServer.init, with the loopback servers
                 for robot in self.sim.robots:
                     rs = robot_server(robot, self._remaining_hostname_candidates)

@@ -5,6 +5,7 @@ command line; in Local Control the commands that act on the robot are refused.""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from .controller import (
     ROBOT_MODE_NAMES,
@@ -12,8 +13,10 @@ from .controller import (
     RUNTIME_PLAYING,
     RUNTIME_STOPPED,
     SAFETY_NORMAL,
-    URController,
 )
+
+if TYPE_CHECKING:  # servers imports this module: the controller whose dashboard this is
+    from .servers import URMock
 
 DASHBOARD_BANNER = b"Connected: Universal Robots Dashboard Server\n"
 #: The control program's name as the dashboard reports it.
@@ -38,7 +41,7 @@ class Dashboard:
                      "Remote Control mode and reconnect to port 29999")
     HANG_UP = {"quit": "Disconnected", "shutdown": "Shutting down"}
 
-    def __init__(self, controller: URController, version: tuple[int, ...], serial: str,
+    def __init__(self, controller: URMock, version: tuple[int, ...], serial: str,
                  model: str) -> None:
         mock = self.mock = controller
         self.version = version

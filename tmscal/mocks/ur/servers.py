@@ -147,9 +147,10 @@ class URMock(URController, MockDevice):
                  tcp_offset: np.ndarray | None = None) -> None:
         loopback_family(host, "URMock host")  # refuses a non-loopback host at once
         loopback_family(urcap_host, "URMock urcap_host")
-        version, serial, model = _identity(rig, version, serial, model)
-        if len(version) != 4:
-            raise ValueError(f"version must be (major, minor, bugfix, build), got {version!r}")
+        full_version, serial, model = _identity(rig, version, serial, model)
+        if len(full_version) != 4:
+            raise ValueError(f"version must be (major, minor, bugfix, build), got "
+                             f"{full_version!r}")
         super().__init__(rig, clock=clock, faults=faults,
                          program_running=program_running and urcap_port is None,
                          robot_mode=robot_mode, remote_control=remote_control,
@@ -161,7 +162,7 @@ class URMock(URController, MockDevice):
         self.urcap = ExternalControl(self, urcap_host, urcap_port, play_when_ready,
                                      self._stop) if urcap_port is not None else None
         self.host = host
-        self.version = tuple(int(v) for v in version)
+        self.version = tuple(int(v) for v in full_version)
         self.serial = serial
         self.model = model
         self.last_script: str | None = None
