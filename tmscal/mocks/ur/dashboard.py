@@ -5,7 +5,6 @@ command line; in Local Control the commands that act on the robot are refused.""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from .controller import (
     ROBOT_MODE_NAMES,
@@ -13,10 +12,8 @@ from .controller import (
     RUNTIME_PLAYING,
     RUNTIME_STOPPED,
     SAFETY_NORMAL,
+    URController,
 )
-
-if TYPE_CHECKING:  # servers imports this module: the controller whose dashboard this is
-    from .servers import URMock
 
 DASHBOARD_BANNER = b"Connected: Universal Robots Dashboard Server\n"
 #: The control program's name as the dashboard reports it.
@@ -41,9 +38,11 @@ class Dashboard:
                      "Remote Control mode and reconnect to port 29999")
     HANG_UP = {"quit": "Disconnected", "shutdown": "Shutting down"}
 
-    def __init__(self, controller: URMock, version: tuple[int, ...], serial: str,
-                 model: str) -> None:
+    def __init__(self, controller: URController, version: tuple[int, ...], serial: str,
+                 model: str, urcap_play: Callable[[], bool] | None = None) -> None:
         mock = self.mock = controller
+        #: Play with the External Control URCap: its program node fetches and runs the script
+        self.urcap_play = urcap_play
         self.version = version
         self.commands: dict[str, Callable[[str], str]] = {
             "polyscopeversion": self._version,
@@ -116,8 +115,8 @@ class Dashboard:
 
     def _play(self, cmd: str) -> str:
         m = self.mock
-        if m.urcap is not None:
-            return "Starting program" if m.urcap.play() else "Failed to execute: play"
+        if self.urcap_play is not None:
+            return "Starting program" if self.urcap_play() else "Failed to execute: play"
         if not m._program_loaded or m.why_no_program(network=False) is not None:
             return "Failed to execute: play"
         if m.runtime_state == RUNTIME_PAUSED:

@@ -170,7 +170,8 @@ class URMock(URController, MockDevice):
         self.dashboard_log: list[str] = []
         self._listeners: list[TCPListener] = []
         self._script_thread: threading.Thread | None = None
-        self._dashboard = Dashboard(self, self.version, serial, model)
+        self._dashboard = Dashboard(self, self.version, serial, model,
+                                    None if self.urcap is None else self.urcap.play)
 
     @property
     def last_urcap_script(self) -> str | None:
