@@ -96,6 +96,7 @@ class FrameNoise:
         self.warmup = int(warmup)
         self._d: dict[str, list[np.ndarray]] = {b: [] for b in self.bodies}
         self._cov: dict[str, np.ndarray] = {}
+        self._stacked: dict[tuple[str, ...], np.ndarray] = {}
 
     @property
     def ready(self) -> bool:
@@ -117,12 +118,17 @@ class FrameNoise:
 
     def cov(self, bodies: Sequence[str]) -> np.ndarray:
         """Σ_f of the stacked ``bodies`` (block diagonal: two tools' frame noise is
-        independent); zeros before the warm-up ends."""
-        q = 6 * len(bodies)
+        independent); zeros before the warm-up ends. The same array while nothing changes."""
+        key = tuple(bodies)
+        if self.ready and key in self._stacked:
+            return self._stacked[key]
+        q = 6 * len(key)
         out = np.zeros((q, q))
-        for i, b in enumerate(bodies):
+        for i, b in enumerate(key):
             if b in self._cov:
                 out[6 * i:6 * i + 6, 6 * i:6 * i + 6] = self._cov[b]
+        if self.ready:
+            self._stacked[key] = out
         return out
 
 
@@ -150,14 +156,27 @@ class Detector:
     rule: Rule
     alarmed: bool = False
     _win: deque[np.ndarray] = field(default_factory=deque)
+    _sum: np.ndarray | None = None
     _bodies: tuple[str, ...] = ()
     _over: int = 0
     _under: int = 0
+    _inv: tuple[object, object, np.ndarray] | None = None  # (S, Sf, (S + Sf/w)⁻¹)
+    _h: dict[int, float] = field(default_factory=dict)
 
     def reset(self) -> None:
         """Empty the window and the counts (a frame that is not usable, a new hold)."""
         self._win.clear()
+        self._sum = None
         self._over = self._under = 0
+
+    def _inverse(self, S: np.ndarray, Sf: np.ndarray | None) -> np.ndarray:
+        c = self._inv
+        if c is not None and c[0] is S and c[1] is Sf:
+            return c[2]
+        C = S + (np.zeros_like(S) if Sf is None else Sf / self.rule.window)
+        inv = np.linalg.inv(C)
+        self._inv = (S, Sf, (inv + inv.T) / 2)
+        return self._inv[2]
 
     def update(self, r: np.ndarray | None, bodies: Sequence[str] = (),
                S: np.ndarray | None = None, Sf: np.ndarray | None = None) -> Step:
@@ -171,15 +190,19 @@ class Detector:
             self.reset()
             self._bodies = bodies
         w = self.rule.window
-        self._win.append(np.asarray(r, dtype=float))
-        while len(self._win) > w:
-            self._win.popleft()
+        r = np.asarray(r, dtype=float)
+        self._win.append(r)
+        self._sum = r.copy() if self._sum is None else self._sum + r
+        if len(self._win) > w:
+            self._sum -= self._win.popleft()
         if len(self._win) < w:
             return Step()
-        m = np.mean(self._win, axis=0)
-        C = S + (np.zeros_like(S) if Sf is None else Sf / w)
-        T = float(m @ np.linalg.solve(C, m))
-        h = self.rule.threshold(len(m))
+        m = self._sum / w
+        T = float(m @ self._inverse(S, Sf) @ m)
+        q = len(m)
+        if q not in self._h:
+            self._h[q] = self.rule.threshold(q)
+        h = self._h[q]
         over = T > h and self._big(m)
         st = Step(statistic=T, threshold=h, over=over, mean=m)
         if over:
