@@ -21,10 +21,11 @@ has been seen). A frame in which a tool jumped from the previous one by more tha
 frame noise allows (:data:`JUMP_LEVEL`) is not checked either (the step of a bump, a coil
 touched): the window refills after it. The rule itself is :mod:`tmscal.calib.alarm`.
 
-Events (:class:`MonitorEvent`): ``alarm`` (with the diagnosis of ``calib.diagnose`` on the
-alarm's hold means: what moved), ``diagnosis`` (refined on a later hold while the alarm
-stands), ``clear``, ``out_of_view`` (a tool unusable for longer than ``out_of_view_s``) and
-``in_view``. Each one goes out as an OpenIGTLink STATUS message (``stream.StreamServer``).
+Events (:class:`MonitorEvent`): ``alarm`` (at once: the robot stopped with ``stop_robot``,
+the residual's size), then ``diagnosis`` (what moved: ``calib.diagnose`` on the alarm's
+window mean, and again on each later still phase while the alarm stands: several poses tell
+a tracker move from a coil re-seat, one does not), ``clear``, ``out_of_view`` (a tool
+unusable for longer than ``out_of_view_s``) and ``in_view``. Each one goes out as an OpenIGTLink STATUS message (``stream.StreamServer``).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ from .stream import STATUS_CODES, StreamServer
 log = logging.getLogger(__name__)
 
 __all__ = ["MonitorSettings", "MonitorEvent", "Monitor", "run_monitor", "JUMP_LEVEL",
-           "DEVICE_NAME"]
+           "DEVICE_NAME", "candidates", "EVIDENCE"]
 
 #: a tool whose frame-to-frame residual change has this small a probability under its frame
 #: noise (χ²₆ of the whitened difference) jumped: that frame is not checked
@@ -169,11 +170,27 @@ class Monitor:
         self._recent: deque[_Pending] = deque(maxlen=self.rule.window)
         self._episode: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
         self._episode_hold: int | None = None
+        self._to_diagnose: tuple[_Pending, Any, tuple[str, ...]] | None = None
         self._seen: dict[str, float] = {t: 0.0 for t in self.tools}
         self._gone: set[str] = set()
         self.last_step: Any = None
 
     # --- time --------------------------------------------------------------------------------
+    @property
+    def t_s(self) -> float:
+        """Tracker time now: s since the first frame (frame numbers / frame rate)."""
+        return self._t
+
+    @property
+    def since_move_s(self) -> float:
+        """Tracker seconds since the robot's report last changed (or the first frame)."""
+        return self._t - self._last_move
+
+    @property
+    def holds(self) -> int:
+        """Still phases begun so far (the first frame and every robot motion start one)."""
+        return self._hold
+
     def _time(self, frame: int) -> float:
         if self._f0 is None:
             self._f0 = self._last_f = frame
@@ -294,12 +311,13 @@ class Monitor:
             self._episode.append(self._hold_mean())
             self._episode_hold = hold
             if not st.alarm:
-                out.append(self._event("diagnosis", p, st, bodies))
+                out.append(self._event("diagnosis", p, st, bodies, self._diagnose()))
         if st.alarm:
             self.alarms += 1
             self._episode = [self._hold_mean()]
             self._episode_hold = hold
-            out.append(self._event("alarm", p, st, bodies))
+            self._to_diagnose = (p, st, bodies)
+            out.append(self._event("alarm", p, st, bodies, None))
         elif st.clear:
             self._episode, self._episode_hold = [], None
             out.append(MonitorEvent(
@@ -333,22 +351,36 @@ class Monitor:
         out["n_poses"] = len(eps)
         return out
 
-    def _event(self, kind: str, p: _Pending, st: Any, bodies: tuple[str, ...]
-               ) -> MonitorEvent:
+    def diagnose_alarm(self) -> MonitorEvent | None:
+        """The ``diagnosis`` event of the alarm :meth:`step` just raised (what moved:
+        ``calib.diagnose`` on the alarm's window mean, a few tenths of a second of fitting,
+        which is why the alarm goes out first), or None when no alarm waits for one."""
+        if self._to_diagnose is None:
+            return None
+        p, st, bodies = self._to_diagnose
+        self._to_diagnose = None
+        ev = self._event("diagnosis", p, st, bodies, self._diagnose())
+        self.events.append(ev)
+        return ev
+
+    def _event(self, kind: str, p: _Pending, st: Any, bodies: tuple[str, ...],
+               dx: dict[str, Any] | None) -> MonitorEvent:
         m = st.mean
         sizes = {b: {"mm": float(np.linalg.norm(m[6 * i:6 * i + 3])),
                      "deg": float(np.linalg.norm(m[6 * i + 3:6 * i + 6]))}
                  for i, b in enumerate(bodies)}
-        dx = self._diagnose()
-        what = _what_moved(dx)
         res = ", ".join(f"{b} {v['mm']:.3f} mm {v['deg']:.3f}°" for b, v in sizes.items())
-        head = "ALARM" if kind == "alarm" else "diagnosis"
-        msg = (f"{head} at {p.t:.2f} s (frame {p.frame}): A X ≠ Z B beyond the calibration's "
-               f"noise (T = {st.statistic:.1f} > {st.threshold:.1f} for "
-               f"{self.rule.frames_to_alarm} frames; residual {res}); what moved: {what}")
-        return MonitorEvent(kind, p.t, p.frame, msg,
-                            {"statistic": st.statistic, "threshold": st.threshold,
-                             "residual": sizes, "diagnosis": dx, "changed": dx.get("changed")})
+        details: dict[str, Any] = {"statistic": st.statistic, "threshold": st.threshold,
+                                   "residual": sizes}
+        if dx is None:
+            msg = (f"ALARM at {p.t:.2f} s (frame {p.frame}): A X ≠ Z B beyond the "
+                   f"calibration's noise (T = {st.statistic:.1f} > {st.threshold:.1f} for "
+                   f"{self.rule.frames_to_alarm} frames; residual {res})")
+        else:
+            msg = (f"what moved (at {p.t:.2f} s, {dx.get('n_poses')} still phase(s) since "
+                   f"the alarm; residual {res}): {_what_moved(dx)}")
+            details.update(diagnosis=dx, changed=dx.get("changed"), candidates=candidates(dx))
+        return MonitorEvent(kind, p.t, p.frame, msg, details)
 
     def summary(self) -> dict[str, Any]:
         """{"frames", "checked" (frames the rule judged), "alarms", "events", "seconds"
@@ -362,20 +394,45 @@ class Monitor:
                 "noise_model": self.noise.source}
 
 
+#: alternatives within this evidence ratio of the winner (AICc) are named with it
+EVIDENCE = 10.0
+
+
+def candidates(dx: dict[str, Any]) -> list[str]:
+    """The changes a diagnosis cannot tell apart: the winner and every alternative within
+    an evidence ratio of :data:`EVIDENCE` of it (AICc), the commonest first
+    (``calib.diagnose.HYPOTHESES``): at one pose a tracker move and a coil re-seat fit
+    equally well."""
+    ch = dx.get("changed")
+    if ch in (None, "none", "unexplained"):
+        return [] if ch is None else [ch]
+    alts = {a["changed"]: a for a in dx.get("alternatives") or []}
+    best = alts.get(dx.get("winner"), {}).get("aicc")
+    if best is None:
+        return [ch]
+    near = [h for h, a in alts.items() if h != "none"
+            and a["aicc"] - best < 2 * np.log(EVIDENCE)]
+    order = {h: i for i, h in enumerate(dg.HYPOTHESES)}
+    return sorted(set(near) | {ch}, key=lambda h: order.get(h, len(order)))
+
+
 def _what_moved(dx: dict[str, Any]) -> str:
-    """The diagnosis in a few words: the change and its size, the runner-up when the poses
-    cannot tell them apart (evidence ratio below 10)."""
+    """The diagnosis in a few words: the change and its size, or the changes these poses
+    cannot tell apart (:func:`candidates`)."""
     ch = dx.get("changed")
     if ch is None:
         return f"not diagnosed ({dx.get('error')})"
     text = str(dx.get("label") or ch)
-    if ch not in ("none", "unexplained") and dx.get("delta_mm") is not None:
-        text += f" ({dx['delta_mm']:.3f} mm, {dx['delta_deg']:.3f}°)"
-    ev = dx.get("evidence_ratio")
-    if dx.get("runner_up") and ev is not None and ev < 10 and ch not in ("none",):
-        text += (f", or {dx['runner_up']} (evidence ratio {ev:.2g}: {dx.get('n_poses')} "
-                 "pose(s) cannot tell them apart)")
-    return text
+    if ch in ("none", "unexplained"):
+        return text
+    size = (f" ({dx['delta_mm']:.3f} mm, {dx['delta_deg']:.3f}°)"
+            if dx.get("delta_mm") is not None else "")
+    near = candidates(dx)
+    if len(near) > 1:
+        return (f"{' or '.join(h.replace('_', ' ') for h in near)}{size}: "
+                f"{dx.get('n_poses')} still phase(s) cannot tell them apart (another pose "
+                "of the robot will)")
+    return text + size
 
 
 def run_monitor(robot: Robot, tracker: Tracker, cf: CalibrationFile,
@@ -417,7 +474,9 @@ def run_monitor(robot: Robot, tracker: Tracker, cf: CalibrationFile,
                         joints = False
             except DeviceError as e:
                 raise _lost(server, "robot", robot.name, e) from None
-            for ev in mon.step(fr, A, q):
+            events = mon.step(fr, A, q)
+            while events:
+                ev = events.pop(0)
                 if ev.kind == "alarm" and s.stop_robot:
                     robot.stop()
                     ev.details["robot_stopped"] = True
@@ -427,6 +486,10 @@ def run_monitor(robot: Robot, tracker: Tracker, cf: CalibrationFile,
                     server.send_status(code, name, ev.message, device_name=DEVICE_NAME)
                 if on_event is not None:
                     on_event(ev)
+                if ev.kind == "alarm":  # the alarm out first, then what moved
+                    dx = mon.diagnose_alarm()
+                    if dx is not None:
+                        events.insert(0, dx)
             if on_frame is not None:
                 on_frame(mon, fr)
             if stop():

@@ -139,7 +139,7 @@ def test_a_tracker_bump_raises_the_alarm_sends_status_and_stops_the_robot(rig, c
     proc, client = _start(cfg, calib_file, "--frames", str(FRAMES), "--stop-robot")
     try:
         out, err = proc.communicate(timeout=240)
-        got = _received(lambda s: s[1] == "RigChanged")
+        got = _received(lambda s: "what moved" in s[2])
     finally:
         client.stop()
     assert proc.returncode == 3, err
@@ -152,14 +152,20 @@ def test_a_tracker_bump_raises_the_alarm_sends_status_and_stops_the_robot(rig, c
         assert 0.8 < a["residual"][body]["mm"] < 1.2, a
     # reported within 1 s of tracker time after the bump (the mock's fast clock: frames / 60)
     assert BUMP_AT_S < a["t_s"] <= BUMP_AT_S + 1.0, a
-    # at one pose a tracker move and a coil re-seat are the same change: either is named
-    assert a["changed"] in ("tracker", "coil"), a["diagnosis"]
     assert a["robot_stopped"] is True
+    # then what moved: at one pose a tracker move and a coil re-seat are the same change,
+    # either is named (with the other as the runner-up)
+    dx = [e for e in ev if e["event"] == "diagnosis"]
+    assert len(dx) == 1 and ev.index(dx[0]) == ev.index(a) + 1, ev
+    assert dx[0]["changed"] in ("tracker", "coil"), dx[0]["diagnosis"]
+    assert dx[0]["candidates"][0] == "tracker" and "coil" in dx[0]["candidates"], dx[0]
+    assert 0.8 < dx[0]["diagnosis"]["delta_mm"] < 1.2, dx[0]["diagnosis"]
     assert mr.devices[1].stats["halts"] == 1  # the DENSO mock saw one Robot_Halt
     assert ev[-1]["event"] == "summary" and ev[-1]["alarms"] == 1
     # the navigation's client got the alarm as a STATUS message (code 2: error)
     status = [s for s in got if s[1] == "RigChanged"]
-    assert status and status[0][0] == 2 and "what moved" in status[0][2], got
+    assert [s[2].startswith("ALARM") for s in status] == [True, False], got
+    assert all(s[0] == 2 for s in status) and "what moved" in status[1][2], got
     assert (1, "", "tmscal monitor: watching") in got
 
 
