@@ -231,8 +231,9 @@ def main() -> None:
                             f"within_1s_{key}": within, f"bumps_{key}": len(rows)})
             late = [r for r in st["rows"] if r[1] is None or r[1] > 1.0]
             for kind, delay, since, _, _ in late:
-                print(f"  alarm over 1 s: tracker {kind} {since:.1f} s after a robot move "
-                      f"(settle 1 s): {'missed' if delay is None else f'{delay:.2f} s'}")
+                print(f"  alarm over 1 s: tracker {kind} {since:.1f} s after a robot move and "
+                      f"{a.hold_s - since:.1f} s before the next (settle 1 s): "
+                      f"{'missed' if delay is None else f'{delay:.2f} s'}")
             print(f"  alarms without a bump: {st['false']}")
             fig["detection_false_alarms"] = st["false"]
         if a.minutes:

@@ -25,7 +25,8 @@ Events (:class:`MonitorEvent`): ``alarm`` (at once: the robot stopped with ``sto
 the residual's size), then ``diagnosis`` (what moved: ``calib.diagnose`` on the alarm's
 window mean, and again on each later still phase while the alarm stands: several poses tell
 a tracker move from a coil re-seat, one does not), ``clear``, ``out_of_view`` (a tool
-unusable for longer than ``out_of_view_s``) and ``in_view``. Each one goes out as an OpenIGTLink STATUS message (``stream.StreamServer``).
+unusable for longer than ``out_of_view_s``) and ``in_view``. Each one goes out as an
+OpenIGTLink STATUS message (``stream.StreamServer``).
 """
 
 from __future__ import annotations
@@ -188,7 +189,7 @@ class Monitor:
 
     @property
     def holds(self) -> int:
-        """Still phases begun so far (the first frame and every robot motion start one)."""
+        """Frames at which the robot was seen moving, and the first: each begins a hold."""
         return self._hold
 
     def _time(self, frame: int) -> float:
