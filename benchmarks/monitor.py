@@ -45,6 +45,7 @@ import yaml
 from figures import record
 
 from tmscal.acquisition.devices import Devices, Endpoints
+from tmscal.calib.alarm import Rule, simulate_holds
 from tmscal.config import load_config
 from tmscal.formats.calibfile import read_calibration
 from tmscal.geometry import make_pose, matrix_from_rotvec
@@ -203,6 +204,8 @@ def main() -> None:
     ap.add_argument("--hold-s", type=float, default=10.0,
                     help="seconds between the session's robot corrections")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--sim-holds", type=int, default=2000,
+                    help="simulated holds for the rule's false-alarm share (0: none)")
     a = ap.parse_args()
     fig: dict[str, float | int | None] = {}
     with tempfile.TemporaryDirectory() as d:
@@ -251,9 +254,24 @@ def main() -> None:
                   f"{r['moves'] + 1} phases")
             for e in r["alarms"]:
                 print(f"    {e.message}")
-            fig.update({"fa_minutes": round(s["seconds"] / 60, 1), "fa_alarms": s["alarms"],
-                        "fa_moves": r["moves"],
-                        "fa_checked_share": round(s["checked"] / s["frames"], 2)})
+            m = f"fa_{a.minutes:g}min".replace(".", "_")
+            fig.update({f"{m}_alarms": s["alarms"], f"{m}_moves": r["moves"],
+                        f"{m}_checked_share": round(s["checked"] / s["frames"], 2),
+                        f"{m}_wall_s": round(r["wall_s"])})
+            cov = r["mon"].covariances()
+            if cov is not None and a.sim_holds:
+                bodies, S, Sf = cov
+                frames = int(round(a.hold_s * 60))
+                print(f"  the rule on {a.sim_holds} simulated unchanged holds of {a.hold_s:g} s "
+                      f"(S of the last hold, {', '.join(bodies)}; the frame noise learnt on "
+                      "the mock), false-alarm share per hold against the level:")
+                for lv in (1e-2, 1e-3):
+                    res = simulate_holds(Rule(window=15, level=lv), S, Sf, a.sim_holds,
+                                         frames, np.random.default_rng(a.seed))
+                    print(f"    level {lv:g}: {res['share']:.4f} ({res['alarms']} of "
+                          f"{a.sim_holds})")
+                    fig[f"sim_share_level_{lv:g}".replace("-", "m").replace(".", "_")] = \
+                        round(res["share"], 4)
     record("monitor", fig)
 
 

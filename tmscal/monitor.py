@@ -175,6 +175,8 @@ class Monitor:
         self._seen: dict[str, float] = {t: 0.0 for t in self.tools}
         self._gone: set[str] = set()
         self.last_step: Any = None
+        #: the tracker frame number of the last frame the rule judged (None before)
+        self.last_checked: int | None = None
 
     # --- time --------------------------------------------------------------------------------
     @property
@@ -303,6 +305,7 @@ class Monitor:
             self._S = {k: v for k, v in self._S.items() if k[0] == hold}
             self._S[key] = dg.pose_covariance(fr, self.noise)[0]
         self.checked += 1
+        self.last_checked = p.frame
         self._recent.append(p)
         st = self.detector.update(r, bodies, self._S[key], self.frame_noise.cov(bodies))
         self.last_step = st
@@ -382,6 +385,15 @@ class Monitor:
                    f"the alarm; residual {res}): {_what_moved(dx)}")
             details.update(diagnosis=dx, changed=dx.get("changed"), candidates=candidates(dx))
         return MonitorEvent(kind, p.t, p.frame, msg, details)
+
+    def covariances(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray] | None:
+        """(bodies, S, Σ_f) of the last hold checked: the residual covariance of that hold
+        from the noise model and the learnt frame noise (q×q, mm and deg), or None before
+        the first check."""
+        if not self._S:
+            return None
+        (_, bodies), S = list(self._S.items())[-1]
+        return bodies, S, self.frame_noise.cov(bodies)
 
     def summary(self) -> dict[str, Any]:
         """{"frames", "checked" (frames the rule judged), "alarms", "events", "seconds"
