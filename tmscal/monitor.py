@@ -491,9 +491,14 @@ def run_monitor(robot: Robot, tracker: Tracker, cf: CalibrationFile,
             while events:
                 ev = events.pop(0)
                 if ev.kind == "alarm" and s.stop_robot:
-                    robot.stop()
-                    ev.details["robot_stopped"] = True
-                    ev.message += "; robot stopped"
+                    try:
+                        robot.stop()
+                        ev.details["robot_stopped"] = True
+                        ev.message += "; robot stopped"
+                    except DeviceError as e:  # the alarm goes out all the same
+                        log.error("the robot's stop failed: %s", e)
+                        ev.details["robot_stopped"] = False
+                        ev.message += f"; the robot's stop FAILED ({e})"
                 if server is not None:
                     code, name = ev.status()
                     server.send_status(code, name, ev.message, device_name=DEVICE_NAME)

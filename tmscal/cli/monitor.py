@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -19,6 +20,9 @@ from .app import (
     main,
     print_json,
 )
+
+if TYPE_CHECKING:
+    from ..monitor import MonitorEvent
 
 
 @main.command()
@@ -112,11 +116,11 @@ def monitor(config: Path, calib_file: Path, as_json: bool, stop_robot: bool, lev
     stop = StopFlag(quiet=True)
     stop.install()
 
-    def on_event(ev: object) -> None:
+    def on_event(ev: MonitorEvent) -> None:
         if as_json:
-            print_json(ev.to_json())  # type: ignore[attr-defined]
+            print_json(ev.to_json())
         else:
-            click.echo(ev.message)  # type: ignore[attr-defined]
+            click.echo(ev.message)
         sys.stdout.flush()
 
     interrupted = False
