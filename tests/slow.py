@@ -18,6 +18,7 @@ SLOW: tuple[str, ...] = (
     "tests/e2e/test_igtl_rig.py",
     "tests/e2e/test_mock_kinematics.py",
     "tests/e2e/test_mocks_loopback.py::test_tmscal_mock_refuses_non_loopback_endpoints",
+    "tests/e2e/test_monitor.py",
     "tests/e2e/test_path_safety.py::test_denso_executes_only_paths_inside_the_envelope",
     "tests/e2e/test_path_safety.py::test_ur_executes_only_paths_inside_the_envelope",
     "tests/e2e/test_progress.py::test_run_that_skips_too_many_poses_stops_resumably_naming_the_reason",

@@ -75,7 +75,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["TRANSFORMS", "MAX_NAME_BYTES", "DEFAULT_PORT", "frame_transforms", "StreamServer",
            "StreamStats", "CrossCheck", "stream_frames", "coil_source", "coil_difference",
-           "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S", "MAX_BODY_BYTES"]
+           "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S", "MAX_BODY_BYTES", "StatusMessage",
+           "STATUS_CODES"]
 
 #: OpenIGTLink's registered TCP port, the default of Slicer's OpenIGTLinkIF and PlusServer
 DEFAULT_PORT = 18944
@@ -109,6 +110,36 @@ TRANSFORMS: dict[str, str] = {
     "MarkerToTracker": "tracker ← coil marker: B as the tracker measures it",
     "TrackerToRobotBase": "robot base ← tracker: Z of the calibration",
 }
+
+
+#: OpenIGTLink STATUS codes (openigtlink.org, "STATUS" message, protocol version 2) used here
+STATUS_CODES = {"ok": 1, "error": 2, "not_found": 4, "not_present": 16, "exiting": 19}
+
+
+class StatusMessage(pyigtl.MessageBase):
+    """An OpenIGTLink STATUS message (pyigtl 0.3 has none): the content is the status
+    ``code`` (uint16, :data:`STATUS_CODES`), a ``subcode`` (int64, device-specific), an
+    ``error_name`` (char[20], zero-padded) and a ``status_string`` (UTF-8, zero-terminated),
+    all big-endian, as the specification defines it."""
+
+    def __init__(self, code: int = 1, subcode: int = 0, error_name: str = "",
+                 status_string: str = "", timestamp: float | None = None,
+                 device_name: str | None = None) -> None:
+        super().__init__(timestamp=timestamp, device_name=device_name)
+        self._message_type = "STATUS"
+        self.code, self.subcode = int(code), int(subcode)
+        self.error_name, self.status_string = error_name, status_string
+        self._valid_message = True
+
+    def _pack_content(self) -> bytes:
+        name = self.error_name.encode("utf-8")[:20]
+        return (struct.pack(">Hq20s", self.code, self.subcode, name)
+                + self.status_string.encode("utf-8") + b"\0")
+
+    def _unpack_content(self, content: bytes) -> None:
+        self.code, self.subcode, name = struct.unpack_from(">Hq20s", content)
+        self.error_name = name.rstrip(b"\0").decode("utf-8", "replace")
+        self.status_string = content[30:].split(b"\0", 1)[0].decode("utf-8", "replace")
 
 
 def coil_source(tools: Iterable[str], cal: Calibration, marker: str = "marker",
@@ -384,6 +415,7 @@ class StreamServer(socketserver.ThreadingTCPServer):
         self._lock = threading.Lock()
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
+        self._latched: bytes | None = None  # the last STATUS, sent to every new client
 
     # --- the clients ---------------------------------------------------------------------------
 
@@ -397,7 +429,10 @@ class StreamServer(socketserver.ThreadingTCPServer):
             if full:
                 self.refused += 1
             else:
-                self._active[client_address] = _Client(peer, self.queue_frames)
+                c = _Client(peer, self.queue_frames)
+                if self._latched is not None:
+                    c.offer(self._latched)
+                self._active[client_address] = c
         if full:
             log.warning("OpenIGTLink client %s refused: %d clients already connected (the "
                         "limit)", peer, self.max_clients)
@@ -464,6 +499,25 @@ class StreamServer(socketserver.ThreadingTCPServer):
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+    def send_status(self, code: int, error_name: str, text: str, *,
+                    device_name: str = "TMSCalMonitor", subcode: int = 0,
+                    timestamp: float | None = None) -> int:
+        """Queue one STATUS message (:class:`StatusMessage`: ``code`` of
+        :data:`STATUS_CODES`, ``error_name`` up to 20 bytes, ``text`` the status string) for
+        every connected client, and keep it: a client that connects later gets the last
+        status first. Returns the number of clients it was queued for."""
+        if len(device_name.encode("utf-8")) > MAX_NAME_BYTES:
+            raise ValueError(f"device name {device_name!r} is longer than {MAX_NAME_BYTES} "
+                             "bytes")
+        msg = StatusMessage(code, subcode, error_name, text, timestamp=timestamp,
+                            device_name=device_name).pack()
+        with self._lock:
+            self._latched = msg
+            clients = list(self._active.values())
+        for c in clients:
+            c.offer(msg)
+        return len(clients)
 
     def send_transforms(self, transforms: Mapping[str, np.ndarray], timestamp: float) -> int:
         """Queue one TRANSFORM message per item (device name → 4×4 mm), as one frame, for

@@ -60,6 +60,7 @@ from .model import (
     Frames,
     NoiseModel,
     frames,
+    pose_covariance,
     residuals,
 )
 from .model import (
@@ -85,7 +86,7 @@ from .updating import (
 
 __all__ = ["HYPOTHESES", "BLOCK_OF", "HYPOTHESIS_OF", "UPDATES", "ALPHA", "ALLOWANCE",
            "CHI2_LEVEL", "COMPONENTS", "RANK_TOL", "NoiseModel", "Frames", "frames", "residuals",
-           "Fit", "fit", "noise_from_residuals", "BOOTSTRAP_METHODS", "BOOTSTRAP_REPS",
-           "calibration_noise", "noise_from_errors", "suggested_tolerances", "Diagnosis",
-           "diagnose", "UpdateRefused", "blocks_of_update", "min_poses", "update", "updated",
-           "noise_after", "placement_spread"]
+           "pose_covariance", "Fit", "fit", "noise_from_residuals", "BOOTSTRAP_METHODS",
+           "BOOTSTRAP_REPS", "calibration_noise", "noise_from_errors", "suggested_tolerances",
+           "Diagnosis", "diagnose", "UpdateRefused", "blocks_of_update", "min_poses", "update",
+           "updated", "noise_after", "placement_spread"]

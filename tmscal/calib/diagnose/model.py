@@ -21,7 +21,8 @@ from ...geometry import make_pose, matrix_from_rotvec, orthonormalize, pose_mean
 from ..calibration import Applied, Calibration
 
 __all__ = ["HYPOTHESES", "BLOCK_OF", "HYPOTHESIS_OF", "UPDATES", "ALPHA", "ALLOWANCE",
-           "CHI2_LEVEL", "COMPONENTS", "RANK_TOL", "NoiseModel", "Frames", "frames", "residuals"]
+           "CHI2_LEVEL", "COMPONENTS", "RANK_TOL", "NoiseModel", "Frames", "frames", "residuals",
+           "pose_covariance"]
 
 #: the changes told apart, in the order a tie is broken (the commonest first)
 HYPOTHESES = ("tracker", "coil", "marker", "coil_centre", "arm")
@@ -188,6 +189,23 @@ def _cal_jacobian(fr: Frames, blocks: Sequence[str]) -> np.ndarray:
             p[b][j] = h
             cols.append((residuals(_apply(fr, blocks, p)).ravel() - r0) / h)
     return np.stack(cols, axis=1)
+
+
+def pose_covariance(fr: Frames, noise: NoiseModel) -> np.ndarray:
+    """(n, q, q) the covariance of each pose's residual r (mm and deg, bodies in
+    ``fr.bodies`` order) on an unchanged rig: the noise model's Σ of each pose plus the
+    calibration's own error at that pose, J_i C_c J_iᵀ (J_i the pose's rows of the
+    residuals' Jacobian with respect to the calibration's blocks; without C_c, Σ alone).
+    The live monitor's S of a hold (``calib.alarm``)."""
+    Sp = noise.for_bodies(fr.bodies).cov
+    q = len(Sp)
+    out = np.repeat(Sp[None], fr.n, axis=0)
+    cc = noise.calibration_for(fr)
+    if cc is None:
+        return out
+    blocks, C = cc
+    J = _cal_jacobian(replace(fr, whiten=None), blocks).reshape(fr.n, q, -1)
+    return out + np.einsum("nij,jk,nlk->nil", J, C, J)
 
 
 def _delta(xi: np.ndarray) -> np.ndarray:
