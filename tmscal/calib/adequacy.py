@@ -21,7 +21,7 @@ cause             rule (statistic; p-value)
 ``kinematics``    residuals that follow the joints: the kinematic estimate's held-out χ² per
                   pose (``calib.kinematics``, every level cross-validated under one noise)
                   of the rigid level against the best level with the arm's deviations;
-                  one-sided z of the difference
+                  one-sided z of the paired per-pose difference
 ``tracker``       a scale pattern: ml's tracker distortion models, forward F tests none →
                   scale → axis → affine (``ml.select_model``); the smallest p × 3
 ``inverted``      a mistake: the same closed-form solve on the tracker poses (or the robot
@@ -35,8 +35,11 @@ cause             rule (statistic; p-value)
 
 The decision (:func:`decide`): every p-value is multiplied by the number of rules run
 (Bonferroni, family level ``ALPHA``); "inadequate" when any is below ``ALPHA``; the likely
-cause is the one with the smallest adjusted p-value (a mistake before a structure at equal p,
-the order of ``CAUSES``). ``chi2_per_dof`` is the rigid model's residual variance in units
+cause is the first of those in the order of ``CAUSES``: a mistake before a structure (a
+mistake makes every structure rule fire), a step before the joints and the tracker; when
+both the joints and the tracker fire (an affine tracker distortion absorbs much of an arm's
+error over a small workspace), the one whose model lowers the residual variance more (the
+larger ``ratio``: held out for the joints, in-sample for the tracker). ``chi2_per_dof`` is the rigid model's residual variance in units
 of the noise the likely cause's model leaves (the variance ratio; ≈ 1 when adequate) and
 ``p_value`` that cause's adjusted p-value (adequate: the smallest). Measured error rates:
 ``benchmarks/adequacy.py`` (docs/adequacy.md).
@@ -234,8 +237,9 @@ def kinematics_rule(cv: dict[str, Any]) -> Rule | None:
     """Residuals that follow the joints: the kinematic estimate's held-out table (``cv`` of
     ``calib.kinematics``' level choice: {level: {"chi2", "chi2_se", …}}, each level's mean
     held-out χ² per pose under one noise) — the rigid level "none" against the best level
-    with the arm's deviations, z = (χ²_none − χ²_best) / √(se_none² + se_best²) (the
-    per-pose differences are paired, so this is conservative), one-sided; × the levels
+    with the arm's deviations, z = mean / SE of the per-pose difference of their held-out
+    χ² (``gain_vs_none``; the same poses held out for both; without it the unpaired
+    (χ²_none − χ²_best) / √(se_none² + se_best²), conservative), one-sided; × the levels
     compared. ``ratio``: χ²_none / χ²_best. None without "none" and another scored level."""
     rows = {k: v for k, v in (cv or {}).items() if isinstance(v, dict) and "chi2" in v}
     if "none" not in rows or len(rows) < 2:
@@ -243,8 +247,13 @@ def kinematics_rule(cv: dict[str, Any]) -> Rule | None:
     others = {k: v for k, v in rows.items() if k != "none"}
     best = min(others, key=lambda k: others[k]["chi2"])
     c0, c1 = float(rows["none"]["chi2"]), float(others[best]["chi2"])
-    se = float(np.hypot(rows["none"].get("chi2_se", 0.0), others[best].get("chi2_se", 0.0)))
-    z = (c0 - c1) / se if se > 0 else (np.inf if c0 > c1 else 0.0)
+    b = others[best]
+    if "gain_vs_none" in b and "gain_vs_none_se" in b:  # paired over the held-out poses
+        gain, se = float(b["gain_vs_none"]), float(b["gain_vs_none_se"])
+    else:
+        gain = c0 - c1
+        se = float(np.hypot(rows["none"].get("chi2_se", 0.0), b.get("chi2_se", 0.0)))
+    z = gain / se if se > 0 else (np.inf if gain > 0 else 0.0)
     from scipy.stats import norm
 
     return Rule("kinematics", float(z), (0, 0), float(norm.sf(z)), c0 / max(c1, 1e-300),
@@ -353,7 +362,14 @@ def decide(rules: Sequence[Rule | None], notes: Sequence[str] = (), alpha: float
            for r in ran]
     order = {c: i for i, c in enumerate(CAUSES)}
     ranked = sorted(adj, key=lambda r: (r.p_adjusted, order.get(r.cause, len(order))))
-    fired = [r for r in ranked if r.p_adjusted < alpha]
+    fired = sorted((r for r in ranked if r.p_adjusted < alpha),
+                   key=lambda r: order.get(r.cause, len(order)))
+    by = {r.cause: r for r in fired}
+    if fired and fired[0].cause == "kinematics" and "tracker" in by:
+        k, t = by["kinematics"], by["tracker"]
+        if np.isfinite(t.ratio) and (not np.isfinite(k.ratio) or t.ratio > k.ratio):
+            fired.remove(t)
+            fired.insert(0, t)
     top = fired[0] if fired else (ranked[0] if ranked else None)
     ratio = float("nan") if top is None else top.ratio
     return Adequacy("inadequate" if fired else "adequate",
