@@ -276,9 +276,9 @@ def distortion_rule(p_values: dict[str, float], ratio: float = float("nan")) -> 
 
 def mistaken(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray | None
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The poses (n, 4, 4) as they would be if mistake ``name`` (``MISTAKES``) had been made
-    in recording them — each mistake is its own inverse up to the pose it drops (a frame
-    late is undone by a frame early), so this both injects and corrects it."""
+    """The poses (n, 4, 4) mm corrected for mistake ``name`` (``MISTAKES``): inverted poses
+    inverted back, metres multiplied by 1000, each reading paired with the pose one later
+    or earlier (one pose dropped)."""
     inv = np.linalg.inv
     if name == "inverted_tracker":
         return A, inv(B), None if C is None else inv(C)
