@@ -39,9 +39,9 @@ cause is the first of those in the order of ``CAUSES``: a mistake before a struc
 mistake makes every structure rule fire), a step before the joints and the tracker; when
 both the joints and the tracker fire (an affine tracker distortion absorbs much of an arm's
 error over a small workspace), the one whose model lowers the residual variance more (the
-larger ``ratio``: held out for the joints, in-sample for the tracker). ``chi2_per_dof`` is the rigid model's residual variance in units
-of the noise the likely cause's model leaves (the variance ratio; ≈ 1 when adequate) and
-``p_value`` that cause's adjusted p-value (adequate: the smallest). Measured error rates:
+larger ``ratio``: held out for the joints, in-sample for the tracker). ``chi2_per_dof``
+is the rigid model's residual variance in units of the noise the likely cause's model
+leaves (the variance ratio; ≈ 1 when adequate) and ``p_value`` that cause's adjusted p-value (adequate: the smallest). Measured error rates:
 ``benchmarks/adequacy.py`` (docs/adequacy.md).
 """
 

@@ -35,7 +35,8 @@ def cause_text(adequacy: dict[str, Any], session: str = "SESSION") -> tuple[str,
     cause = adequacy.get("likely_cause")
     if cause is None:
         return None
-    rule = next((r for r in adequacy.get("rules", []) if r.get("cause") == cause), {})
+    rule: dict[str, Any] = next((r for r in adequacy.get("rules", [])
+                                 if r.get("cause") == cause), {})
     s = session
     if cause == "repeated":
         pairs = ", ".join(f"pose {a} repeats pose {b}" for a, b in rule.get("poses", []))
@@ -60,7 +61,8 @@ def cause_text(adequacy: dict[str, Any], session: str = "SESSION") -> tuple[str,
     if cause == "tool_moved":
         moved = {"tracker": "the tracker", "coil": "the coil on the flange",
                  "marker": "the marker on the coil",
-                 "coil_centre": "the coil's centre (probe)"}.get(rule.get("moved"), "a tool")
+                 "coil_centre": "the coil's centre (probe)"}.get(str(rule.get("moved")),
+                                                                 "a tool")
         k = rule.get("pose")
         return (f"a step in time: {moved} moved at pose {k} (by {rule.get('delta_mm', 0):.2f} "
                 f"mm, {rule.get('delta_deg', 0):.2f}°)",
