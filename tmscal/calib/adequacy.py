@@ -41,8 +41,9 @@ both the joints and the tracker fire (an affine tracker distortion absorbs much 
 error over a small workspace), the one whose model lowers the residual variance more (the
 larger ``ratio``: held out for the joints, in-sample for the tracker). ``chi2_per_dof``
 is the rigid model's residual variance in units of the noise the likely cause's model
-leaves (the variance ratio; ≈ 1 when adequate) and ``p_value`` that cause's adjusted p-value (adequate: the smallest). Measured error rates:
-``benchmarks/adequacy.py`` (docs/adequacy.md).
+leaves (the variance ratio; ≈ 1 when adequate) and ``p_value`` that cause's adjusted
+p-value (adequate: the smallest). Measured error rates: ``benchmarks/adequacy.py``
+(docs/adequacy.md).
 """
 
 from __future__ import annotations
