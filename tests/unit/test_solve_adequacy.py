@@ -34,6 +34,10 @@ def _session(n: int = 40, seed: int = 7, sigma: float = 0.05, scale: float = 1.0
     cmd = d["commanded"]
     if mistake == "inverted":
         B, C = np.linalg.inv(B), np.linalg.inv(C)
+    elif mistake == "inverted_robot":
+        A = np.linalg.inv(A)
+    elif mistake == "metres_robot":
+        A[:, :3, 3] /= 1000.0
     elif mistake == "metres":
         B[:, :3, 3] /= 1000.0
         C[:, :3, 3] /= 1000.0
@@ -71,6 +75,8 @@ def test_json_keys() -> None:
 
 @pytest.mark.parametrize("mistake,cause", [("inverted", "inverted_tracker"),
                                            ("metres", "metres_tracker"),
+                                           ("inverted_robot", "inverted_robot"),
+                                           ("metres_robot", "metres_robot"),
                                            ("repeated", "repeated"),
                                            ("late", "late_frames")])
 def test_each_mistake_is_named(mistake: str, cause: str) -> None:
