@@ -187,15 +187,33 @@ def _ls(G: np.ndarray, g: np.ndarray, s: float) -> tuple[float, np.ndarray, bool
     return float(max(s + g @ p, 0.0)), p, ok
 
 
+def _exact_step(fr: dg.Frames, noise: dg.NoiseModel, block: str, k: int
+                ) -> tuple[float, np.ndarray, float, float] | None:
+    """(F, the change between the sides [v mm; ω rad], RSS of one change for all, RSS of one
+    per side) of ``block`` stepping at k, fitted by ``diagnose.fit``; None if undetermined."""
+    base = dg.fit(fr, noise, (block,))
+    sides = [dg.fit(subset(fr, sl), noise, (block,)) for sl in (slice(0, k), slice(k, fr.n))]
+    if not (base.rank_ok and all(f.rank_ok for f in sides)):
+        return None
+    m = fr.n * 6 * len(fr.bodies)
+    rss = sides[0].rss + sides[1].rss
+    F = max(base.rss - rss, 0.0) / 6 / max(rss / (m - 12), 1e-300)
+    D = np.linalg.inv(sides[0].delta(block)) @ sides[1].delta(block)
+    return float(F), dg._xi(D), base.rss, rss
+
+
 def step_rule(fr: dg.Frames, noise: dg.NoiseModel, min_segment: int = MIN_SEGMENT
               ) -> Rule | None:
     """A tool moved during the session (module docstring): every step position k with
     ``min_segment`` poses on each side, each block's change fitted on each side by the
     linearised least squares of the whitened residuals (one Jacobian per pose and block,
-    cumulative sums: every k costs the same as one fit); None when the session is too short.
+    cumulative sums: every k costs the same as one fit), then at the k found each block
+    fitted exactly (``diagnose.fit`` on each side); None when the session is too short.
     ``detail``: ``pose`` (the first pose after the step: the session index when
     ``fr.indices`` has them), ``position`` (its place among the usable poses), ``moved``
-    (``diagnose`` hypothesis), ``delta_mm``, ``delta_deg`` (the change between the sides)."""
+    (``diagnose`` hypothesis), ``delta_mm``, ``delta_deg`` (the change between the sides),
+    ``runner_up`` (the next block's hypothesis and its largest F: on a plan of small
+    rotations a tracker move and a coil re-seat are close)."""
     n = fr.n
     if n < 2 * min_segment + 1:
         return None
@@ -204,6 +222,7 @@ def step_rule(fr: dg.Frames, noise: dg.NoiseModel, min_segment: int = MIN_SEGMEN
     m = n * q
     ks = range(min_segment, n - min_segment + 1)
     best: tuple[float, str, int, np.ndarray, float, float] | None = None
+    per_block: dict[str, float] = {}
     for b in blocks:
         w, J = _pose_jacobians(fr, noise, b)
         Gi = np.einsum("nqa,nqb->nab", J, J)
@@ -220,18 +239,32 @@ def step_rule(fr: dg.Frames, noise: dg.NoiseModel, min_segment: int = MIN_SEGMEN
                 continue
             rss = r1 + r2
             F = max(rss0 - rss, 0.0) / 6 / max(rss / (m - 12), 1e-300)
+            per_block[b] = max(per_block.get(b, 0.0), F)
             if best is None or F > best[0]:
                 best = (F, b, k, p2 - p1, rss0, rss)
     if best is None:
         return None
     F, b, k, dp, rss0, rss1 = best
+    exact = {}  # at the step found, every block fitted exactly (a tracker turned about its
+    for bb in blocks:  # own origin, 1.5 m away, is far from linear at the poses)
+        got = _exact_step(fr, noise, bb, k)
+        if got is not None:
+            exact[bb] = got
+    if exact:
+        b = max(exact, key=lambda bb: exact[bb][0])
+        F, dp, rss0, rss1 = exact[b]
+        per_block = {bb: v[0] for bb, v in exact.items()}
     ratio = (rss0 / (m - 6)) / max(rss1 / (m - 12), 1e-300)
     pose = int(fr.indices[k]) if fr.indices is not None else int(k)
+    others = sorted((v, h) for h, v in per_block.items() if h != b)
+    runner = None if not others else {"moved": dg.HYPOTHESIS_OF[others[-1][1]],
+                                      "statistic": float(others[-1][0])}
     return Rule("tool_moved", float(F), (6, m - 12), _f_sf(F, 6, m - 12), float(ratio),
                 multiplicity=len(ks) * len(blocks),
                 detail={"pose": pose, "position": int(k), "moved": dg.HYPOTHESIS_OF[b],
                         "delta_mm": float(np.linalg.norm(dp[:3])),
-                        "delta_deg": float(np.degrees(np.linalg.norm(dp[3:])))})
+                        "delta_deg": float(np.degrees(np.linalg.norm(dp[3:]))),
+                        "runner_up": runner})
 
 
 def kinematics_rule(cv: dict[str, Any]) -> Rule | None:

@@ -25,8 +25,8 @@ def adequacy_text(adequacy: dict[str, Any] | None) -> str:
     cause = adequacy.get("likely_cause")
     ratio = adequacy.get("chi2_per_dof")
     stat = (f"residual variance {ratio:.3g}× the noise its model leaves, " if ratio else "")
-    lines = ["WARNING: the rigid hand/eye model does not explain this session; do not use "
-             "the calibration until this is fixed (docs/adequacy.md)"]
+    lines = _wrap("WARNING: the rigid hand/eye model does not explain this session; do not "
+                  "use the calibration until this is fixed (docs/adequacy.md)", "", "  ")
     lines += _wrap(f"likely cause: {adequacy.get('message') or cause} "
                    f"({stat}p = {adequacy.get('p_value', 0):.2g} after Bonferroni over "
                    f"{len(adequacy.get('rules', []))} rules)", "  ", "    ")

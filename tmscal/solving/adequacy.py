@@ -56,16 +56,19 @@ def cause_text(adequacy: dict[str, Any], session: str = "SESSION") -> tuple[str,
                "late_frames": "pair each robot pose with the next tracker reading, or "
                               "re-record with a longer settle before each reading",
                "early_frames": "pair each robot pose with the previous tracker reading"}[cause]
-        return (f"{what}: corrected, the residuals fall {rule.get('ratio') or 0:.0f}× "
-                "(variance)", fix)
+        return (f"{what} (corrected, they are explained)", fix)
     if cause == "tool_moved":
-        moved = {"tracker": "the tracker", "coil": "the coil on the flange",
-                 "marker": "the marker on the coil",
-                 "coil_centre": "the coil's centre (probe)"}.get(str(rule.get("moved")),
-                                                                 "a tool")
+        names = {"tracker": "the tracker", "coil": "the coil on the flange",
+                 "marker": "the marker on the coil", "coil_centre": "the coil's centre (probe)"}
+        moved = names.get(str(rule.get("moved")), "a tool")
         k = rule.get("pose")
+        ru = rule.get("runner_up") or {}
+        alt = ""
+        if ru and ru.get("statistic", 0) > 0.8 * float(rule.get("statistic") or 0):
+            alt = (f"; or {names.get(str(ru.get('moved')), 'another tool')}, nearly as "
+                   f"likely: F {ru['statistic']:.3g} against {rule.get('statistic'):.3g}")
         return (f"a step in time: {moved} moved at pose {k} (by {rule.get('delta_mm', 0):.2f} "
-                f"mm, {rule.get('delta_deg', 0):.2f}°)",
+                f"mm, {rule.get('delta_deg', 0):.2f}°{alt})",
                 f"fix it in place and re-record from pose {k}, or solve the poses on one side "
                 f"only (tmscal solve {s} --train {rule.get('position')} holds out the rest)")
     if cause == "kinematics":
