@@ -181,9 +181,12 @@ def _pose_jacobians(fr: dg.Frames, noise: dg.NoiseModel, block: str
 def _ls(G: np.ndarray, g: np.ndarray, s: float) -> tuple[float, np.ndarray, bool]:
     """RSS and step of the linear least squares min ‖w + J p‖² from its sums G = JᵀJ,
     g = Jᵀw, s = wᵀw; whether G is well conditioned."""
-    sv = np.linalg.svd(G, compute_uv=False)
-    ok = bool(sv[-1] > dg.RANK_TOL * max(sv[0], 1e-300))
-    p = -np.linalg.lstsq(G, g, rcond=None)[0]
+    d = np.sqrt(np.maximum(np.diag(G), 1e-300))  # column scaling (mm and rad differ)
+    Gs = G / d[:, None] / d[None, :]
+    sv = np.linalg.svd(Gs, compute_uv=False)
+    # G = JᵀJ: its singular values are J's squared; J's condition is diagnose's criterion
+    ok = bool(np.sqrt(max(sv[-1], 0.0)) > dg.RANK_TOL * np.sqrt(max(sv[0], 1e-300)))
+    p = -np.linalg.lstsq(Gs, g / d, rcond=None)[0] / d
     return float(max(s + g @ p, 0.0)), p, ok
 
 

@@ -107,8 +107,8 @@ def session_adequacy(session: Session, cal: Calibration) -> dict[str, Any]:
         rules.append(aq.mistake_rule(name, A0, B0, C0, _rigid_solver, as_solved))
     step = aq.step_rule(fr, noise)
     if step is None:
-        notes.append(f"tool_moved: {fr.n} poses are too few for two segments of "
-                     f"{aq.MIN_SEGMENT}")
+        notes.append(f"tool_moved: not tested ({fr.n} poses: too few for two segments of "
+                     f"{aq.MIN_SEGMENT}, or no change determined by them)")
     rules.append(step)
     rules.append(_kinematics(session, cal, A0, B0, C0, idx, notes))
     rules.append(_distortion(cal, fr, noise, notes))
