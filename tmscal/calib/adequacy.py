@@ -185,9 +185,10 @@ def _ls(G: np.ndarray, g: np.ndarray, s: float) -> tuple[float, np.ndarray, bool
     Gs = G / d[:, None] / d[None, :]
     sv = np.linalg.svd(Gs, compute_uv=False)
     # G = JᵀJ: its singular values are J's squared; J's condition is diagnose's criterion
-    ok = bool(np.sqrt(max(sv[-1], 0.0)) > dg.RANK_TOL * np.sqrt(max(sv[0], 1e-300)))
+    lo, hi = float(sv[-1]), float(sv[0])
+    ok = bool(np.sqrt(max(lo, 0.0)) > dg.RANK_TOL * np.sqrt(max(hi, 1e-300)))
     p = -np.linalg.lstsq(Gs, g / d, rcond=None)[0] / d
-    return float(max(s + g @ p, 0.0)), p, ok
+    return max(float(s + g @ p), 0.0), p, ok
 
 
 def _exact_step(fr: dg.Frames, noise: dg.NoiseModel, block: str, k: int
