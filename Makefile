@@ -74,6 +74,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/kinematics.py --noise-scale 2 --skip-sim --ladder 40
 	$(BIN)/python benchmarks/kinematics_ratio.py
 	$(BIN)/python benchmarks/ml_selection.py
+	$(BIN)/python benchmarks/adequacy.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5
 	$(BIN)/python benchmarks/install_size.py
 	$(BIN)/python benchmarks/check_figures.py

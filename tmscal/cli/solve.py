@@ -245,6 +245,9 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
         if kin_file is not None:
             click.echo(f"robot poses A recomputed from the recorded joints with {kin_file}\n")
         click.echo(format_result(res, verbose=verbose))
+        from ..report.adequacy_text import adequacy_text
+        if warn := adequacy_text(res.adequacy):
+            click.echo("\n" + warn)
         if pred is not None:
             click.echo("\n" + pred[1])
         for f in (output, plot):

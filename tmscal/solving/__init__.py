@@ -30,6 +30,9 @@ it imports none of them (docs/architecture.md). Its errors name the arguments of
   session (Joubair et al. 2016; the arm written in a form that does not depend on the kept
   columns; docs/selfcal.md, "Running it").
 - :mod:`.outliers`: the robust rule that names outlier poses (Leys et al. 2013).
+- :mod:`.adequacy`: ``session_adequacy``, whether the rigid model explains a solve's session
+  (the rules of ``calib.adequacy`` on its poses; the likely cause and its fix;
+  docs/adequacy.md), ``SolveResult.adequacy``.
 
 Frames: A = base_from_flange, B = tracker_from_marker, C = tracker_from_probe,
 X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.

@@ -25,6 +25,7 @@ from ..calib.metrics import body_errors
 from ..calib.study import cross_validate, per_pose_options
 from ..errors import CalibrationError
 from ..session import Session, plain
+from .adequacy import session_adequacy
 from .kinematics import (
     applied_arrays,
     choose_arm,
@@ -141,6 +142,10 @@ class SolveResult:
     #: was solved on, ``NoiseModel.to_json``): what the daily check's diagnosis and
     #: ``--update`` test against (docs/lab-day.md); None when it could not be estimated
     noise_model: dict[str, Any] | None = None
+    #: can the rigid model explain the session? (``adequacy.session_adequacy``:
+    #: chi2_per_dof, p_value, verdict, likely_cause, the rules, message, fix;
+    #: docs/adequacy.md); None when not asked (``adequacy=False``)
+    adequacy: dict[str, Any] | None = None
     #: the calibration these figures are of (X, Y, Z and everything the solver returned)
     calibration: Calibration | None = field(default=None, repr=False, compare=False)
 
@@ -159,7 +164,7 @@ class SolveResult:
         if self.truth is not None:
             out["truth"] = self.truth
         for k in ("uncertainty", "distortion", "options", "arm", "nominal", "prediction",
-                  "noise_model"):
+                  "noise_model", "adequacy"):
             if getattr(self, k) is not None:
                 out[k] = plain(getattr(self, k))
         return out
@@ -217,7 +222,8 @@ def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
           arm: str | None = None, level: str = "auto", tolerances: Tolerances | None = None,
           train: int | None = None, folds: int = 5, in_sample: bool = False,
           orthonormal: bool = False, options: dict[str, Any] | None = None,
-          kinematics_source: str = "the kinematics file") -> SolveResult:
+          kinematics_source: str = "the kinematics file", adequacy: bool = True
+          ) -> SolveResult:
     """Solve a session and evaluate the calibration (docs/methods.md): the one call of
     ``tmscal solve``, by named arguments, e.g. ``solve(session, method="ml",
     kinematics="estimate")``. Returns one :class:`SolveResult`: the calibration
@@ -255,7 +261,12 @@ def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
     (``SolveResult.nominal``: before and after; a second solve, the only one). Raises
     CalibrationError for unusable data, bad counts, a pose without joints, an unknown arm;
     its message names the arguments (``kinematics='estimate'``, ``train=N``), which the CLI
-    words as its options."""
+    words as its options.
+
+    ``adequacy`` (default): whether the rigid model explains the session's poses
+    (``adequacy.session_adequacy``, docs/adequacy.md: a tool moved during the session,
+    residuals that follow the joints, a tracker scale pattern, a stale frame, inverted or
+    metre poses), ``SolveResult.adequacy``."""
     options = dict(options or {})
     estimate = isinstance(kinematics, str) and kinematics == "estimate"
     if kinematics is not None and not estimate and not isinstance(kinematics, Arm):
@@ -270,7 +281,7 @@ def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
     as_recorded = None
     if kinematics is not None:  # before: the same solve on the controller's poses
         before = solve(session, method=method, train=train, orthonormal=orthonormal,
-                       folds=folds, in_sample=in_sample, options=options)
+                       folds=folds, in_sample=in_sample, options=options, adequacy=False)
         as_recorded = {"errors_on": before.errors_on, "errors": before.errors,
                    "errors_sd": before.errors_sd, "truth": before.truth}
     given = None
@@ -356,6 +367,7 @@ def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
                                           per_pose_options(options, slice(0, n_solve), n)),
         noise_model=_noise_model(cal, A_eval[:n_solve], B[:n_solve],
                                  None if C is None else C[:n_solve]),
+        adequacy=session_adequacy(session, cal) if adequacy else None,
         calibration=cal)
     return res
 

@@ -79,7 +79,9 @@ def choose_level(heldout: dict[str, tuple[np.ndarray, np.ndarray] | None],
     from ``heldout`` {level: (e_t per held-out pose mm, whitened χ² per held-out pose) or
     None}, in the order simpler → richer, the levels' information criteria ``aic`` and the
     number of ``folds``. The table: {level: {"e_t_mm", "se_mm" (its standard error), "chi2"
-    (mean χ² per pose), "chi2_se", "folds"} or None}."""
+    (mean χ² per pose), "chi2_se", "folds", and beside "none" "gain_vs_none" (the mean over
+    poses of "none"'s held-out χ² minus this level's, the same poses) and its standard error
+    "gain_vs_none_se"} or None}."""
     def se(x: np.ndarray) -> float:
         return float(x.std(ddof=1) / np.sqrt(len(x)))
 
@@ -91,6 +93,12 @@ def choose_level(heldout: dict[str, tuple[np.ndarray, np.ndarray] | None],
     if not scored:
         return None, "", cv
     chi2 = {lv: h[1] for lv, h in scored.items()}
+    if "none" in chi2:  # the paired per-pose gain over the rigid model (the adequacy rule)
+        for lv, c in chi2.items():
+            if lv != "none" and len(c) == len(chi2["none"]) and len(c) > 1:
+                d = chi2["none"] - c
+                cv[lv]["gain_vs_none"] = float(d.mean())  # type: ignore[index]
+                cv[lv]["gain_vs_none_se"] = se(d)  # type: ignore[index]
     best = min(chi2, key=lambda lv: float(chi2[lv].mean()))
     reason = (f"held-out χ² {chi2[best].mean():.4g} per pose, the lowest of "
               + ", ".join(f"{lv} {c.mean():.4g}" for lv, c in chi2.items()))
