@@ -57,6 +57,7 @@ from scipy.stats import f as f_dist
 
 from ..errors import CalibrationError
 from . import diagnose as dg
+from .diagnose.model import _apply, _xi
 
 __all__ = ["ALPHA", "CAUSES", "MISTAKES", "Rule", "Adequacy", "subset", "noise_of",
            "step_rule", "kinematics_rule", "distortion_rule", "mistake_rule", "repeated_rule",
@@ -174,7 +175,7 @@ def _pose_jacobians(fr: dg.Frames, noise: dg.NoiseModel, block: str
     for j in range(6):
         p = np.zeros(6)
         p[j] = h
-        J[:, :, j] = (dg.residuals(dg._apply(fr, (block,), {block: p})) @ Wp.T - w0) / h
+        J[:, :, j] = (dg.residuals(_apply(fr, (block,), {block: p})) @ Wp.T - w0) / h
     return w0, J
 
 
@@ -203,7 +204,7 @@ def _exact_step(fr: dg.Frames, noise: dg.NoiseModel, block: str, k: int
     rss = sides[0].rss + sides[1].rss
     F = max(base.rss - rss, 0.0) / 6 / max(rss / (m - 12), 1e-300)
     D = np.linalg.inv(sides[0].delta(block)) @ sides[1].delta(block)
-    return float(F), dg._xi(D), base.rss, rss
+    return float(F), _xi(D), base.rss, rss
 
 
 def step_rule(fr: dg.Frames, noise: dg.NoiseModel, min_segment: int = MIN_SEGMENT

@@ -63,9 +63,6 @@ from .model import (
     pose_covariance,
     residuals,
 )
-from .model import (
-    _apply as _apply,  # one rigid change applied (the adequacy check's Jacobian)
-)
 from .noise import (
     BOOTSTRAP_METHODS,
     BOOTSTRAP_REPS,
