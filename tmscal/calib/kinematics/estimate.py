@@ -143,47 +143,66 @@ class _Problem:
 
     def evaluate(self, s: _State, jac: bool = True
                  ) -> tuple[np.ndarray, np.ndarray | None]:
-        """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None)."""
-        n = len(self.q)
+        """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None).
+
+        The Jacobian is whitened block by block as it is built: with L the whitener (q, q)
+        of a pose's q = 6·bodies rows (shared or per pose) and L_b its columns of body b,
+        the columns of W_b are L_b ∂r_b/∂W_b, Z's Σ_b L_b ∂r_b/∂Z, and the deviations'
+        (Σ_b L_b ∂r_b/∂ξ) J_k: products of (q, 6) blocks, written into the one (m, P) array
+        (no whitening of the wide matrix, no copy of it)."""
+        n, nb, P = len(self.q), self.nb, self.n_params
+        q = 6 * nb
         chain = self.chain(s)
         # the flange poses by the chain's product; the deviations' twists only with the
         # Jacobian (the damping's trial steps need none: half the evaluations)
         A = base_from_flange(chain, self.q)
-        Jk = deviation_twists(chain, self.q, self.names)[1] if jac else None
+        Jk = None if not jac else deviation_twists(chain, self.q, self.names)[1] \
+            if self.names else np.zeros((n, 6, 0))
         R_A = A[:, :3, :3]
-        res = np.zeros((n, 6 * self.nb))
-        J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
+        res = np.zeros((n, q))
+        m_w = 6 * n if self.wrench is not None and s.w is not None else 0
+        J = np.zeros((n * q + m_w + len(self.names), P)) if jac else None
+        Jt = None if J is None else J[:n * q].reshape(n, q, P)   # a view: the tracker's rows
+        K = np.zeros((n, q, 6)) if jac and self.names else None  # Σ_b L_b ∂r_b/∂ξ
+        zc = slice(6 * nb, 6 * nb + 6)
         for b, (W, N) in enumerate(zip(s.Ws, self._measured(s.g), strict=True)):
-            br = body_residual(A, W, s.Z, N, J is not None, flange=bool(self.names))
+            br = body_residual(A, W, s.Z, N, Jt is not None, flange=K is not None)
             rows = slice(6 * b, 6 * b + 6)
             res[:, rows] = br.r
-            if J is None:
+            if Jt is None:
                 continue
             assert br.dW is not None and br.dZ is not None
-            J[:, rows, 6 * b:6 * b + 6] = br.dW
-            J[:, rows, 6 * self.nb:6 * self.nb + 6] = br.dZ
-            if br.dA is not None and Jk is not None:  # the arm: A' = A exp(ξ), ξ = Jk δ
-                J[:, rows, self.n_xyz:] = br.dA @ Jk
-        if J is not None and self.n_g:  # the distortion's few columns by central differences
-            c0 = 6 * self.nb + self.n_z
+            Lb = self.whiten[..., :, rows]                      # (q, 6) or (n, q, 6)
+            Jt[:, :, rows] = Lb @ br.dW
+            Jt[:, :, zc] += Lb @ br.dZ
+            if K is not None and br.dA is not None:  # the arm: A' = A exp(ξ), ξ = Jk δ
+                K += Lb @ br.dA
+        if Jt is not None and K is not None and Jk is not None:
+            Jt[:, :, self.n_xyz:] = K @ Jk
+        if Jt is not None and self.n_g:  # the distortion's few columns by central differences
+            c0 = 6 * nb + self.n_z
             for k in range(self.n_g):
                 e = np.zeros(self.n_g)
                 e[k] = G_STEP
                 rp = self._raw(_State(s.Ws, s.Z, s.delta, s.g + e), A)
                 rm = self._raw(_State(s.Ws, s.Z, s.delta, s.g - e), A)
-                J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
+                Jt[:, :, c0 + k] = _apply(self.whiten, (rp - rm) / (2 * G_STEP))
         rw = _apply(self.whiten, res).ravel()
         prior = s.delta / self.tau
-        wr, Jwr = (np.zeros(0), np.zeros((0, self.n_params))) if self.wrench is None \
-            or s.w is None else wm.wrench_block(s.w, self.wrench, R_A, Jk, self.c_w,
-                                                self.n_xyz, self.n_params, J is not None)
+        if m_w:
+            assert self.wrench is not None and s.w is not None
+            wr, Jwr = wm.wrench_block(s.w, self.wrench, R_A, Jk, self.c_w, self.n_xyz, P,
+                                      J is not None)
+        else:
+            wr, Jwr = np.zeros(0), None
         r = np.concatenate([rw, wr, prior])
         if J is None:
             return r, None
-        Jw = _apply_jac(self.whiten, J).reshape(-1, self.n_params)
-        Jp = np.zeros((len(self.names), self.n_params))
-        Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
-        return r, np.concatenate([Jw, Jwr, Jp], axis=0)
+        if Jwr is not None:
+            J[n * q:n * q + m_w] = Jwr
+        k = len(self.names)
+        J[n * q + m_w:, self.n_xyz:] = np.diag(1.0 / self.tau) if k else 0.0
+        return r, J
 
     def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
         """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
@@ -203,10 +222,6 @@ class _Problem:
 
 def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
     return r @ whiten.T if whiten.ndim == 2 else np.einsum("nij,nj->ni", whiten, r)
-
-
-def _apply_jac(whiten: np.ndarray, J: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,njk->nik", whiten, J) if whiten.ndim == 2 else whiten @ J
 
 
 def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int,
