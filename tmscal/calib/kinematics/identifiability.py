@@ -119,7 +119,10 @@ def _compressed(Jd: np.ndarray) -> np.ndarray:
     others' span, singular values and right singular vectors), which R keeps, so the m rows
     are reduced to k once, in O(m k²): what follows costs nothing in the poses."""
     m, k = Jd.shape
-    return np.linalg.qr(Jd, mode="r") if m > k else Jd
+    if m <= k:
+        return Jd
+    R: np.ndarray = np.linalg.qr(Jd, mode="r")  # type: ignore[assignment]
+    return R
 
 
 def _residual_of(M: np.ndarray, J: np.ndarray) -> np.ndarray:
