@@ -73,6 +73,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/kinematics.py --first-seed 4 --skip-sim --ladder 15,20,40
 	$(BIN)/python benchmarks/kinematics.py --noise-scale 2 --skip-sim --ladder 40
 	$(BIN)/python benchmarks/kinematics_ratio.py
+	$(BIN)/python benchmarks/kinematics_cost.py
 	$(BIN)/python benchmarks/ml_selection.py
 	$(BIN)/python benchmarks/adequacy.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5

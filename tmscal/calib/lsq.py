@@ -73,6 +73,7 @@ def levenberg_marquardt(
         max_evaluations: int | None = None,
         small_step: Callable[[S, np.ndarray], bool] | None = None,
         solved: Callable[[np.ndarray], bool] | None = None,
+        on_iteration: Callable[[int, float], None] | None = None,
 ) -> Solution[S]:
     """Minimise ‖r(state)‖² from ``state``.
 
@@ -82,7 +83,10 @@ def levenberg_marquardt(
     rad, …; on a manifold, its exponential map). ``max_step`` caps the largest |Δ_j| (the step
     is shrunk as a whole). See the module docstring for the iteration and the stopping rules;
     ``max_iter`` counts Jacobians, ``max_evaluations`` (None: no cap) every call of
-    ``evaluate``, trials included (a cap on the cost of a problem that does not converge)."""
+    ``evaluate``, trials included (a cap on the cost of a problem that does not converge).
+    ``on_iteration(it, cost)``, when given, is called after each accepted step with the
+    iteration's number (from 1) and the cost rᵀr it reached (a progress report; it does not
+    steer the loop)."""
     cap = np.inf if max_evaluations is None else max_evaluations
     r, J = evaluate(state, True)
     evals = 1
@@ -117,6 +121,8 @@ def levenberg_marquardt(
                 or float(np.linalg.norm(dx * d)) < xtol
                 or (small_step is not None and small_step(state, dx)))
         state, cost, lam = cand, c_new, max(lam / lam_down, LAM_MIN)
+        if on_iteration is not None:
+            on_iteration(it, cost)
         r, J = evaluate(state, True)
         evals += 1
         if evals >= cap and not (done or (solved is not None and solved(r))):

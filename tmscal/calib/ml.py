@@ -304,7 +304,8 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
              tools_mm: Any = None, criterion: str = "lrt", noise: str = "estimate",
              scale_covariance: bool = True, max_iter: int = 50, kinematics: str | None = None,
              joints: Any = None, arm: Any = None, level: str = "auto", tolerances: Any = None,
-             folds: int = 5, wrench: Any = None, wrench_sigma: Any = None) -> Calibration:
+             folds: int = 5, wrench: Any = None, wrench_sigma: Any = None,
+             progress: Any = None) -> Calibration:
     """Maximum-likelihood X, (Y,) Z with tracker distortion ``distortion`` ("auto": chosen
     by ``criterion``, "lrt" F tests by default; "none", "scale", "axis", "affine"); see the
     module docstring for the model, the noise options and the parameters. ``noise``
@@ -323,7 +324,8 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
     the kinematic fit by default, :mod:`tmscal.calib.kinematics.noise`). ``wrench`` (n, 6)
     [N, N·m] and ``wrench_sigma`` (N, N·m): a wrist sensor's averaged wrench per pose, whose
     gravity rows join that likelihood (docs/kinematics.md, "Wrench rows"); only with
-    ``kinematics="estimate"``."""
+    ``kinematics="estimate"``; ``progress`` the kinematic estimate's progress callback
+    (:data:`tmscal.calib.kinematics.estimate.Progress`), only with it."""
     if kinematics is not None:
         from .kinematics.solve import solve_with_kinematics
 
@@ -336,7 +338,10 @@ def ml_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, orthonormal: bo
             robot_sigma_mm=robot_sigma_mm, robot_sigma_deg=robot_sigma_deg,
             tracker_sigma_mm=tracker_sigma_mm, tracker_sigma_deg=tracker_sigma_deg,
             tracker_cov=tracker_cov, spreads=spreads, orthonormal=orthonormal, noise=noise,
-            wrench=wrench, wrench_sigma=wrench_sigma)
+            wrench=wrench, wrench_sigma=wrench_sigma, progress=progress)
+    if progress is not None:
+        raise CalibrationError("method 'ml': progress= reports the kinematic estimate; it goes "
+                               "with kinematics='estimate'")
     if wrench is not None:
         raise CalibrationError("method 'ml': the wrench rows go with kinematics='estimate' "
                                "(the wrench sees the arm, not X, Y, Z)")

@@ -22,13 +22,14 @@ RMS angle (deg) of a pose's samples about their mean (``tmscal.acquisition.sampl
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import shutil
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, TextIO
 
 from tqdm import tqdm
@@ -37,7 +38,8 @@ from tqdm.contrib.logging import logging_redirect_tqdm
 from ..acquisition.progress import Progress
 from ..escape import visible
 
-__all__ = ["AcquireProgress", "fit", "spread_text", "stderr_to_log", "isatty", "terminal_width"]
+__all__ = ["AcquireProgress", "FitBar", "with_fit_bar", "fit", "spread_text", "stderr_to_log",
+           "isatty", "terminal_width"]
 
 PLAIN_WIDTH = 80
 _SEP = "  "
@@ -189,6 +191,52 @@ class AcquireProgress(Progress):
         for bar in reversed(self._bars):
             bar.close()
         self._bars = []
+
+
+class FitBar:
+    """A long fit's progress bar on stderr: called as ``progress(done, total, what)`` (fits
+    done of ``total``, the one running and its iteration; the kinematic estimate's
+    :data:`tmscal.calib.kinematics.estimate.Progress`, ``solving.solve``'s ``progress``). The
+    tqdm bar appears at the first call, only on a terminal (tqdm's ``disable=None``), and is
+    removed by :meth:`close`, e.g.::
+
+        solve 7/23 fits |███      | 30% [00:04<00:09] kinematics: full, fold 2/5: LM iteration 3
+    """
+
+    def __init__(self, desc: str = "solve", stream: TextIO | None = None) -> None:
+        self.desc, self.stream = desc, stream
+        self._bar: Any = None
+
+    def __call__(self, done: int, total: int, what: str) -> None:
+        if self._bar is None:
+            label = self.desc.replace("{", "{{").replace("}", "}}")
+            self._bar = tqdm(total=total, unit="fit", disable=None, file=self.stream or sys.stderr,
+                             leave=False, dynamic_ncols=True,
+                             bar_format=label + " {n_fmt}/{total_fmt} fits |{bar}| "
+                                                "{percentage:3.0f}% [{elapsed}<{remaining}] {desc}")
+        bar = self._bar
+        if bar.disable:
+            return
+        bar.total, bar.n = total, done
+        bar.set_description_str(what, refresh=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+
+def with_fit_bar(fn: Callable[..., Any], desc: str = "solve") -> Callable[..., Any]:
+    """``fn`` called with ``progress=`` a :class:`FitBar`, closed when it returns or raises
+    (before the CLI prints an error)."""
+    @functools.wraps(fn)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        bar = FitBar(desc)
+        try:
+            return fn(*args, progress=bar, **kwargs)
+        finally:
+            bar.close()
+    return run
 
 
 @contextlib.contextmanager

@@ -183,6 +183,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     from ..session import sha256_of
     from ..solving.solve import pose_residuals
     from ..solving.solve import solve as solve_service
+    from .progress import with_fit_bar
 
     estimate = kinematics == "estimate"
     kin_file = kinematics if isinstance(kinematics, Path) else None
@@ -219,7 +220,7 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     session = read_session_file(session_file, strict)
     if handheld_pose is not None:
         opts.update(_handheld_options(session, handheld_pose))
-    res = solve_service(session, method=method.lower(), train=train,
+    res = with_fit_bar(solve_service)(session, method=method.lower(), train=train,
                         orthonormal=orthonormal, folds=folds, in_sample=in_sample,
                         options=opts, arm=arm, level=level,
                         tolerances=_tolerances(tolerance_length, tolerance_angle, estimate),

@@ -9,6 +9,7 @@ X = flange_from_marker, Y = flange_from_probe, Z = base_from_tracker; 4×4 mm.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -218,12 +219,30 @@ def _spreads(session: Session, indices: list[int], bodies: list[str]
     return [{"spread": p.spread, "samples": p.samples} for p in use]
 
 
+class _Stages:
+    """One progress count (``solve``'s ``progress``) over the kinematic estimate's fits and
+    the ``folds`` solves of its cross-validated errors (each one fit of the chosen level)."""
+
+    def __init__(self, report: Callable[[int, int, str], None], folds: int) -> None:
+        self.report, self.folds, self.fits, self.fold = report, folds, 1, 0
+
+    def estimate(self, done: int, total: int, what: str) -> None:
+        self.fits = total
+        self.report(done, total + self.folds, f"kinematics: {what}")
+
+    def errors(self, done: int, total: int, what: str) -> None:
+        self.report(self.fits + self.fold + done // max(total, 1), self.fits + self.folds,
+                    f"errors, fold {min(self.fold + 1, self.folds)}/{self.folds}: {what}")
+        if done >= total:
+            self.fold += 1
+
+
 def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
           arm: str | None = None, level: str = "auto", tolerances: Tolerances | None = None,
           train: int | None = None, folds: int = 5, in_sample: bool = False,
           orthonormal: bool = False, options: dict[str, Any] | None = None,
-          kinematics_source: str = "the kinematics file", adequacy: bool = True
-          ) -> SolveResult:
+          kinematics_source: str = "the kinematics file", adequacy: bool = True,
+          progress: Callable[[int, int, str], None] | None = None) -> SolveResult:
     """Solve a session and evaluate the calibration (docs/methods.md): the one call of
     ``tmscal solve``, by named arguments, e.g. ``solve(session, method="ml",
     kinematics="estimate")``. Returns one :class:`SolveResult`: the calibration
@@ -266,7 +285,11 @@ def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
     ``adequacy`` (default): whether the rigid model explains the session's poses
     (``adequacy.session_adequacy``, docs/adequacy.md: a tool moved during the session,
     residuals that follow the joints, a tracker scale pattern, a stale frame, inverted or
-    metre poses), ``SolveResult.adequacy``."""
+    metre poses), ``SolveResult.adequacy``.
+
+    ``progress(done, total, what)``, with ``kinematics="estimate"``: called as its fits go
+    (the estimate's, :data:`tmscal.calib.kinematics.estimate.Progress`, then one per fold of
+    its cross-validated errors), counted together, e.g. for a progress bar."""
     options = dict(options or {})
     estimate = isinstance(kinematics, str) and kinematics == "estimate"
     if kinematics is not None and not estimate and not isinstance(kinematics, Arm):
@@ -326,14 +349,19 @@ def solve(session: Session, *, method: str = "qr36", kinematics: Any = None,
             options["wrench"] = ws[0]
             if not np.isnan(ws[1]).any():
                 options["wrench_sigma"] = np.maximum(ws[1], SIGMA_FLOOR)
+    stages = None if progress is None or not estimate else \
+        _Stages(progress, folds if train is None and not in_sample else 0)
     cal = solve_arrays(A[:n_solve], B[:n_solve], None if C is None else C[:n_solve], method=method,
-                orthonormal=orthonormal, **per_pose_options(options, slice(0, n_solve), n))
+                orthonormal=orthonormal, **per_pose_options(options, slice(0, n_solve), n),
+                **({} if stages is None else {"progress": stages.estimate}))
     if given is not None:
         cal.arm = given
     A_eval = A if estimate is False else cal.robot_poses(A, q)
     sd = cv = None
     if train is None and not in_sample:
         cv_opts = options if not estimate else {**options, "level": cal.arm.report["level"]}
+        if stages is not None:
+            cv_opts = {**cv_opts, "progress": stages.errors}
         r = cross_validate(A, B, C, method=method, k=folds, orthonormal=orthonormal,
                            **cv_opts)
         errors, sd = _nest(r["mean"]), _nest(r["sd"])

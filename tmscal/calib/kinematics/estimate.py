@@ -48,6 +48,7 @@ spreads), so for the noise estimate they are rows of known variance, as the prio
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -82,7 +83,14 @@ from .noise import (
 )
 
 __all__ = ["LEVELS", "Tolerances", "KinematicFit", "Combination", "level_parameters",
-           "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas"]
+           "fit_kinematics", "identifiability", "estimate_kinematics", "prior_sigmas",
+           "Progress"]
+
+#: a long fit's progress: ``progress(done, total, what)`` with ``done`` of ``total`` fits
+#: finished (each level on all poses, each of its cross-validation folds) and ``what`` the
+#: one running, its Levenberg–Marquardt iteration and cost (e.g. "full, fold 2/5: LM
+#: iteration 3, cost 1.2e+04"); called after each LM iteration and each fit
+Progress = Callable[[int, int, str], None]
 
 # --- residuals and their analytic Jacobian ---------------------------------------------------
 
@@ -135,43 +143,66 @@ class _Problem:
 
     def evaluate(self, s: _State, jac: bool = True
                  ) -> tuple[np.ndarray, np.ndarray | None]:
-        """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None)."""
-        n = len(self.q)
-        A, Jk = deviation_twists(self.chain(s), self.q, self.names)
+        """(whitened residuals incl. the prior rows (m,), Jacobian (m, P) or None).
+
+        The Jacobian is whitened block by block as it is built: with L the whitener (q, q)
+        of a pose's q = 6·bodies rows (shared or per pose) and L_b its columns of body b,
+        the columns of W_b are L_b ∂r_b/∂W_b, Z's Σ_b L_b ∂r_b/∂Z, and the deviations'
+        (Σ_b L_b ∂r_b/∂ξ) J_k: products of (q, 6) blocks, written into the one (m, P) array
+        (no whitening of the wide matrix, no copy of it)."""
+        n, nb, P = len(self.q), self.nb, self.n_params
+        q = 6 * nb
+        chain = self.chain(s)
+        # the flange poses by the chain's product; the deviations' twists only with the
+        # Jacobian (the damping's trial steps need none: half the evaluations)
+        A = base_from_flange(chain, self.q)
+        Jk = None if not jac else deviation_twists(chain, self.q, self.names)[1] \
+            if self.names else np.zeros((n, 6, 0))
         R_A = A[:, :3, :3]
-        res = np.zeros((n, 6 * self.nb))
-        J = np.zeros((n, 6 * self.nb, self.n_params)) if jac else None
+        res = np.zeros((n, q))
+        m_w = 6 * n if self.wrench is not None and s.w is not None else 0
+        J = np.zeros((n * q + m_w + len(self.names), P)) if jac else None
+        Jt = None if J is None else J[:n * q].reshape(n, q, P)   # a view: the tracker's rows
+        K = np.zeros((n, q, 6)) if jac and self.names else None  # Σ_b L_b ∂r_b/∂ξ
+        zc = slice(6 * nb, 6 * nb + 6)
         for b, (W, N) in enumerate(zip(s.Ws, self._measured(s.g), strict=True)):
-            br = body_residual(A, W, s.Z, N, J is not None, flange=bool(self.names))
+            br = body_residual(A, W, s.Z, N, Jt is not None, flange=K is not None)
             rows = slice(6 * b, 6 * b + 6)
             res[:, rows] = br.r
-            if J is None:
+            if Jt is None:
                 continue
             assert br.dW is not None and br.dZ is not None
-            J[:, rows, 6 * b:6 * b + 6] = br.dW
-            J[:, rows, 6 * self.nb:6 * self.nb + 6] = br.dZ
-            if br.dA is not None:  # the arm: A' = A exp(ξ) with ξ = Jk δ
-                J[:, rows, self.n_xyz:] = br.dA @ Jk
-        if J is not None and self.n_g:  # the distortion's few columns by central differences
-            c0 = 6 * self.nb + self.n_z
+            Lb = self.whiten[..., :, rows]                      # (q, 6) or (n, q, 6)
+            Jt[:, :, rows] = Lb @ br.dW
+            Jt[:, :, zc] += Lb @ br.dZ
+            if K is not None and br.dA is not None:  # the arm: A' = A exp(ξ), ξ = Jk δ
+                K += Lb @ br.dA
+        if Jt is not None and K is not None and Jk is not None:
+            Jt[:, :, self.n_xyz:] = K @ Jk
+        if Jt is not None and self.n_g:  # the distortion's few columns by central differences
+            c0 = 6 * nb + self.n_z
             for k in range(self.n_g):
                 e = np.zeros(self.n_g)
                 e[k] = G_STEP
                 rp = self._raw(_State(s.Ws, s.Z, s.delta, s.g + e), A)
                 rm = self._raw(_State(s.Ws, s.Z, s.delta, s.g - e), A)
-                J[:, :, c0 + k] = (rp - rm) / (2 * G_STEP)
+                Jt[:, :, c0 + k] = _apply(self.whiten, (rp - rm) / (2 * G_STEP))
         rw = _apply(self.whiten, res).ravel()
         prior = s.delta / self.tau
-        wr, Jwr = (np.zeros(0), np.zeros((0, self.n_params))) if self.wrench is None \
-            or s.w is None else wm.wrench_block(s.w, self.wrench, R_A, Jk, self.c_w,
-                                                self.n_xyz, self.n_params, J is not None)
+        if m_w:
+            assert self.wrench is not None and s.w is not None
+            wr, Jwr = wm.wrench_block(s.w, self.wrench, R_A, Jk, self.c_w, self.n_xyz, P,
+                                      J is not None)
+        else:
+            wr, Jwr = np.zeros(0), None
         r = np.concatenate([rw, wr, prior])
         if J is None:
             return r, None
-        Jw = _apply_jac(self.whiten, J).reshape(-1, self.n_params)
-        Jp = np.zeros((len(self.names), self.n_params))
-        Jp[:, self.n_xyz:] = np.diag(1.0 / self.tau)
-        return r, np.concatenate([Jw, Jwr, Jp], axis=0)
+        if Jwr is not None:
+            J[n * q:n * q + m_w] = Jwr
+        k = len(self.names)
+        J[n * q + m_w:, self.n_xyz:] = np.diag(1.0 / self.tau) if k else 0.0
+        return r, J
 
     def _raw(self, s: _State, A: np.ndarray) -> np.ndarray:
         """Unwhitened residuals (n, 6·bodies) at the flange poses A."""
@@ -193,17 +224,14 @@ def _apply(whiten: np.ndarray, r: np.ndarray) -> np.ndarray:
     return r @ whiten.T if whiten.ndim == 2 else np.einsum("nij,nj->ni", whiten, r)
 
 
-def _apply_jac(whiten: np.ndarray, J: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,njk->nik", whiten, J) if whiten.ndim == 2 else whiten @ J
-
-
-def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int
+def _levenberg_marquardt(prob: _Problem, s: _State, max_iter: int,
+                         on_iteration: Callable[[int, float], None] | None = None
                          ) -> tuple[_State, np.ndarray, np.ndarray, int]:
     """Minimise the whitened cost from s with the one least-squares loop
     (:func:`tmscal.calib.lsq.levenberg_marquardt`; converged when the cost falls by less than
     1e-12 of itself); returns (state, residuals, Jacobian, iterations)."""
     sol = levenberg_marquardt(lambda st, jac: prob.evaluate(st, jac=jac), s, prob.step,
-                              max_iter=max_iter, ftol=1e-12)
+                              max_iter=max_iter, ftol=1e-12, on_iteration=on_iteration)
     assert sol.jacobian is not None
     return sol.state, sol.residuals, sol.jacobian, sol.iterations
 
@@ -272,7 +300,10 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
                    distortion: str = "none",
                    moments: list[np.ndarray | None] | None = None,
                    wrench: wm.WrenchData | None = None,
-                   noise_mode: str = "estimate") -> KinematicFit:
+                   noise_mode: str = "estimate", *, warm: KinematicFit | None = None,
+                   identify: bool = True,
+                   on_iteration: Callable[[int, float], None] | None = None
+                   ) -> KinematicFit:
     """Fit one level from ``start`` = ([X0, (Y0)], Z0); ``noise`` holds ``ml``'s noise
     options (robot_sigma_mm, robot_sigma_deg, tracker_sigma_mm/deg, tracker_cov or
     spreads); ``distortion`` a tracker distortion model of ``ml`` ("none", "scale", "axis",
@@ -288,7 +319,14 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     (:mod:`tmscal.calib.kinematics.noise`), and the fit is repeated with them, until no
     factor changes by more than :data:`NOISE_TOL` (at most :data:`NOISE_ROUNDS` rounds); the
     covariance is then that of the estimated noise, unscaled, and the information criterion
-    includes the noise's log-determinant (the likelihood with the noise estimated)."""
+    includes the noise's log-determinant (the likelihood with the noise estimated).
+
+    ``warm``: a fit of the same level, distortion and rows (e.g. on all poses, for a fold of
+    them) whose X, Y, Z, δ, distortion and wrench model start the iteration instead of
+    ``start`` and zero deviations: the same minimum in fewer iterations. ``identify`` False
+    leaves the identifiability analysis out (``identified``, ``weak``, ``unidentified``
+    empty; a cross-validation fold needs only the estimate). ``on_iteration(it, cost)``: called
+    after each Levenberg–Marquardt iteration (:func:`tmscal.calib.lsq.levenberg_marquardt`)."""
     if not bodies:  # the force-sensor self-calibration: wrench rows only (no X, Y, Z)
         if wrench is None:
             raise CalibrationError("kinematics: no tracker poses and no wrenches: nothing "
@@ -305,14 +343,15 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     s = _State([W.copy() for W in start[0]], start[1].copy(), np.zeros(len(names)),
                np.zeros(DISTORTION_MODELS[distortion]),
                None if wrench is None
-               else wm.initial_wrench(wrench, base_from_flange(chain0, q)[:, :3, :3]))
+               else wm.initial_wrench(wrench, base_from_flange(chain0, q)[:, :3, :3])) \
+        if warm is None else _warm_state(warm, names, distortion, wrench is not None)
     its, cur, comp, rounds = 0, noise, None, 0
     m_t = len(q) * 6 * len(bodies)                      # the tracker's rows
     m = len(q) * 6 * (len(bodies) + (wrench is not None))  # every data row
     for _ in range(1 if flags.any() else 2):
         whiten = _whitener_for(s.Ws, cur, len(q))
         prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments, wrench)
-        s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
+        s, r, J, it = _levenberg_marquardt(prob, s, max_iter, on_iteration)
         its += it
     if flags.any():  # the noise from the residuals, then the fit with it, until it settles
         raw = _Problem(q, bodies, chain0, names, tau, np.eye(6 * len(bodies)), distortion,
@@ -324,7 +363,7 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
             cur = with_factors(cur, comp.theta)
             whiten = _whitener_for(s.Ws, cur, len(q))
             prob = _Problem(q, bodies, chain0, names, tau, whiten, distortion, moments, wrench)
-            s, r, J, it = _levenberg_marquardt(prob, s, max_iter)
+            s, r, J, it = _levenberg_marquardt(prob, s, max_iter, on_iteration)
             its += it
             if done:
                 break
@@ -364,11 +403,23 @@ def fit_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm, level: 
     if s.w is not None:
         fit.wrench = wm.wrench_report(s.w, np.sqrt(np.diag(P)[prob.c_w:prob.n_xyz] * sc),
                                    r[m - 6 * len(q):m])
-    if k:
+    if k and identify:
         fit.identified, fit.weak, fit.unidentified = identifiability(
             prob.names, prob.tau, s.delta, Jd, prob.n_xyz, prob.nb, bool(prob.n_g), sc,
             None if wrench is None else prob.c_w)
     return fit
+
+
+def _warm_state(fit: KinematicFit, names: list[str], distortion: str, wrench: bool) -> _State:
+    """The state of a fit (:func:`fit_kinematics`' ``warm``), checked to be of the same
+    problem."""
+    if fit.names != names or fit.distortion != distortion or (fit.wrench is None) == wrench:
+        raise CalibrationError("kinematics: a warm start needs a fit of the same level, "
+                               "distortion and rows")
+    Ws = [W.copy() for W in (fit.X, fit.Y) if W is not None]
+    Z = np.eye(4) if fit.Z is None else fit.Z.copy()
+    return _State(Ws, Z, fit.delta.copy(), g_of(distortion, fit.G),
+                  None if fit.wrench is None else fit.wrench["params"])
 
 
 # --- level selection --------------------------------------------------------------------------
@@ -434,7 +485,8 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
                         max_iter: int = 50, distortion: str = "none",
                         moments: list[np.ndarray | None] | None = None,
                         wrench: wm.WrenchData | None = None,
-                        noise_mode: str = "estimate") -> KinematicsResult:
+                        noise_mode: str = "estimate",
+                        progress: Progress | None = None) -> KinematicsResult:
     """Fit the level asked for, or with ``level="auto"`` every level of :data:`LEVELS` and
     keep the one with the lowest k-fold held-out χ² per pose (``folds`` interleaved folds;
     X, Y, Z and δ refitted on each training part; every level's held-out residuals whitened
@@ -444,30 +496,62 @@ def estimate_kinematics(q: np.ndarray, bodies: list[np.ndarray], chain0: Arm,
     each level's cross-validation fits take the noise that level estimated on all poses as
     given (the rig's noise does not change between folds; a REML per fold would cost k more
     noise loops per level and estimate two or three numbers from 4/5 of the poses, the same
-    numbers less well)."""
+    numbers less well). Each fold's fit starts from its level's fit on all poses (the same
+    minimum in a few iterations) and leaves out the identifiability analysis, which only the
+    fits on all poses report.
+
+    ``progress`` (:data:`Progress`): called as the fits go (1 with a level given, else one
+    per level and one per level and fold), e.g. for a progress bar."""
     opts: dict[str, Any] = {"distortion": distortion, "moments": moments}
-    if level != "auto":
-        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts,
-                             wrench=wrench, noise_mode=noise_mode)
-        return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
     n = len(q)
     k = max(2, min(folds, n // 4))
-    fits = {lv: fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
-                               wrench=wrench, noise_mode=noise_mode) for lv in LEVELS}
+    total = 1 if level != "auto" else len(LEVELS) * (1 + k)
+    done = 0
+
+    def report(what: str) -> Callable[[int, float], None] | None:
+        if progress is None:
+            return None
+        progress(done, total, what)
+        return lambda it, cost: progress(done, total, f"{what}: LM iteration {it}, cost "
+                                                      f"{cost:.4g}")
+
+    def finished(what: str) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total, f"{what}: done")
+
+    if level != "auto":
+        fit = fit_kinematics(q, bodies, chain0, level, start, noise, tol, max_iter, **opts,
+                             wrench=wrench, noise_mode=noise_mode,
+                             on_iteration=report(f"{level}, all {n} poses"))
+        finished(f"{level}, all {n} poses")
+        return KinematicsResult(fit, {level: fit}, {level: None}, f"level {level} as asked")
+    fits = {}
+    for lv in LEVELS:
+        fits[lv] = fit_kinematics(q, bodies, chain0, lv, start, noise, tol, max_iter, **opts,
+                                  wrench=wrench, noise_mode=noise_mode,
+                                  on_iteration=report(f"{lv}, all {n} poses"))
+        finished(f"{lv}, all {n} poses")
     weights = fits[LEVELS[-1]].noise_used  # the noise least inflated by the arm's error
     heldout = {}
     for lv in LEVELS:
         scores: list[tuple[np.ndarray, np.ndarray]] = []
-        for test in _folds(n, k):
+        for j, test in enumerate(_folds(n, k)):
             train = np.setdiff1d(np.arange(n), test)
+            what = f"{lv}, fold {j + 1}/{k}"
             try:
                 f = fit_kinematics(q[train], [N[train] for N in bodies], chain0, lv, start,
                                    _subset_noise(fits[lv].noise_used, train), tol, max_iter,
                                    **opts, noise_mode="given",
-                                   wrench=None if wrench is None else wrench.subset(train))
+                                   wrench=None if wrench is None else wrench.subset(train),
+                                   warm=fits[lv], identify=False, on_iteration=report(what))
             except CalibrationError:
+                done += k - j - 1   # the level's other folds are not fitted
+                finished(f"{what}: not identifiable")
                 scores = []
                 break
+            finished(what)
             held = [N[test] for N in bodies]
             scores.append((_heldout_e_t(f, q[test], held, moments),
                            _heldout_chi2(f, q[test], held, chain0,

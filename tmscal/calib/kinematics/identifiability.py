@@ -61,6 +61,7 @@ def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np
     :data:`tmscal.calib.kinematics.wrench.WRENCH_NAMES`), Z absorbs with the base tilt and
     X (Y) with the sensor rotation, as the wrench sees the same directions."""
     nx = n_xyz
+    Jd = _compressed(Jd)
     Jk = Jd[:, nx:] * tau                               # δ in tolerance units
     tol = 1e-7 * max(float(np.linalg.norm(Jk, 2)), 1e-300)
     Jp = _residual_of(Jd[:, :nx], Jk)
@@ -110,6 +111,18 @@ def identifiability(names: list[str], tau: np.ndarray, delta: np.ndarray, Jd: np
             unident.append(Combination(c.terms, 0.0, c.estimate, float(np.sqrt(vf)), why,
                                        c.vector))
     return ident, weak, unident
+
+
+def _compressed(Jd: np.ndarray) -> np.ndarray:
+    """R (k, k) of the thin QR Jd = Q R of a tall Jd (m, k), else Jd itself. Everything here
+    depends on Jd only through its columns' inner products (projections of columns onto
+    others' span, singular values and right singular vectors), which R keeps, so the m rows
+    are reduced to k once, in O(m k²): what follows costs nothing in the poses."""
+    m, k = Jd.shape
+    if m <= k:
+        return Jd
+    R: np.ndarray = np.linalg.qr(Jd, mode="r")  # type: ignore[assignment]
+    return R
 
 
 def _residual_of(M: np.ndarray, J: np.ndarray) -> np.ndarray:

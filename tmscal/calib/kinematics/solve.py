@@ -20,7 +20,7 @@ from ..calibration import Applied, Calibration
 from ..methods import solve
 from ..ml_model import DISTORTION_MODELS, tool_moment
 from .calibrated import ArmCalibration, controller_frame, spread_seeds
-from .estimate import LEVELS, KinematicFit, Tolerances, estimate_kinematics
+from .estimate import LEVELS, KinematicFit, Progress, Tolerances, estimate_kinematics
 from .model import Arm, base_from_flange
 from .wrench import WRENCH_NAMES, WRENCH_UNITS, WrenchData
 
@@ -106,7 +106,8 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
                           tracker_sigma_deg: float | None = None, tracker_cov: Any = None,
                           spreads: Any = None, orthonormal: bool = True,
                           noise: str = "estimate", wrench: Any = None,
-                          wrench_sigma: Any = None) -> Calibration:
+                          wrench_sigma: Any = None, progress: Progress | None = None
+                          ) -> Calibration:
     """X, Y (with C), Z and the arm's deviations from robot poses A (the controller's, used
     only to find the frame it reports in), tracker poses B (and C), joints ``joints`` (n, dof)
     rad and the nominal ``arm`` (an Arm or a registry name); ``level`` "auto", "none",
@@ -120,7 +121,9 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
     [Fx, Fy, Fz N, Tx, Ty, Tz N·m]: the wrist sensor's averaged wrench at every pose, whose
     gravity wrench rows then join the likelihood (docs/kinematics.md, "Wrench rows"), with
     ``wrench_sigma`` its σ (a number, (6,) or (n, 6) N, N·m; None: the default of
-    :mod:`.wrench`). Raises CalibrationError for missing joints, a wrong arm, a malformed
+    :mod:`.wrench`). ``progress``: called as the fits go (:data:`.estimate.Progress`: fits
+    done, of how many, which one and its iteration), e.g. for a progress bar. Raises
+    CalibrationError for missing joints, a wrong arm, a malformed
     wrench, or too few poses."""
     arm = _arm(arm)
     if distortion not in DISTORTION_MODELS:
@@ -147,7 +150,7 @@ def solve_with_kinematics(A: np.ndarray, B: np.ndarray, C: np.ndarray | None, *,
     moments = _moments(tools_mm, len(bodies))
     res = estimate_kinematics(q, bodies, arm, (Ws0, start.Z), noise, level, tol, folds,
                               distortion=distortion, moments=moments, wrench=wdata,
-                              noise_mode=mode)
+                              noise_mode=mode, progress=progress)
     fit = res.fit
     Z = M @ fit.Z
     G4 = np.eye(4)

@@ -149,14 +149,14 @@ def wrench_rows(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk_w: np.nda
     return r, Jw / s, Jd / s
 
 
-def wrench_block(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk: np.ndarray,
+def wrench_block(p: WrenchParams, data: WrenchData, R_A: np.ndarray, Jk: np.ndarray | None,
                  c_w: int, c_delta: int, n_params: int, jac: bool = True
                  ) -> tuple[np.ndarray, np.ndarray]:
     """The estimator's wrench rows: whitened residuals (6n,) and, with ``jac``, their
     Jacobian (6n, ``n_params``) with the wrench parameters in columns ``c_w``…``c_delta`` − 1
     and the deviations from ``c_delta`` on, whose body twists are ``Jk`` (n, 6, k) [ω; v].
-    Without ``jac`` the Jacobian is all zeros."""
-    r, Jw, Jd = wrench_rows(p, data, R_A, Jk[:, :3, :] if jac else None)
+    Without ``jac`` (``Jk`` may then be None) the Jacobian is all zeros."""
+    r, Jw, Jd = wrench_rows(p, data, R_A, Jk[:, :3, :] if jac and Jk is not None else None)
     J = np.zeros((r.size, n_params))
     if Jw is not None and Jd is not None:
         J[:, c_w:c_delta] = Jw.reshape(r.size, -1)
