@@ -74,8 +74,8 @@ def choose_definition(session: Session, arm: Any, urdf_base: str | None = None,
     already resolved), else the one the session
     recorded. CalibrationError when ``arm`` is not the arm the session recorded (naming both
     and the header key; a file of as many joints as the registry arm its driver reported is
-    taken: it refines the reported model), naming the known arms for an unknown name, or asking for ``arm`` when
-    the session recorded none."""
+    taken: it refines the reported model), naming the known arms for an unknown name, or
+    asking for ``arm`` when the session recorded none."""
     from ..formats.armdef import ArmDefinition, resolve_arm
 
     where = session.path or "session"

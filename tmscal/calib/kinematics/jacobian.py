@@ -25,7 +25,8 @@ gives J_t = u, J_ω = 0. With F_i the world ← DH frame i (F_0 the base):
 A joint value q_i moves the flange exactly as θ0_i does (d_i for a prismatic joint; through
 the joint map M, docs of :mod:`.model`, the columns combine as J_q = J_rows · M):
 :func:`joint_jacobian` is those columns. The root transform of a chain read from a URDF is
-fixed (not a parameter); the base's columns turn about the base origin, before it. Roll/pitch/yaw columns are singular at pitch = ±π/2 (gimbal lock). This Jacobian is
+fixed (not a parameter); the base's columns turn about the base origin, before it.
+Roll/pitch/yaw columns are singular at pitch = ±π/2 (gimbal lock). This Jacobian is
 that of an arm without Hayati angles (``arm.beta`` zero, every nominal model).
 
 Body twists of named deviations (:func:`deviation_twists`, the tracker-based kinematic

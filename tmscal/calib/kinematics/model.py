@@ -40,7 +40,8 @@ The geometric parameter vector (``Arm.geometry_vector``, names ``Arm.geometry_na
 one order: per joint i = 1…n ``theta0_i`` rad, ``d_i`` mm, ``a_i`` mm, ``alpha_i`` rad (the DH
 row); ``base_roll/pitch/yaw`` rad and ``base_x/y/z`` mm (base = Trans(xyz) · Rz(yaw) Ry(pitch)
 Rx(roll)); ``flange_roll/pitch/yaw`` rad and ``flange_x/y/z`` mm (the same form for
-``flange``). 4m + 12 parameters (m DH rows; m = n without passive rows). Their pose Jacobian: :mod:`.jacobian`.
+``flange``). 4m + 12 parameters (m DH rows; m = n without passive rows). Their pose
+Jacobian: :mod:`.jacobian`.
 """
 
 from __future__ import annotations
@@ -54,8 +55,8 @@ import numpy as np
 from ...geometry import rot_x, rot_y, rot_z
 
 __all__ = ["Arm", "CONVENTIONS", "JOINT_TYPES", "forward", "base_from_flange", "joint_frames",
-           "pose_from_rpy", "rpy_from_matrix", "dh_matrices", "row_transforms", "check_joints", "DEVIATION_KINDS",
-           "split_deviation", "deviation_units"]
+           "pose_from_rpy", "rpy_from_matrix", "dh_matrices", "row_transforms", "check_joints",
+           "DEVIATION_KINDS", "split_deviation", "deviation_units"]
 
 #: the DH conventions an arm's table may be written in (module docstring)
 CONVENTIONS = ("standard", "modified")
