@@ -190,3 +190,71 @@ def arm_from_record(rec: Any, where: str) -> ArmDefinition:
                          path=str(path) if path is not None else None, content=text, sha256=sha,
                          urdf_base=urdf_base if rec["kind"] == "urdf" else None,
                          urdf_flange=urdf_flange if rec["kind"] == "urdf" else None)
+
+
+# --- the registry's arms as arm files -------------------------------------------------------
+
+_REGISTRY_NOTE = ("generated from tmscal's arm registry (tmscal/calib/kinematics/arms.py) by "
+                  "`python -m tmscal.formats.armdef`; tests/unit/test_arm_files.py checks that it "
+                  "still is")
+
+
+def registry_arm_doc(name: str) -> dict[str, Any]:
+    """The arm-file document (plain types) of the registry's arm ``name``: its kinematics
+    (:func:`~.kinfile.kinematics_doc`, without the creation time), its ``description``
+    (vendor, model, source, approximate, controller model, generation, reach) and its ``mock``
+    placement (serial, mount 4×4 mm, home joints deg)."""
+    import numpy as np
+
+    from ..calib.kinematics.arms import ARMS
+    from .kinfile import kinematics_doc
+
+    spec = ARMS[name]
+    doc = kinematics_doc(spec.arm)
+    doc.pop("created", None)
+    about: dict[str, Any] = {"vendor": spec.vendor, "model": spec.model, "source": spec.source,
+                             "approximate": spec.approximate,
+                             "controller_model": spec.controller_model}
+    if spec.generation is not None:
+        about["generation"] = spec.generation
+    about.update(reach_mm=spec.reach_mm, notes=_REGISTRY_NOTE)
+    doc["description"] = about
+    mock: dict[str, Any] = {}
+    if spec.mock_serial is not None:
+        mock["serial"] = spec.mock_serial
+    mock.update(mount=np.asarray(spec.mount, dtype=float).tolist(),
+                home_deg=np.degrees(np.asarray(spec.home_q, dtype=float)).tolist())
+    doc["mock"] = mock
+    return doc
+
+
+def registry_arm_yaml(name: str) -> str:
+    """The text of the shipped arm file of the registry's arm ``name``."""
+    import yaml
+
+    doc = registry_arm_doc(name)
+    about, mock = doc.pop("description"), doc.pop("mock")
+
+    def dump(d: dict[str, Any], flow: bool | None) -> str:
+        return yaml.safe_dump(d, sort_keys=False, default_flow_style=flow, width=100,
+                              allow_unicode=True)
+
+    return dump(doc, None) + dump({"description": about}, False) + dump({"mock": mock}, None)
+
+
+def _write_registry_files(directory: Path) -> list[Path]:
+    from ..calib.kinematics.arms import ARM_NAMES
+
+    out = []
+    for name in ARM_NAMES:
+        p = directory / f"{name}.yaml"
+        p.write_text(registry_arm_yaml(name), encoding="utf-8")
+        out.append(p)
+    return out
+
+
+if __name__ == "__main__":  # regenerate the registry's shipped arm files
+    here = Path(__file__).resolve().parents[1] / "data" / "arms"
+    here.mkdir(exist_ok=True)
+    for written in _write_registry_files(here):
+        print(written)
