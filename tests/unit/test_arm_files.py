@@ -379,7 +379,6 @@ def test_solve_with_a_urdf_arm_and_check_without_it(tmp_path: Path) -> None:
     """tmscal solve --kinematics estimate --arm FILE.urdf; the calibration keeps the arm whole
     (arm.nominal_arm), so that --calib checks it with the URDF gone."""
     from tests.unit.test_kinematics_use import _session as sim_session
-
     from tmscal.cli import main
 
     s = tmp_path / "s.jsonl"

@@ -124,9 +124,14 @@ def _joint_docs(model: Any, dh: np.ndarray, lim: np.ndarray) -> list[dict[str, A
     types = tuple(getattr(model, "types", ("revolute",) * len(dh)))
     M = getattr(model, "joint_map", None)
     M = np.eye(len(dh)) if M is None else np.asarray(M, dtype=float)
-    own = [int(np.flatnonzero(M[:, j])[0]) for j in range(M.shape[1])]
-    if own != sorted(own):
-        raise ValueError("the joint map's joints must move their first rows in row order")
+    own: list[int] = []             # each joint's own row: increasing, its factor ±1
+    for j in range(M.shape[1]):
+        rows = [r for r in range(len(dh)) if r > (own[-1] if own else -1)
+                and abs(M[r, j]) == 1.0]
+        if not rows:
+            raise ValueError(f"joint {j + 1} of the joint map has no row of its own (a row "
+                             "after the previous joint's with factor 1 or -1)")
+        own.append(rows[0])
     out = []
     for i, r in enumerate(dh):
         e: dict[str, Any] = {"theta_offset_deg": float(np.degrees(r[0])), "d_mm": float(r[1]),

@@ -53,7 +53,9 @@ _MOVING = ("revolute", "continuous", "prismatic")
 _KNOWN = _MOVING + ("fixed", "floating", "planar")
 _MAX_ELEMENTS = 10_000
 #: the sine below which two joint axes count as parallel, the distance (mm) below which they
-#: intersect
+#: intersect. Nearly parallel axes (a sine of 1e-3 and less) put the common normal far out
+#: (≈ distance / sine): the rows stay exact in exact arithmetic but lose digits, as DH does
+#: there (Hayati and Mirmirani 1985)
 _PARALLEL = 1e-10
 _MEET_MM = 1e-9
 
@@ -267,10 +269,13 @@ def dh_from_axes(points: np.ndarray, axes: np.ndarray, flange: np.ndarray
         diff = o_next - foot
         diff = diff - (diff @ z) * z
         dist = float(np.linalg.norm(diff))
-        if dist > _MEET_MM:
-            x_next = diff / dist
-        elif np.linalg.norm(c) > _PARALLEL:
+        if np.linalg.norm(c) > _PARALLEL:       # the common normal: along z × w exactly
             x_next = c / np.linalg.norm(c)
+            if diff @ x_next < 0 and dist > _MEET_MM:
+                x_next = -x_next
+            dist = float(diff @ x_next) if dist > _MEET_MM else 0.0
+        elif dist > _MEET_MM:
+            x_next = diff / dist
         else:
             x_next = x
         z_next = w - (w @ x_next) * x_next
@@ -299,6 +304,19 @@ def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
     return T
 
 
+def _frozen(j: UrdfJoint) -> UrdfJoint:
+    """A joint that mimics another with multiplier 0 is fixed at its offset."""
+    from dataclasses import replace
+
+    offset = j.mimic[2] if j.mimic is not None else 0.0
+    if j.type == "prismatic":
+        motion = np.eye(4)
+        motion[:3, 3] = j.axis * offset
+    else:
+        motion = _rot(j.axis, offset)
+    return replace(j, type="fixed", origin=j.origin @ motion, mimic=None)
+
+
 def parse_urdf(text: str, src: str = "<urdf>", base_link: str = URDF_BASE,
                flange_link: str = URDF_FLANGE, name: str | None = None) -> Any:
     """The :class:`~tmscal.calib.kinematics.Arm` (mm, rad; ``base`` = identity: the world is
@@ -308,6 +326,7 @@ def parse_urdf(text: str, src: str = "<urdf>", base_link: str = URDF_BASE,
     from ..calib.kinematics.model import Arm
 
     robot, chain = chain_joints(text, src, base_link, flange_link)
+    chain = [_frozen(j) if j.mimic is not None and j.mimic[1] == 0.0 else j for j in chain]
     moving = [j for j in chain if j.type in _MOVING]
     if not moving:
         raise _bad(src, f"<link name={flange_link!r}>", f"no revolute, continuous or prismatic "

@@ -133,6 +133,9 @@ class Arm:
                     or not np.all(np.isfinite(jmap)):
                 raise ValueError(f"joint_map must be a finite ({m}, n) array with 1 ≤ n ≤ {m}, "
                                  f"got shape {jmap.shape}")
+            for i in range(m):
+                if not jmap[i].any():
+                    raise ValueError(f"joint_map: DH row {i + 1} is moved by no joint")
             for j in range(jmap.shape[1]):
                 rows = {types[i] for i in np.flatnonzero(jmap[:, j])}
                 if not rows:
