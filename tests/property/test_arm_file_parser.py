@@ -57,7 +57,7 @@ def arms(draw: st.DrawFn) -> Arm:
         if not M[:, j].any():
             M[own[j], j] = 1.0
     lim = []
-    for j, i in enumerate(own):
+    for i in own:
         lo = draw(st.floats(-300.0, 300.0)) if types[i] == "prismatic" else draw(_angle)
         lim.append([lo, lo + draw(st.floats(0.1, 1.0))])
     try:

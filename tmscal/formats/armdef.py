@@ -169,7 +169,7 @@ def arm_from_record(rec: Any, where: str) -> ArmDefinition:
                                f"{', '.join(DEFINITION_KINDS)})")
     name = rec.get("name")
     if rec["kind"] == "registry":
-        if name not in ARMS:
+        if not isinstance(name, str) or name not in ARMS:
             raise CalibrationError(f"{where}.name: {str(name)[:60]!r} is not an arm of this "
                                    f"tmscal's registry ({', '.join(ARMS)})")
         return ArmDefinition(arm=ARMS[name].arm, kind="registry", name=name)

@@ -216,12 +216,13 @@ def chain_joints(text: str, src: str, base_link: str = URDF_BASE,
     seen = {flange_link}
     at = flange_link
     while at != base_link:
-        j = parent_of.get(at)
-        if j is None:
+        up = parent_of.get(at)
+        if up is None:
             raise _bad(src, f"<link name={flange_link!r}>",
                        f"the chain does not connect the flange link {flange_link!r} to the base "
                        f"link {base_link!r}: going up from the flange it ends at the root link "
                        f"{at!r}")
+        j = up
         if j.parent in seen:
             raise _bad(src, f"<joint name={j.name!r}>", f"link {j.parent!r} is its own "
                        "ancestor: a closed loop")
