@@ -76,6 +76,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/ml_selection.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5
 	$(BIN)/python benchmarks/install_size.py
+	$(BIN)/python benchmarks/arm_files.py
 	$(BIN)/python benchmarks/check_figures.py
 
 clean:
