@@ -4,7 +4,7 @@
 ``--arm`` (and ``arm=`` of the solve service) takes
 
 * a name of tmscal's arm registry (``ur5e``, ``fr3``, …; ``tmscal.calib.kinematics.ARMS``);
-* a name of an arm file shipped with tmscal (``tmscal/data/arms/NAME.yaml``: the registry's
+* a name of an arm file shipped with tmscal (in ``tmscal/data/arms/``: the registry's
   arms, and arms the mock rig does not simulate, e.g. ``kuka_lbr_iiwa7``);
 * a path: a URDF (``.urdf``; the chain from ``--urdf-base`` to ``--urdf-flange``, by default
   ``base_link`` and ``tool0``; :mod:`.urdf`) or a tmscal arm file (a kinematics file,
@@ -97,7 +97,7 @@ def shipped_arm_names() -> list[str]:
 
 
 def shipped_arm_text(name: str) -> str:
-    """The text of the shipped arm file ``name`` (``tmscal/data/arms/NAME.yaml``)."""
+    """The text of the shipped arm file ``name`` (``name``.yaml in ``tmscal/data/arms/``)."""
     return (resources.files("tmscal.data") / "arms" / f"{name}.yaml").read_text("utf-8")
 
 
@@ -253,8 +253,7 @@ def _write_registry_files(directory: Path) -> list[Path]:
     return out
 
 
-if __name__ == "__main__":  # regenerate the registry's shipped arm files
-    here = Path(__file__).resolve().parents[1] / "data" / "arms"
-    here.mkdir(exist_ok=True)
-    for written in _write_registry_files(here):
-        print(written)
+if __name__ == "__main__":  # regenerate the registry's shipped arm files (git diff shows them)
+    _here = Path(__file__).resolve().parents[1] / "data" / "arms"
+    _here.mkdir(exist_ok=True)
+    _write_registry_files(_here)

@@ -30,6 +30,15 @@ kg); the model inside the code is in mm and radians::
 Rz(θ_i + θ0) Tz(d)) are always written; a file without them (older ones) is standard DH with
 the flange at the last DH frame.
 
+The same format is the tmscal **arm file** (docs/kinematics.md, "Arm files"), which may add,
+per joint, ``type`` (revolute or prismatic: q in mm adds to d, its range ``min_mm``/``max_mm``),
+``sign`` (1 or −1), ``coupling`` ([{joint, factor}]: the row also moves with other joints,
+FANUC's J2/J3), ``mimic`` ([{joint, factor}]: a passive row with no joint of its own, no range)
+and ``name``; at the top ``root`` (robot base ← DH frame 0), ``description`` (vendor, model,
+source, approximate, controller_model, generation, reach_mm, notes) and ``mock`` (serial,
+mount, home_deg); ``base`` is optional (identity) and every transform may be a 4×4 matrix or
+``{xyz_mm, rpy_deg}``.
+
 ``identification`` (written by ``selfcal identify``, optional when reading): ``parameters``
 (names of the identified parameters, in :meth:`ArmModel.parameter_names` order),
 ``estimate``, ``std`` and ``nominal`` (one number per name, in the units of
