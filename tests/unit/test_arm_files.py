@@ -490,3 +490,29 @@ def test_pose_from_rpy_is_the_urdf_origin() -> None:
     for _ in range(20):
         rpy = RNG.uniform(-3, 3, 3)
         assert np.allclose(pose_from_rpy(rpy, [0, 0, 0])[:3, :3], _rpy(*rpy), atol=1e-15)
+
+
+def test_selfcal_identify_takes_an_arm_file(tmp_path: Path) -> None:
+    """`selfcal identify --arm FILE` starts from the file's arm: on a UR5e session, the UR5e
+    arm file of the docs (the registry's forward kinematics exactly) gives the registry
+    name's estimate; a URDF with a passive row is refused naming --arm."""
+    from tests.unit.test_kinfile import selfcal_session
+    from tmscal.session import read_session
+    from tmscal.sim import make_arm
+    from tmscal.solving.selfcal import identify_session
+
+    pair = make_arm("ur5e", "all", 3)
+    s = tmp_path / "sc.jsonl"
+    selfcal_session(s, pair, n=40)
+    f = tmp_path / "ur5e.yaml"
+    f.write_text(UR5E_ARM_FILE)
+    by_name = identify_session(read_session(s), "ur5e")
+    by_file = identify_session(read_session(s), str(f))
+    assert by_file.name == "my_ur5e"
+    names = by_name.model.geometry_names()
+    np.testing.assert_allclose(by_file.model.geometry_vector(), by_name.model.geometry_vector(),
+                               rtol=0, atol=1e-9, err_msg=str(names))
+    p = tmp_path / "mimic.urdf"
+    p.write_text(urdf_text(MIMIC))
+    with pytest.raises(ConfigError, match=r"--arm: .*mimicking row"):
+        identify_session(read_session(s), str(p))

@@ -100,10 +100,11 @@ def _print_kept(res: Any) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Kinematics file (YAML) to write: the calibrated arm model, for "
                    "tmscal solve --kinematics.")
-@click.option("--arm", default=None,
-              help="The nominal model to start from, a registered name such as ur5e or "
-                   "vs060 (docs/kinematics.md; default: the one the session was acquired "
-                   "with).")
+@click.option("--arm", default=None, metavar="NAME|FILE",
+              help="The nominal model to start from: a registered name such as ur5e or "
+                   "vs060, a shipped arm file's name, or the path of a URDF or arm file "
+                   "(docs/kinematics.md, \"Arm files\"; default: the one the session was "
+                   "acquired with).")
 @click.option("--sigma", type=(Finite(0, lo_open=True), Finite(0, lo_open=True)),
               default=None, metavar="FORCE_N TORQUE_NM",
               help="Noise of the averaged wrench per force and torque channel (default: from "
@@ -152,7 +153,7 @@ def identify(session_file: Path, output: Path, arm: str | None,
                                  param_hint="--arm")
     res = identify_session(session, name, sigma, form, prior[0], prior[1], max_iter,
                            "--arm" if arm else f"{session_file}: header 'selfcal.arm'")
-    click.echo(f"{session_file}: {len(res.q)} configurations of arm {name}; channel σ from "
+    click.echo(f"{session_file}: {len(res.q)} configurations of arm {res.name}; channel σ from "
                f"{res.sigma_source}: " + ", ".join(
                    f"{c} {s:.2g} {u}" for c, s, u in zip(CHANNELS, res.sigma, CHANNEL_UNITS,
                                                         strict=True)))
