@@ -94,9 +94,9 @@ def _pose6(T: np.ndarray) -> np.ndarray:
 class Arm:
     """A serial arm's geometry (module docstring; docs/kinematics.md).
 
-    ``name``: the arm's name (a registry name such as ``"ur5e"``, or any label); ``dh``: (n, 4)
+    ``name``: the arm's name (a registry name such as ``"ur5e"``, or any label); ``dh``: (m, 4)
     rows [θ0 rad, d mm, a mm, α rad] in ``convention`` ("standard" or "modified"); ``base``:
-    4×4 mm, world ← robot base; ``flange``: 4×4 mm, DH frame n ← the controller's flange;
+    4×4 mm, world ← robot base; ``flange``: 4×4 mm, DH frame m ← the controller's flange;
     ``joint_limits_rad``: (n, 2) [low, high] per joint, rad (mm for a prismatic joint; None:
     ±2π each, ±1000 mm for a prismatic one); ``joint_types``: one of :data:`JOINT_TYPES` per DH
     row (None: all revolute); ``joint_map``: (m, n) joint values → row values (None: the
@@ -199,12 +199,6 @@ class Arm:
             return self.types
         return tuple(self.types[int(np.flatnonzero(self.joint_map[:, j])[0])]
                      for j in range(self.n_joints))
-
-    @property
-    def is_plain(self) -> bool:
-        """True for an arm of revolute rows moved one each by their own joint, without a root
-        transform (every registry arm before arm files): x = q."""
-        return self.joint_types is None and self.joint_map is None and self.root is None
 
     def row_values(self, q: Any) -> np.ndarray:
         """The row values x (…, m) of joint values q (…, n): x = M q (module docstring); rad
