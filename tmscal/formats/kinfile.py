@@ -522,9 +522,9 @@ def _identification(v: Any, src: str, names: list[str]
 
 def _parameter_names(model: Any) -> list[str]:
     """The names an identification may give: an ``ArmModel``'s parameter vector, or an arm's
-    DH parameters (θ0, d, a, α per joint), and β of every joint (the tracker-based
+    DH parameters (θ0, d, a, α per DH row), and β of every row (the tracker-based
     estimate's Hayati angles)."""
-    n = model.n_joints
+    n = getattr(model, "n_rows", model.n_joints)
     per = (list(model.parameter_names()) if hasattr(model, "parameter_names") else
            [f"{k}_{i}" for i in range(1, n + 1) for k in ("theta0", "d", "a", "alpha")])
     return per + [f"beta_{i}" for i in range(1, n + 1)]
