@@ -256,8 +256,10 @@ def _mapping(v: Any, src: str, key: str, keys: tuple[str, ...],
     """A mapping with exactly ``keys`` and perhaps ``optional`` ones (a missing or unknown key
     is named)."""
     if not isinstance(v, dict):
-        raise _bad(src, key, f"expected a mapping with {', '.join(keys)}")
+        raise _bad(src, key, f"expected a mapping with {', '.join(keys or optional)}")
     for k in v:
+        if not isinstance(k, str):
+            raise _bad(src, f"{key}.{_show(k)}", "every key must be a string")
         if k not in keys and k not in optional:
             raise _bad(src, f"{key}.{k}", "unknown key; expected one of: "
                        f"{', '.join(keys + optional)}")
