@@ -56,3 +56,33 @@ def test_a_config_arm_the_controller_is_not_is_refused(tmp_path, mock_config) ->
                           r"reports a 'vs060'"):
         acquire(load_config(cfg_path), tmp_path / "s.jsonl", **endpoints_kwargs(mp.endpoints))
     assert not (tmp_path / "s.jsonl").exists()
+
+
+def test_selfcal_acquire_keeps_the_arm_file_and_identify_uses_it(tmp_path, mock_config) -> None:
+    """`selfcal acquire --arm FILE` on the mock UR and ATI: the header's selfcal entry keeps
+    the file's definition; `selfcal identify` without --arm takes it, the file gone."""
+    pytest.importorskip("rtde_control")
+    import subprocess
+    import sys
+
+    arm_file = tmp_path / "my_ur5e.yaml"
+    arm_file.write_text(shipped_arm_text("ur5e").replace("arm: ur5e", "arm: my_ur5e"))
+    cfg = mock_config("mock-ur-ati.yaml", ft={"port": 0, "samples": 5},
+                      mock={"kinematics": {"arm": "ur5e", "errors": "paper", "seed": 5}})
+    out, kin = tmp_path / "sc.jsonl", tmp_path / "kin.yaml"
+
+    def tmscal(*args: object) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "tmscal.cli", *map(str, args)],
+                              capture_output=True, text=True, timeout=300)
+
+    with spawn_mock_rig(cfg, transport="tcp") as mp:
+        ep = mp.endpoints
+        r = tmscal("selfcal", "acquire", cfg, "-o", out, "--robot-host", ep["robot"],
+                   "--ft-host", ep["ft"], "--k", 8, "--pool", 300, "--arm", arm_file)
+    assert r.returncode == 0, r.stderr[-3000:]
+    head = read_session(out).header["selfcal"]
+    assert head["arm"] == "my_ur5e" and head["arm_definition"]["kind"] == "arm-file"
+    arm_file.unlink()
+    r = tmscal("selfcal", "identify", out, "-o", kin)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "configurations of arm my_ur5e" in r.stdout

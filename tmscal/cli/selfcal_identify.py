@@ -146,7 +146,12 @@ def identify(session_file: Path, output: Path, arm: str | None,
     check_outputs({"--output": output}, [session_file], force)
     session = read_session_file(session_file, strict)
     head = session.header.get("selfcal")
-    name = arm or (head.get("arm") if isinstance(head, dict) else None)
+    name: Any = arm or (head.get("arm") if isinstance(head, dict) else None)
+    if arm is None and isinstance(head, dict) and head.get("arm_definition") is not None:
+        from ..formats.armdef import arm_from_record
+
+        name = arm_from_record(head["arm_definition"],
+                               f"{session_file}: header key 'selfcal.arm_definition'")
     if name is None:
         raise click.BadParameter(f"{session_file} does not name its arm; name the nominal "
                                  "model (a registered name such as ur5e or vs060)",

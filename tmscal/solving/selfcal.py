@@ -162,27 +162,29 @@ class SessionIdentification:
                 "converged": self.fit.converged}
 
 
-def nominal_model(arm: str, where: str = "--arm") -> ArmModel:
+def nominal_model(arm: Any, where: str = "--arm") -> ArmModel:
     """The self-calibration model to start from: the registry's (``NOMINAL``) for a registered
-    name, else the arm a shipped arm file, a URDF or an arm file defines
+    name, else the arm a shipped arm file, a URDF, an arm file or an ``ArmDefinition`` defines
     (:func:`tmscal.formats.armdef.resolve_arm`) with the sensor on the flange and the default
     tool. ConfigError naming ``where`` for an unknown name or an arm self-calibration cannot
     take (a passive, mimicking row); CalibrationError naming the file for a file that is not an
     arm."""
     from ..calib.kinematics.arms import ARMS
     from ..errors import ConfigError
-    from ..formats.armdef import resolve_arm
+    from ..formats.armdef import ArmDefinition, resolve_arm
 
     if isinstance(arm, str) and arm in ARMS:
         return NOMINAL[spec_by_name(arm, where).name]
-    d = resolve_arm(arm, where)
+    if isinstance(arm, ArmDefinition) and arm.kind == "registry":
+        return NOMINAL[arm.name]
+    d = arm if isinstance(arm, ArmDefinition) else resolve_arm(arm, where)
     try:
         return ArmModel.from_arm(d.arm)
     except ValueError as e:
         raise ConfigError(f"{where}: {e}") from None
 
 
-def identify_session(session: Session, arm: str, sigma: tuple[float, float] | None = None,
+def identify_session(session: Session, arm: Any, sigma: tuple[float, float] | None = None,
                      form: str = "map", prior_length_mm: float = 2.0,
                      prior_angle_deg: float = 1.0, max_iter: int = 50,
                      where: str = "--arm") -> SessionIdentification:
