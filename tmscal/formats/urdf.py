@@ -15,8 +15,9 @@ collisions, inertias, transmissions or meshes.
 The chain becomes standard DH rows (Denavit and Hartenberg 1955) exactly: at q = 0, DH frame
 0 lies on the first joint's axis (``Arm.root`` = base link ← DH frame 0), frame i on the
 common normal of axes i and i + 1 (where two axes are parallel, the normal through the next
-joint's origin), the last row ends on the line through the flange link's origin along its z
-axis, and ``Arm.flange`` = last DH frame ← flange link. Each joint's axis becomes its DH z
+joint's origin), the last row runs along the last joint's own axis to the point nearest the
+flange link's origin (α = 0: well conditioned whatever the flange's orientation), and
+``Arm.flange`` = last DH frame ← flange link. Each joint's axis becomes its DH z
 axis, so q keeps the URDF's sign; a joint's q = 0 is the URDF's zero. A prismatic joint's row
 adds q (mm) to d.
 
@@ -253,15 +254,17 @@ def dh_from_axes(points: np.ndarray, axes: np.ndarray, flange: np.ndarray
         x = np.array([0.0, 1.0, 0.0]) - z[1] * z
     x = x / np.linalg.norm(x)
     root = _frame(o, x, z)
-    lines = [(points[i], axes[i] / np.linalg.norm(axes[i])) for i in range(1, m)]
-    lines.append((flange[:3, 3], flange[:3, 2]))
+    lines: list[tuple[np.ndarray, np.ndarray | None]] = [
+        (points[i], axes[i] / np.linalg.norm(axes[i])) for i in range(1, m)]
+    lines.append((flange[:3, 3], None))     # the last row: along its own axis to the flange
     dh = np.empty((m, 4))
-    for i, (p, w) in enumerate(lines):
+    for i, (p, w_next) in enumerate(lines):
+        w = z if w_next is None else w_next
         c = np.cross(z, w)
         r = p - o
         if np.linalg.norm(c) > _PARALLEL:
             b = z @ w
-            den = 1.0 - b * b
+            den = float(c @ c)                       # 1 − b², without its cancellation
             s = ((z @ r) - b * (w @ r)) / den
             t = (b * (z @ r) - (w @ r)) / den
             foot, o_next = o + s * z, p + t * w
