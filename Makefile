@@ -78,6 +78,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/adequacy.py
 	$(BIN)/python benchmarks/adaptive_coverage.py --runs 40 --table-rigs 5
 	$(BIN)/python benchmarks/install_size.py
+	$(BIN)/python benchmarks/arm_files.py
 	$(BIN)/python benchmarks/check_figures.py
 
 clean:

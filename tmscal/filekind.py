@@ -6,7 +6,8 @@ Kinds (:data:`KINDS`): ``session`` (JSON Lines, a header with format ``tmscal-se
 ``config`` (a rig config: YAML with ``robot``/``tracker``/``plan``/``safety`` sections),
 ``calibration`` (``format: tmscal-calibration``, YAML of ``solve -o`` or the ``json``
 export), ``kinematics`` (``format: tmscal-kinematics``), and the exports other programs read
-(``itk``, ``plus``, ``easy-handeye``, ``invesalius``) and the HTML report. The sniffing reads
+(``itk``, ``plus``, ``easy-handeye``, ``invesalius``), the HTML report and a URDF (``urdf``,
+an arm's description, XML with a ``<robot>`` element). The sniffing reads
 keys and first lines only; it never decides whether a file is valid (the readers do).
 """
 
@@ -35,6 +36,7 @@ KINDS: dict[str, tuple[str, str]] = {
     "report": ("an HTML report", "tmscal report"),
     "measurements": ("a measurement CSV", "joints and measured poses, one row per pose, for "
                      "tmscal import"),
+    "urdf": ("a URDF", "a ROS robot description: XML with a <robot> element"),
 }
 
 #: the words a message uses for the command; the CLI puts the command's name in their place
@@ -62,6 +64,8 @@ def sniff(text: str) -> str | None:
             return "plus"
         if "<html" in low or "<!doctype html" in low:
             return "report"
+        if re.search(r"<robot[\s>]", low):
+            return "urdf"
         return None
     if stripped.startswith("{"):
         return _sniff_json(stripped)

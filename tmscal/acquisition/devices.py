@@ -21,9 +21,11 @@ import numpy as np
 
 from ..config import RigConfig, construct, reserved_options
 from ..drivers.base import ConfigError, Envelope, ForceTorque, Robot, SafetyError, Tracker
+from ..errors import CalibrationError
 from ..registry import get_spec
 
 __all__ = ["envelope_for", "make_robot", "make_tracker", "make_ft", "Devices", "Endpoints",
+           "arm_definition",
            "SENSORS"]
 
 log = logging.getLogger(__name__)
@@ -176,6 +178,33 @@ class Endpoints:
         return self.ft_host + (f":{self.ft_port}" if self.ft_port else "")
 
 
+def arm_definition(cfg: RigConfig, identity: dict[str, Any]) -> dict[str, Any]:
+    """The definition record (docs/kinematics.md, "Arm files") of the config's ``robot.arm``,
+    for the session header's ``devices.robot.arm_definition``. ConfigError naming the key
+    when it names no arm, its file is not an arm, or the controller reports another
+    registered arm (``identity["arm"]``; a file of as many joints refines the reported
+    model)."""
+    from ..calib.kinematics.arms import ARMS
+    from ..formats.armdef import resolve_arm
+
+    robot = cfg.robot
+    assert robot is not None and robot.arm is not None
+    where = f"{cfg.path}: key 'robot.arm'"
+    try:
+        d = resolve_arm(robot.arm, where, robot.urdf_base, robot.urdf_flange)
+    except CalibrationError as e:
+        raise ConfigError(f"{where}: {e}") from None
+    reported = identity.get("arm")
+    if isinstance(reported, str) and reported in ARMS:
+        if d.kind == "registry" and d.name != reported:
+            raise ConfigError(f"{where}: {d.name!r}, but the controller reports a "
+                              f"{reported!r} (devices.robot.arm)")
+        if d.arm.n_joints != ARMS[reported].arm.n_joints:
+            raise ConfigError(f"{where}: {d.describe()} has {d.arm.n_joints} joints; the "
+                              f"controller reports a {reported} ({ARMS[reported].arm.n_joints})")
+    return d.record()
+
+
 class Devices:
     """The devices of a run: the robot and the ``sensor`` beside it ("tracker" or "ft", a
     force-torque sensor), built from the config and ``endpoints``; a tracker run whose config
@@ -250,6 +279,9 @@ class Devices:
         out = {"robot": self.robot.identity(), self.sensor: sensor.identity()}
         if self.wrench and self.ft is not None:
             out["ft"] = self.ft.identity()
+        if getattr(self.cfg.robot, "arm", None) is not None:
+            out["robot"] = {**(out["robot"] or {}),
+                            "arm_definition": arm_definition(self.cfg, out["robot"] or {})}
         return out
 
     def joints(self) -> np.ndarray:

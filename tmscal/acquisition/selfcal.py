@@ -50,7 +50,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +58,7 @@ import numpy as np
 
 from ..config import RigConfig
 from ..drivers.base import ConfigError, Envelope, SafetyError
-from ..errors import SessionError
+from ..errors import CalibrationError, SessionError
 from ..geometry import check_pose, invert
 from ..session import PoseRecord, Session
 from .devices import Devices, Endpoints
@@ -107,6 +107,7 @@ class SelfcalPlan:
     identifiable: tuple[str, ...] = ()
     o1: float = float("nan")
     q0: np.ndarray | None = None
+    arm_definition: dict[str, Any] | None = None
 
     def to_header(self) -> dict[str, Any]:
         """The session header's "selfcal" entry (plain types)."""
@@ -117,6 +118,8 @@ class SelfcalPlan:
                "p0": self.p0.tolist()}
         if self.q0 is not None:
             out["q0_rad"] = self.q0.tolist()
+        if self.arm_definition is not None:
+            out["arm_definition"] = dict(self.arm_definition)
         return {**out, "q_rad": self.q.tolist(), "poses": self.poses.tolist()}
 
     @classmethod
@@ -148,9 +151,12 @@ class SelfcalPlan:
                 if q0.shape != q.shape[1:] or not np.isfinite(q0).all():
                     raise ValueError(f"q0_rad: expected {q.shape[1]} finite joint angles")
             o1 = h.get("o1")
+            rec = h.get("arm_definition")
+            if rec is not None and not isinstance(rec, dict):
+                raise ValueError("arm_definition: expected the arm's definition (a mapping)")
             return cls(str(h["arm"]), q, poses, check_pose(h["p0"], "p0"), seed, pool,
                        int(h["inside"]), span, tuple(str(n) for n in h.get("identifiable", [])),
-                       float("nan") if o1 is None else float(o1), q0)
+                       float("nan") if o1 is None else float(o1), q0, rec)
         except (KeyError, TypeError, ValueError, OverflowError) as e:
             raise SessionError(f"{where}: the header's 'selfcal' plan is incomplete or "
                                f"invalid ({e})") from None
@@ -325,14 +331,22 @@ def rederive_poses(plan: SelfcalPlan, model: Any, where: Any = "session"
 
 # --- the run ---------------------------------------------------------------------------------
 
-def nominal_arm(arm: str, where: Any = "--arm") -> Any:
-    """The nominal ``ArmModel`` of the registered arm named ``arm`` (the arm registry,
-    ``tmscal.calib.kinematics.ARMS``); ConfigError naming ``where`` and the known names
-    otherwise."""
-    from ..calib.kinematics import spec_by_name
-    from ..calib.selfcal.model import NOMINAL
+def nominal_arm(arm: Any, where: Any = "--arm") -> Any:
+    """The nominal ``ArmModel`` of ``arm``: a registered name (the arm registry,
+    ``tmscal.calib.kinematics.ARMS``), a shipped arm file's name, the path of a URDF or arm
+    file, or an ``ArmDefinition`` (docs/kinematics.md, "Arm files"); ConfigError naming
+    ``where`` and the known names otherwise."""
+    from ..solving.selfcal import nominal_model
 
-    return NOMINAL[spec_by_name(arm, str(where)).name]
+    return nominal_model(arm, str(where))
+
+
+def arm_definition_of(arm: str) -> Any:
+    """The ``ArmDefinition`` of an ``--arm`` that is not a registered name (None for one)."""
+    from ..calib.kinematics import ARMS
+    from ..formats.armdef import resolve_arm
+
+    return None if arm in ARMS else resolve_arm(arm, "--arm")
 
 
 @dataclass(frozen=True)
@@ -391,6 +405,7 @@ class SelfcalStrategy(Strategy):
         self.arm, self.k, self.pool, self.seed, self.span_deg = arm, k, pool, seed, span_deg
         self.samples = samples
         self.model: Any = None
+        self.definition: Any = None
         self.st: SelfcalSettings | None = None
         self._notes: list[str] = []
 
@@ -403,14 +418,18 @@ class SelfcalStrategy(Strategy):
     def prepare(self) -> None:
         if self.arm is None:
             raise ConfigError(f"{self.cfg.path}: name the arm's nominal model (arm=)")
-        self.model = nominal_arm(self.arm)
+        self.definition = arm_definition_of(self.arm)
+        self.model = nominal_arm(self.definition or self.arm)
 
     def _use(self, plan: SelfcalPlan) -> None:
         self.plan, self.p0, self.poses = plan, plan.p0, plan.poses
 
     def make_plan(self, dev: Devices, p0: np.ndarray, envelope: Any) -> None:
-        self._use(plan_selfcal(self.model, dev.joints(), p0, envelope, self.k, self.pool,
-                               self.seed, self.span_deg))
+        plan = plan_selfcal(self.model, dev.joints(), p0, envelope, self.k, self.pool,
+                            self.seed, self.span_deg)
+        if self.definition is not None:   # a file's arm: the session keeps its definition
+            plan = replace(plan, arm_definition=self.definition.record())
+        self._use(plan)
 
     def read(self, session: Session) -> None:
         self._use(SelfcalPlan.from_header(session.header, session.path))
@@ -419,14 +438,24 @@ class SelfcalStrategy(Strategy):
         """The header's configurations drawn again and their poses computed again on the
         nominal model of the header's arm (:func:`rederive_poses`); ``--arm``, when given,
         must name that arm."""
+        from ..formats.armdef import arm_from_record
+
         plan: SelfcalPlan = self.plan
         try:
-            model = nominal_arm(plan.arm, f"{session.path}: the header's selfcal.arm")
-        except ConfigError as e:
+            recorded = None if plan.arm_definition is None else arm_from_record(
+                plan.arm_definition, f"{session.path}: header key 'selfcal.arm_definition'")
+            model = nominal_arm(recorded or plan.arm,
+                                f"{session.path}: the header's selfcal.arm")
+        except (ConfigError, CalibrationError) as e:
             raise SessionError(str(e)) from None
-        if self.arm is not None and nominal_arm(self.arm).name != model.name:
-            raise SessionError(f"{session.path}: the session was recorded for arm "
-                               f"{plan.arm!r}; arm={self.arm!r} was given; {RESUME_HINT}")
+        if self.arm is not None:
+            given = arm_definition_of(self.arm)
+            same = (given.same_as(recorded) if given is not None and recorded is not None
+                    else given is None and recorded is None
+                    and nominal_arm(self.arm).name == model.name)
+            if not same:
+                raise SessionError(f"{session.path}: the session was recorded for arm "
+                                   f"{plan.arm!r}; arm={self.arm!r} was given; {RESUME_HINT}")
         poses, self._notes = rederive_poses(plan, model, session.path)
         return poses, (f"arm {plan.arm!r}'s nominal forward kinematics at the header's "
                        "joints")

@@ -39,10 +39,11 @@ def _arm_name(arm: str | None, cfg: Any) -> str | None:
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted session: the plan is in its header; the "
                    "configurations already recorded are skipped.")
-@click.option("--arm", default=None,
-              help="The arm's nominal model, a registered name such as ur5e, vs060 or fr3 "
-                   "(docs/kinematics.md; default: the config's mock.kinematics.arm on a mock "
-                   "rig; required at a real one).")
+@click.option("--arm", default=None, metavar="NAME|FILE",
+              help="The arm's nominal model: a registered name such as ur5e, vs060 or fr3, a "
+                   "shipped arm file's name, or the path of a URDF or arm file (the session "
+                   "keeps its definition; docs/kinematics.md, \"Arm files\"; default: the "
+                   "config's mock.kinematics.arm on a mock rig; required at a real one).")
 @click.option("--k", "k", type=click.IntRange(1, 10000), default=60, show_default=True,
               help="Configurations to visit, chosen by DETMAX (maximal det JᵀJ, i.e. O1).")
 @click.option("--pool", type=click.IntRange(1, 100000), default=5000, show_default=True,

@@ -100,10 +100,11 @@ def _print_kept(res: Any) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Kinematics file (YAML) to write: the calibrated arm model, for "
                    "tmscal solve --kinematics.")
-@click.option("--arm", default=None,
-              help="The nominal model to start from, a registered name such as ur5e or "
-                   "vs060 (docs/kinematics.md; default: the one the session was acquired "
-                   "with).")
+@click.option("--arm", default=None, metavar="NAME|FILE",
+              help="The nominal model to start from: a registered name such as ur5e or "
+                   "vs060, a shipped arm file's name, or the path of a URDF or arm file "
+                   "(docs/kinematics.md, \"Arm files\"; default: the one the session was "
+                   "acquired with).")
 @click.option("--sigma", type=(Finite(0, lo_open=True), Finite(0, lo_open=True)),
               default=None, metavar="FORCE_N TORQUE_NM",
               help="Noise of the averaged wrench per force and torque channel (default: from "
@@ -145,14 +146,19 @@ def identify(session_file: Path, output: Path, arm: str | None,
     check_outputs({"--output": output}, [session_file], force)
     session = read_session_file(session_file, strict)
     head = session.header.get("selfcal")
-    name = arm or (head.get("arm") if isinstance(head, dict) else None)
+    name: Any = arm or (head.get("arm") if isinstance(head, dict) else None)
+    if arm is None and isinstance(head, dict) and head.get("arm_definition") is not None:
+        from ..formats.armdef import arm_from_record
+
+        name = arm_from_record(head["arm_definition"],
+                               f"{session_file}: header key 'selfcal.arm_definition'")
     if name is None:
         raise click.BadParameter(f"{session_file} does not name its arm; name the nominal "
                                  "model (a registered name such as ur5e or vs060)",
                                  param_hint="--arm")
     res = identify_session(session, name, sigma, form, prior[0], prior[1], max_iter,
                            "--arm" if arm else f"{session_file}: header 'selfcal.arm'")
-    click.echo(f"{session_file}: {len(res.q)} configurations of arm {name}; channel σ from "
+    click.echo(f"{session_file}: {len(res.q)} configurations of arm {res.name}; channel σ from "
                f"{res.sigma_source}: " + ", ".join(
                    f"{c} {s:.2g} {u}" for c, s, u in zip(CHANNELS, res.sigma, CHANNEL_UNITS,
                                                         strict=True)))

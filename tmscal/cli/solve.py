@@ -135,10 +135,16 @@ def _handheld_options(session: Any, index: int) -> dict[str, Any]:
                    "joints with the arm's calibrated kinematics (a file of tmscal selfcal "
                    "identify -o) instead of taking the controller's reported pose "
                    "(docs/selfcal.md). Every pose used needs joint angles.")
-@click.option("--arm", default=None, metavar="NAME",
-              help="With --kinematics estimate: the nominal arm (ur5e, vs060, fr3, …; "
-                   "docs/kinematics.md lists them). Default: the arm the session recorded "
-                   "(its robot driver's devices.robot.arm).")
+@click.option("--arm", default=None, metavar="NAME|FILE",
+              help="With --kinematics estimate: the nominal arm: a registered name (ur5e, "
+                   "vs060, fr3, …), a shipped arm file's name (kuka_lbr_iiwa7, xarm6, …), or "
+                   "the path of a URDF (.urdf) or a tmscal arm file (docs/kinematics.md, "
+                   "\"Arm files\"). Default: the arm the session recorded; another one is an "
+                   "error.")
+@click.option("--urdf-base", default=None, metavar="LINK",
+              help="With --arm FILE.urdf: the chain's base link (default base_link).")
+@click.option("--urdf-flange", default=None, metavar="LINK",
+              help="With --arm FILE.urdf: the chain's flange link (default tool0).")
 @click.option("--level", type=click.Choice(["auto", "none", "offsets", "full"]),
               default="auto", show_default=True,
               help="With --kinematics estimate: which deviations to estimate: none (X, Y, Z "
@@ -163,7 +169,8 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
           train: int | None, folds: int, in_sample: bool, orthonormal: bool, as_json: bool,
           output: Path | None, plot: Path | None, calib_file: Path | None,
           tolerance_mm: float | None, tolerance_deg: float | None,
-          update: tuple[str, ...], kinematics: str | Path | None, arm: str | None, level: str,
+          update: tuple[str, ...], kinematics: str | Path | None, arm: str | None,
+          urdf_base: str | None, urdf_flange: str | None, level: str,
           tolerance_length: float | None, tolerance_angle: float | None, verbose: bool,
           force: bool, strict: bool) -> None:
     """Solve a session for X, Y, Z and report the errors (the metrics of Wang et al. 2018;
@@ -189,6 +196,8 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     kin_file = kinematics if isinstance(kinematics, Path) else None
     if not estimate:
         for opt, given in (("--arm", arm is not None), ("--level", level != "auto"),
+                           ("--urdf-base", urdf_base is not None),
+                           ("--urdf-flange", urdf_flange is not None),
                            ("--tolerance-length", tolerance_length is not None),
                            ("--tolerance-angle", tolerance_angle is not None)):
             if given:
@@ -220,9 +229,14 @@ def solve(session_file: Path, method: str, options: tuple[str, ...], handheld_po
     session = read_session_file(session_file, strict)
     if handheld_pose is not None:
         opts.update(_handheld_options(session, handheld_pose))
+    nominal: Any = arm
+    if arm is not None and (urdf_base is not None or urdf_flange is not None):
+        from ..formats.armdef import resolve_arm
+
+        nominal = resolve_arm(arm, "--arm", urdf_base, urdf_flange)
     res = with_fit_bar(solve_service)(session, method=method.lower(), train=train,
                         orthonormal=orthonormal, folds=folds, in_sample=in_sample,
-                        options=opts, arm=arm, level=level,
+                        options=opts, arm=nominal, level=level,
                         tolerances=_tolerances(tolerance_length, tolerance_angle, estimate),
                         **_kinematics_args(kinematics))
     cal = res.calibration

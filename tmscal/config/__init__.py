@@ -3,7 +3,8 @@ was expected.
 
 A config describes one rig (see ``configs/*.yaml`` for commented examples)::
 
-    robot:    {driver: ur|denso|franka, host, port, speed_mm_s, accel_mm_s2, options: {...}}
+    robot:    {driver: ur|denso|franka, host, port, speed_mm_s, accel_mm_s2, [arm, urdf_base,
+               urdf_flange], options: {...}}
     tracker:  {driver: ndi|igtl, tools: {marker: ..., probe: ...}, frame_rate_hz,
                options: {...}, + the driver's keys (ndi: port, baud, reply, log_wire, the
                tools' ROM files; igtl: host, port, timeout_s, the tools' TRANSFORM names)}

@@ -32,7 +32,8 @@ __all__ = ["GENERIC_KEYS", "RESERVED_OPTIONS", "reserved_options", "settings_cla
 
 #: the keys every device of a kind has (the rest of a section is its driver's)
 GENERIC_KEYS: dict[str, tuple[str, ...]] = {
-    "robot": ("driver", "host", "port", "speed_mm_s", "accel_mm_s2", "options"),
+    "robot": ("driver", "host", "port", "speed_mm_s", "accel_mm_s2", "arm", "urdf_base",
+              "urdf_flange", "options"),
     "tracker": ("driver", "tools", "frame_rate_hz", "options"),
     "ft": ("driver", "host", "port", "samples", "options"),
 }
@@ -166,9 +167,40 @@ def parse_robot(data: Any, src: str, base_dir: Path | None = None,
         in_range(src, "robot.port", robot.port, 0, 65535)
     positive(src, "robot.speed_mm_s", robot.speed_mm_s)
     positive(src, "robot.accel_mm_s2", robot.accel_mm_s2)
+    _check_arm(robot, src, base_dir, check_files)
     robot.options = _options(data, src, "robot", driver, cls)
     robot.settings = cls.parse(data, src, base_dir, check_files)
     return robot
+
+
+#: what makes ``robot.arm`` a path rather than a name
+_ARM_SUFFIXES = (".urdf", ".yaml", ".yml", ".json")
+
+
+def _check_arm(robot: RobotConfig, src: str, base_dir: Path | None, check_files: bool) -> None:
+    """``robot.arm``: a short name, or a path (a suffix of :data:`_ARM_SUFFIXES` or a
+    slash) made absolute against ``base_dir`` and, with ``check_files``, a file that exists;
+    ``urdf_base``/``urdf_flange`` only with a URDF. The file itself is read by the
+    acquisition (tmscal.formats.armdef), which names the config's key when it is not an
+    arm."""
+    arm = robot.arm
+    if arm is not None:
+        if not arm or not arm.isprintable() or len(arm) > 4096:
+            raise err(src, "robot.arm", "expected an arm's name or the path of a URDF or arm "
+                      "file")
+        if "/" in arm or arm.lower().endswith(_ARM_SUFFIXES):
+            p = Path(arm).expanduser()
+            if not p.is_absolute() and base_dir is not None:
+                p = base_dir / p
+            if check_files and not p.is_file():
+                raise err(src, "robot.arm", f"no such file: {p}")
+            robot.arm = str(p)
+    for k in ("urdf_base", "urdf_flange"):
+        v = getattr(robot, k)
+        if v is not None and (robot.arm is None or not robot.arm.lower().endswith(".urdf")):
+            raise err(src, f"robot.{k}", "goes with a URDF robot.arm (a .urdf file)")
+        if v is not None and (not v or len(v) > 200 or not v.isprintable()):
+            raise err(src, f"robot.{k}", "expected a link's name")
 
 
 def parse_tracker(data: Any, src: str, base_dir: Path | None,

@@ -22,8 +22,11 @@ __all__ = ["RobotConfig", "TrackerConfig", "FTConfig", "PlanConfig", "SamplingCo
 class RobotConfig:
     """The robot section: a registered robot ``driver``, the controller's ``host`` and
     ``port`` (None: the driver's default), the motion's speed (mm/s) and acceleration
-    (mm/s²), the driver ``options`` as its settings class checked them, and ``settings``
-    (the driver's own keys; set by the parser)."""
+    (mm/s²), the driver ``options`` as its settings class checked them, ``settings``
+    (the driver's own keys; set by the parser), and ``arm``: the arm the session records
+    (a registry name, a shipped arm file's name, or the path of a URDF or arm file, relative
+    paths against the config's folder; docs/kinematics.md, "Arm files"; None: the one the
+    driver reports), with a URDF's chain links ``urdf_base`` and ``urdf_flange``."""
 
     driver: str
     host: str = "127.0.0.1"
@@ -32,6 +35,9 @@ class RobotConfig:
     accel_mm_s2: float = 500.0
     options: dict[str, Any] = field(default_factory=dict)
     settings: DriverSettings | None = None
+    arm: str | None = None
+    urdf_base: str | None = None
+    urdf_flange: str | None = None
 
 
 @dataclass

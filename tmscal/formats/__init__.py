@@ -6,7 +6,10 @@
   export), with the partial re-registration's file (``updated_calibration_yaml``);
 - :mod:`.armfile`: a calibration's identified arm (the ``arm`` section);
 - :mod:`.kinfile`: the kinematics file (of ``selfcal identify``, and inside the ``arm``
-  section);
+  section), which is also the tmscal arm file (docs/kinematics.md, "Arm files");
+- :mod:`.urdf`: a serial arm from a URDF chain; :mod:`.armdef`: what ``--arm`` names (a
+  registry name, a shipped arm file, a URDF or an arm file) and the definition a session or a
+  calibration records;
 - :mod:`.textfile`: what the readers share (a bounded UTF-8 file, YAML or JSON, a checked 4×4
   matrix in mm), each problem one ``CalibrationError`` naming the file and the dotted key.
 

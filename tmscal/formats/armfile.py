@@ -6,6 +6,8 @@ format of :mod:`.kinfile`, the one ``tmscal selfcal identify -o`` writes::
 
     arm:
       nominal: ur5e              # the controller's model, a name of tmscal's arm registry
+      nominal_arm: {…}           # only for an arm of a URDF or an arm file: that arm, in
+                                 # the kinematics format (so a check needs no file)
       source: estimated          # estimated (tmscal solve --kinematics estimate) or the
                                  # kinematics file the robot poses were recomputed with
       controller_frame: [[…]]    # 4×4 mm: the controller's frame ← the arm's DH base
@@ -42,7 +44,7 @@ from .textfile import bad, check_matrix
 
 __all__ = ["arm_section", "parse_arm_section"]
 
-_KEYS = ("nominal", "source", "controller_frame", "seeds_deg", "kinematics")
+_KEYS = ("nominal", "nominal_arm", "source", "controller_frame", "seeds_deg", "kinematics")
 #: the report entries of an estimated arm, beside parameters/estimate/nominal/std
 _REPORT = ("level", "reason", "tolerances", "identified", "weak", "unidentified", "cv",
            "variance_factor", "iterations")
@@ -66,10 +68,27 @@ def arm_section(ac: ArmCalibration) -> dict[str, Any]:
         ident = rep.get("identification")
         source = str(rep.get("source", "given"))
     seeds = [] if ac.seeds is None else np.degrees(np.asarray(ac.seeds, dtype=float)).tolist()
-    return plain({"nominal": ac.nominal.name, "source": source,
+    out = {}
+    if not _registered(ac.nominal):  # an arm of a URDF or an arm file: kept whole
+        out["nominal_arm"] = kinematics_doc(ac.nominal)
+    return plain({"nominal": ac.nominal.name, **out, "source": source,
                   "controller_frame": np.asarray(ac.controller_frame, dtype=float).tolist(),
                   "seeds_deg": seeds,
                   "kinematics": kinematics_doc(ac.arm, identification=ident)})
+
+
+def _registered(arm: Any) -> bool:
+    """The arm is the registry's arm of its name, as it is there."""
+    from ..calib.kinematics.arms import ARMS
+
+    spec = ARMS.get(arm.name)
+    return spec is not None and _same(spec.arm.to_dict(), arm.to_dict())
+
+
+def _same(a: Any, b: Any) -> bool:
+    return bool(np.array_equal(np.asarray(a["dh"]), np.asarray(b["dh"]))) and all(
+        a.get(k) == b.get(k) for k in ("convention", "base", "flange", "joint_limits_rad",
+                                       "beta", "joint_types", "joint_map", "root"))
 
 
 def _seeds(v: Any, src: str, n: int) -> np.ndarray | None:
@@ -154,10 +173,16 @@ def parse_arm_section(v: Any, src: str) -> ArmCalibration:
     for k in ("nominal", "controller_frame", "kinematics"):
         if v.get(k) is None:
             raise bad(src, f"arm.{k}", "missing")
-    try:
-        nominal = arm_by_name(v["nominal"], f"{src}: key 'arm.nominal'")
-    except Exception as e:  # the registry's ConfigError, typed as the file's
-        raise CalibrationError(str(e)) from None
+    if v.get("nominal_arm") is not None:   # an arm of a URDF or an arm file, kept whole
+        nominal = parse_kinematics(v["nominal_arm"], f"{src}, arm.nominal_arm").model
+        if nominal.name != v["nominal"]:
+            raise bad(src, "arm.nominal", f"{str(v['nominal'])[:60]!r} is not the name of "
+                      f"arm.nominal_arm ({nominal.name!r})")
+    else:
+        try:
+            nominal = arm_by_name(v["nominal"], f"{src}: key 'arm.nominal'")
+        except Exception as e:  # the registry's ConfigError, typed as the file's
+            raise CalibrationError(str(e)) from None
     kf = parse_kinematics(v["kinematics"], f"{src}, arm.kinematics")
     arm = kf.model
     if (arm.name, arm.n_joints, arm.convention) != \

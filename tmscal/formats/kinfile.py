@@ -30,6 +30,15 @@ kg); the model inside the code is in mm and radians::
 Rz(θ_i + θ0) Tz(d)) are always written; a file without them (older ones) is standard DH with
 the flange at the last DH frame.
 
+The same format is the tmscal **arm file** (docs/kinematics.md, "Arm files"), which may add,
+per joint, ``type`` (revolute or prismatic: q in mm adds to d, its range ``min_mm``/``max_mm``),
+``sign`` (1 or −1), ``coupling`` ([{joint, factor}]: the row also moves with other joints,
+FANUC's J2/J3), ``mimic`` ([{joint, factor}]: a passive row with no joint of its own, no range)
+and ``name``; at the top ``root`` (robot base ← DH frame 0), ``description`` (vendor, model,
+source, approximate, controller_model, generation, reach_mm, notes) and ``mock`` (serial,
+mount, home_deg); ``base`` is optional (identity) and every transform may be a 4×4 matrix or
+``{xyz_mm, rpy_deg}``.
+
 ``identification`` (written by ``selfcal identify``, optional when reading): ``parameters``
 (names of the identified parameters, in :meth:`ArmModel.parameter_names` order),
 ``estimate``, ``std`` and ``nominal`` (one number per name, in the units of
@@ -79,8 +88,8 @@ _FORCE_N = 100_000.0
 _TORQUE_NM = 10_000.0
 _JOINT_KEYS = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg", "min_deg", "max_deg")
 _TOP_KEYS = ("format", "version", "created", "arm", "convention", "units", "joints", "base",
-             "flange", "flange_from_sensor", "tool", "bias", "identification", "session",
-             "provenance")
+             "root", "flange", "flange_from_sensor", "tool", "bias", "identification", "session",
+             "provenance", "description", "mock")
 
 
 @dataclass
@@ -118,6 +127,47 @@ def _floats(a: Any) -> Any:
     return np.asarray(a, dtype=float).tolist()
 
 
+def _joint_docs(model: Any, dh: np.ndarray, lim: np.ndarray) -> list[dict[str, Any]]:
+    """The ``joints`` entries of an arm: its DH rows, and (when not plain) each row's type,
+    sign, couplings or mimic entries from the joint map (module docstring)."""
+    types = tuple(getattr(model, "types", ("revolute",) * len(dh)))
+    M = getattr(model, "joint_map", None)
+    M = np.eye(len(dh)) if M is None else np.asarray(M, dtype=float)
+    own: list[int] = []             # each joint's own row: increasing, its factor ±1
+    for j in range(M.shape[1]):
+        rows = [r for r in range(len(dh)) if r > (own[-1] if own else -1)
+                and abs(M[r, j]) == 1.0]
+        if not rows:
+            raise ValueError(f"joint {j + 1} of the joint map has no row of its own (a row "
+                             "after the previous joint's with factor 1 or -1)")
+        own.append(rows[0])
+    out = []
+    for i, r in enumerate(dh):
+        e: dict[str, Any] = {"theta_offset_deg": float(np.degrees(r[0])), "d_mm": float(r[1]),
+                             "a_mm": float(r[2]), "alpha_deg": float(np.degrees(r[3]))}
+        if types[i] != "revolute":
+            e = {"type": types[i], **e}
+        links = [{"joint": int(j) + 1, "factor": float(M[i, j])}
+                 for j in np.flatnonzero(M[i]) if i not in own or own.index(i) != j]
+        if i in own:
+            j = own.index(i)
+            lo, hi = lim[j]
+            if types[i] == "prismatic":
+                e.update({"min_mm": float(lo), "max_mm": float(hi)})
+            else:
+                e.update({"min_deg": float(np.degrees(lo)), "max_deg": float(np.degrees(hi))})
+            if M[i, j] != 1.0:
+                if abs(M[i, j]) != 1.0:
+                    raise ValueError(f"row {i + 1}: a joint's own factor must be 1 or -1")
+                e["sign"] = int(M[i, j])
+            if links:
+                e["coupling"] = links
+        else:
+            e["mimic"] = links
+        out.append(e)
+    return out
+
+
 def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
                    session: dict[str, Any] | None = None,
                    provenance: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -133,10 +183,7 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
     lim = np.asarray(model.joint_limits_rad, dtype=float)
     beta = np.asarray(getattr(model, "beta", None) if getattr(model, "beta", None) is not None
                       else np.zeros(len(dh)), dtype=float)
-    joints = [{"theta_offset_deg": float(np.degrees(r[0])), "d_mm": float(r[1]),
-               "a_mm": float(r[2]), "alpha_deg": float(np.degrees(r[3])),
-               "min_deg": float(np.degrees(lo)), "max_deg": float(np.degrees(hi))}
-              for r, (lo, hi) in zip(dh, lim, strict=True)]
+    joints = _joint_docs(model, dh, lim)
     if np.any(beta != 0):
         for j, b in zip(joints, beta, strict=True):
             j["beta_deg"] = float(np.degrees(b))
@@ -151,6 +198,8 @@ def kinematics_doc(model: Any, identification: dict[str, Any] | None = None,
         "base": _floats(model.base),
         "flange": _floats(getattr(model, "flange", np.eye(4))),
     }
+    if getattr(model, "root", None) is not None:
+        doc["root"] = _floats(model.root)
     if hasattr(model, "flange_from_sensor"):
         bias = np.asarray(model.bias, dtype=float)
         doc.update({
@@ -207,8 +256,10 @@ def _mapping(v: Any, src: str, key: str, keys: tuple[str, ...],
     """A mapping with exactly ``keys`` and perhaps ``optional`` ones (a missing or unknown key
     is named)."""
     if not isinstance(v, dict):
-        raise _bad(src, key, f"expected a mapping with {', '.join(keys)}")
+        raise _bad(src, key, f"expected a mapping with {', '.join(keys or optional)}")
     for k in v:
+        if not isinstance(k, str):
+            raise _bad(src, f"{key}.{_show(k)}", "every key must be a string")
         if k not in keys and k not in optional:
             raise _bad(src, f"{key}.{k}", "unknown key; expected one of: "
                        f"{', '.join(keys + optional)}")
@@ -218,28 +269,117 @@ def _mapping(v: Any, src: str, key: str, keys: tuple[str, ...],
     return v
 
 
-def _joints(v: Any, src: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """DH rows [θ0 rad, d mm, a mm, α rad], joint limits [min, max] rad and the Hayati angles
-    β rad (``beta_deg``, optional: 0)."""
+_TYPES = ("revolute", "prismatic")
+_JOINT_OPTIONAL = ("beta_deg", "type", "sign", "coupling", "mimic", "name", "min_mm", "max_mm")
+
+
+def _links(v: Any, src: str, key: str, n_max: int) -> list[tuple[int, float]]:
+    """A list of {joint: j (1-based joint number), factor: c} (a coupling or a mimic)."""
+    if not isinstance(v, list) or not v:
+        raise _bad(src, key, "expected a list of {joint: J, factor: C} (J a joint number "
+                   "counted from 1, C a finite number)")
+    out = []
+    for k, e in enumerate(v):
+        e = _mapping(e, src, f"{key}[{k}]", ("joint", "factor"))
+        j = e["joint"]
+        if isinstance(j, bool) or not isinstance(j, int) or not 1 <= j <= n_max:
+            raise _bad(src, f"{key}[{k}].joint", f"expected a joint number in 1…{n_max}, got "
+                       f"{_show(j)}")
+        out.append((j, _num(e["factor"], src, f"{key}[{k}].factor", 1e3)))
+    return out
+
+
+def _joints(v: Any, src: str) -> dict[str, Any]:
+    """The arm's rows and joints: ``dh`` rows [θ0 rad, d mm, a mm, α rad], ``joint_limits_rad``
+    [min, max] per joint (rad; mm for a prismatic one), ``beta`` the Hayati angles rad
+    (``beta_deg``, optional: 0), ``joint_types`` and ``joint_map`` (``type``, ``sign``,
+    ``coupling``, ``mimic``: docs/kinematics.md, "Arm files")."""
     if not isinstance(v, list) or not 1 <= len(v) <= MAX_JOINTS:
         raise _bad(src, "joints", f"expected a list of 1 to {MAX_JOINTS} joints")
-    dh, lim, beta = [], [], []
+    dh, lim, beta, types = [], [], [], []
+    own: list[int | None] = []          # the joint number (0-based) of each row, None: mimic
+    links: list[list[tuple[int, float]]] = []
+    signs: list[float] = []
     for i, j in enumerate(v):
         key = f"joints[{i}]"
-        j = _mapping(j, src, key, _JOINT_KEYS, optional=("beta_deg",))
+        if not isinstance(j, dict):
+            raise _bad(src, key, f"expected a mapping with {', '.join(_JOINT_KEYS)}")
+        kind = j.get("type", "revolute")
+        if kind not in _TYPES:
+            raise _bad(src, f"{key}.type", f"expected revolute or prismatic, got {_show(kind)}")
+        mimic = j.get("mimic") is not None
+        need = ["theta_offset_deg", "d_mm", "a_mm", "alpha_deg"]
+        lim_keys = ("min_mm", "max_mm") if kind == "prismatic" else ("min_deg", "max_deg")
+        if not mimic:
+            need += list(lim_keys)
+        allowed = tuple(need) + _JOINT_OPTIONAL + ("min_deg", "max_deg")
+        for k in j:
+            if k not in allowed or (k in ("min_deg", "max_deg", "min_mm", "max_mm")
+                                    and (mimic or k not in lim_keys)):
+                why = ("a passive (mimic) joint has no limits of its own" if mimic and
+                       k in ("min_deg", "max_deg", "min_mm", "max_mm") else
+                       f"a {kind} joint's limits are {' and '.join(lim_keys)}"
+                       if k in ("min_deg", "max_deg", "min_mm", "max_mm") else
+                       f"unknown key; expected one of: {', '.join(tuple(need) + _JOINT_OPTIONAL)}")
+                raise _bad(src, f"{key}.{k}", why)
+        for k in need:
+            if k not in j:
+                raise _bad(src, f"{key}.{k}", "missing")
+        if j.get("name") is not None and (not isinstance(j["name"], str) or len(j["name"]) > 100):
+            raise _bad(src, f"{key}.name", "expected the joint's name (a short string)")
         beta.append(math.radians(_num(j.get("beta_deg", 0.0), src, f"{key}.beta_deg",
                                       _ANGLE_DEG)))
         t0 = _num(j["theta_offset_deg"], src, f"{key}.theta_offset_deg", _ANGLE_DEG)
         d = _num(j["d_mm"], src, f"{key}.d_mm", _LENGTH_MM)
         a = _num(j["a_mm"], src, f"{key}.a_mm", _LENGTH_MM)
         al = _num(j["alpha_deg"], src, f"{key}.alpha_deg", _ANGLE_DEG)
-        lo = _num(j["min_deg"], src, f"{key}.min_deg", _LIMIT_DEG)
-        hi = _num(j["max_deg"], src, f"{key}.max_deg", _LIMIT_DEG)
-        if not lo < hi:
-            raise _bad(src, f"{key}.max_deg", f"{hi:g} is not above min_deg {lo:g}")
         dh.append([math.radians(t0), d, a, math.radians(al)])
-        lim.append([math.radians(lo), math.radians(hi)])
-    return np.array(dh), np.array(lim), np.array(beta)
+        types.append(kind)
+        if mimic:
+            if "sign" in j or "coupling" in j:
+                raise _bad(src, f"{key}.{'sign' if 'sign' in j else 'coupling'}",
+                           "a passive (mimic) joint follows its mimic entries only")
+            own.append(None)
+            links.append(_links(j["mimic"], src, f"{key}.mimic", MAX_JOINTS))
+            signs.append(0.0)
+            continue
+        bound = _LENGTH_MM if kind == "prismatic" else _LIMIT_DEG
+        lo = _num(j[lim_keys[0]], src, f"{key}.{lim_keys[0]}", bound)
+        hi = _num(j[lim_keys[1]], src, f"{key}.{lim_keys[1]}", bound)
+        if not lo < hi:
+            raise _bad(src, f"{key}.{lim_keys[1]}", f"{hi:g} is not above {lim_keys[0]} {lo:g}")
+        lim.append([lo, hi] if kind == "prismatic" else [math.radians(lo), math.radians(hi)])
+        sign = j.get("sign", 1)
+        if sign not in (1, -1) or isinstance(sign, bool):
+            raise _bad(src, f"{key}.sign", f"expected 1 or -1, got {_show(sign)}")
+        own.append(sum(o is not None for o in own))
+        signs.append(float(sign))
+        links.append([] if j.get("coupling") is None else
+                     _links(j["coupling"], src, f"{key}.coupling", MAX_JOINTS))
+    n = sum(o is not None for o in own)
+    if n == 0:
+        raise _bad(src, "joints", "every joint is passive (mimic): no joint moves the arm")
+    kinds = [types[i] for i, o in enumerate(own) if o is not None]
+    M = np.zeros((len(dh), n))
+    for i, o in enumerate(own):
+        if o is not None:
+            M[i, o] = signs[i]
+        sub = "mimic" if o is None else "coupling"
+        for k, (jn, c) in enumerate(links[i]):
+            if jn > n:
+                raise _bad(src, f"joints[{i}].{sub}[{k}].joint", f"joint {jn}: the arm has {n} "
+                           "joints (passive rows not counted)")
+            if jn - 1 == o:
+                raise _bad(src, f"joints[{i}].{sub}[{k}].joint", "a joint coupled to itself "
+                           "(give its sign instead)")
+            if kinds[jn - 1] != types[i]:
+                raise _bad(src, f"joints[{i}].{sub}[{k}].joint", f"couples this {types[i]} "
+                           f"joint to joint {jn}, a {kinds[jn - 1]} one")
+            M[i, jn - 1] += c
+    plain_map = M.shape[0] == M.shape[1] and np.array_equal(M, np.eye(n))
+    return {"dh": np.array(dh), "joint_limits_rad": np.array(lim), "beta": np.array(beta),
+            "joint_types": None if all(t == "revolute" for t in types) else tuple(types),
+            "joint_map": None if plain_map else M}
 
 
 def _header(doc: Any, src: str) -> str:
@@ -264,6 +404,47 @@ def _header(doc: Any, src: str) -> str:
     return arm
 
 
+def _pose(v: Any, src: str, key: str) -> np.ndarray:
+    """A rigid 4×4 (mm): a matrix, or {xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]}
+    (Trans(xyz) · Rz(yaw) Ry(pitch) Rx(roll), as a URDF origin)."""
+    if isinstance(v, dict):
+        from ..calib.kinematics.model import pose_from_rpy
+
+        v = _mapping(v, src, key, (), optional=("xyz_mm", "rpy_deg"))
+        xyz = _vec(v.get("xyz_mm", [0, 0, 0]), src, f"{key}.xyz_mm", 3, _LENGTH_MM)
+        rpy = _vec(v.get("rpy_deg", [0, 0, 0]), src, f"{key}.rpy_deg", 3, _ANGLE_DEG)
+        return pose_from_rpy(np.radians(rpy), xyz)
+    return _matrix(v, src, key, rigid=True)
+
+
+#: what an arm file may say of the arm beside its kinematics (``description``) and where the
+#: mock rig places it (``mock``); docs/kinematics.md, "Arm files"
+_ABOUT_KEYS = ("vendor", "model", "source", "approximate", "controller_model", "generation",
+               "reach_mm", "notes")
+_MOCK_KEYS = ("serial", "mount", "home_deg")
+
+
+def _about(doc: dict[str, Any], src: str) -> None:
+    """``description`` and ``mock``: checked, kept in the document."""
+    d = doc.get("description")
+    if d is not None:
+        d = _mapping(d, src, "description", (), optional=_ABOUT_KEYS)
+        for k in ("vendor", "model", "source", "controller_model", "generation", "notes"):
+            if d.get(k) is not None and (not isinstance(d[k], str) or len(d[k]) > 2000):
+                raise _bad(src, f"description.{k}", "expected a text")
+        if d.get("approximate") is not None and not isinstance(d["approximate"], bool):
+            raise _bad(src, "description.approximate", "expected true or false")
+        if d.get("reach_mm") is not None:
+            _num(d["reach_mm"], src, "description.reach_mm", _LENGTH_MM, lo=0.0)
+    m = doc.get("mock")
+    if m is not None:
+        m = _mapping(m, src, "mock", (), optional=_MOCK_KEYS)
+        if m.get("mount") is not None:
+            _pose(m["mount"], src, "mock.mount")
+        if m.get("serial") is not None and not isinstance(m["serial"], str):
+            raise _bad(src, "mock.serial", "expected a text")
+
+
 _SENSOR_KEYS = ("flange_from_sensor", "tool", "bias")
 
 
@@ -276,15 +457,16 @@ def _fields(doc: Any, src: str) -> dict[str, Any]:
     except ConfigError as e:
         raise CalibrationError(str(e)) from None
     name = _header(doc, src)
-    dh, lim, beta = _joints(doc.get("joints"), src)
-    base = _matrix(doc.get("base"), src, "base", rigid=True)
+    rows = _joints(doc.get("joints"), src)
+    base = np.eye(4) if doc.get("base") is None else _pose(doc.get("base"), src, "base")
     convention = doc.get("convention", "standard")
     if convention not in ("standard", "modified"):
         raise _bad(src, "convention", f"expected standard or modified, got {_show(convention)}")
-    flange = np.eye(4) if doc.get("flange") is None else \
-        _matrix(doc.get("flange"), src, "flange", rigid=True)
-    out = {"name": name, "dh": dh, "base": base, "convention": convention, "flange": flange,
-           "joint_limits_rad": lim, "beta": beta}
+    flange = np.eye(4) if doc.get("flange") is None else _pose(doc.get("flange"), src, "flange")
+    out = {"name": name, "base": base, "convention": convention, "flange": flange, **rows}
+    if doc.get("root") is not None:
+        out["root"] = _pose(doc.get("root"), src, "root")
+    _about(doc, src)
     given = [k for k in _SENSOR_KEYS if doc.get(k) is not None]
     if not given:
         return out
@@ -342,9 +524,9 @@ def _identification(v: Any, src: str, names: list[str]
 
 def _parameter_names(model: Any) -> list[str]:
     """The names an identification may give: an ``ArmModel``'s parameter vector, or an arm's
-    DH parameters (θ0, d, a, α per joint), and β of every joint (the tracker-based
+    DH parameters (θ0, d, a, α per DH row), and β of every row (the tracker-based
     estimate's Hayati angles)."""
-    n = model.n_joints
+    n = getattr(model, "n_rows", model.n_joints)
     per = (list(model.parameter_names()) if hasattr(model, "parameter_names") else
            [f"{k}_{i}" for i in range(1, n + 1) for k in ("theta0", "d", "a", "alpha")])
     return per + [f"beta_{i}" for i in range(1, n + 1)]

@@ -27,12 +27,17 @@ from ..calib.metrics import placement_errors
 from ..errors import CalibrationError, ConfigError, SessionError
 from ..session import Session
 
-__all__ = ["JOINTS_HINT", "recorded_arm", "choose_arm", "session_joints", "usable_joints",
+__all__ = ["JOINTS_HINT", "ARM_DEFINITION_KEY", "recorded_arm", "recorded_definition",
+           "choose_definition", "choose_arm", "session_joints", "usable_joints",
            "applied_arrays", "arm_forward", "session_frames", "given_arm", "truth_arm_of",
            "truth_controller", "coil_placement"]
 
 #: what to do about a pose without joints
 JOINTS_HINT = "record the session with a robot driver that reports joints (docs/kinematics.md)"
+
+
+#: where a session header records the arm's definition (tmscal.formats.armdef)
+ARM_DEFINITION_KEY = ("devices", "robot", "arm_definition")
 
 
 def recorded_arm(session: Session) -> str | None:
@@ -43,23 +48,77 @@ def recorded_arm(session: Session) -> str | None:
     return arm if isinstance(arm, str) and arm else None
 
 
-def choose_arm(session: Session, arm: str | None) -> tuple[Arm, str]:
-    """The nominal arm of a kinematic calibration and where its name came from: ``arm`` (a
-    registry name), else the one the session recorded. CalibrationError naming the known
-    arms for an unknown name, or asking for ``arm`` when the session recorded none."""
-    if arm is not None:
-        name, source = arm, "arm="
-    else:
-        name, source = recorded_arm(session), "the session header (devices.robot.arm)"
-        if name is None:
+def recorded_definition(session: Session) -> Any:
+    """The arm definition the session header records (``devices.robot.arm_definition``, a
+    :class:`tmscal.formats.armdef.ArmDefinition` rebuilt from its content, no file read),
+    else the registry arm its driver reported (``devices.robot.arm``), else None.
+    CalibrationError naming the session and the key for a record that is not valid."""
+    from ..formats.armdef import ArmDefinition, arm_from_record
+
+    robot = (session.header.get("devices") or {}).get("robot")
+    rec = robot.get("arm_definition") if isinstance(robot, dict) else None
+    if rec is not None:
+        return arm_from_record(rec, f"{session.path or 'session'}: header key "
+                               f"'{'.'.join(ARM_DEFINITION_KEY)}'")
+    name = recorded_arm(session)
+    if name is not None and name in ARMS:
+        return ArmDefinition(arm=ARMS[name].arm, kind="registry", name=name)
+    return None
+
+
+def choose_definition(session: Session, arm: Any, urdf_base: str | None = None,
+                      urdf_flange: str | None = None) -> tuple[Any, str]:
+    """The nominal arm's definition (an ``ArmDefinition``) of a kinematic calibration and
+    where it came from: ``arm`` (a registry name, a shipped arm file's name, or the path of a
+    URDF or arm file; :func:`tmscal.formats.armdef.resolve_arm`; or an ``ArmDefinition``
+    already resolved), else the one the session
+    recorded. CalibrationError when ``arm`` is not the arm the session recorded (naming both
+    and the header key; a file of as many joints as the registry arm its driver reported is
+    taken: it refines the reported model), naming the known arms for an unknown name, or
+    asking for ``arm`` when the session recorded none."""
+    from ..formats.armdef import ArmDefinition, resolve_arm
+
+    where = session.path or "session"
+    recorded = recorded_definition(session)
+    if arm is None:
+        if recorded is None:
+            name = recorded_arm(session)
+            if name is not None:   # a model the registry does not know
+                try:
+                    arm_by_name(name, "the session header (devices.robot.arm)")
+                except ConfigError as e:
+                    raise CalibrationError(str(e)) from None
             raise CalibrationError(
-                f"{session.path or 'session'}: the session does not say which arm recorded it "
-                "(its robot driver reported no model): name it with arm= (one of "
-                f"{', '.join(ARMS)})")
+                f"{where}: the session does not say which arm recorded it (its robot driver "
+                f"reported no model): name it with arm= (one of {', '.join(ARMS)}, or a URDF "
+                "or arm file)")
+        key = "devices.robot.arm_definition" if recorded.kind != "registry" \
+            else "devices.robot.arm"
+        return recorded, f"the session header ({key})"
     try:
-        return arm_by_name(name, f"{source}"), source
+        given = arm if isinstance(arm, ArmDefinition) else \
+            resolve_arm(arm, "arm=", urdf_base, urdf_flange)
     except ConfigError as e:
         raise CalibrationError(str(e)) from None
+    if recorded is not None and recorded.kind == "registry" and given.kind != "registry" \
+            and given.arm.n_joints == recorded.arm.n_joints:
+        # the driver reported only the model: a file of it (its URDF, its arm file) refines it
+        return given, f"arm= (the session's driver reported {recorded.name})"
+    if recorded is not None and not given.same_as(recorded):
+        key = "devices.robot.arm_definition" if recorded.kind != "registry" \
+            else "devices.robot.arm"
+        raise CalibrationError(
+            f"{where}: the session was recorded with {recorded.describe()} (header key "
+            f"'{key}'); arm= gives {given.describe()}: give the arm the session was recorded "
+            "with, or none (the recorded one is used)")
+    return given, "arm="
+
+
+def choose_arm(session: Session, arm: Any, urdf_base: str | None = None,
+               urdf_flange: str | None = None) -> tuple[Arm, str]:
+    """The nominal arm (:class:`Arm`) of :func:`choose_definition` and where it came from."""
+    d, source = choose_definition(session, arm, urdf_base, urdf_flange)
+    return d.arm, source
 
 
 def session_joints(session: Session, indices: list[int], purpose: str) -> np.ndarray:

@@ -37,7 +37,7 @@ from ..errors import CalibrationError, SessionError
 from ..session import Session
 
 __all__ = ["CHANNELS", "CHANNEL_UNITS", "MIN_SIGMA", "FORMS", "SessionIdentification",
-           "session_wrenches", "wrench_sigma", "identify_session"]
+           "session_wrenches", "wrench_sigma", "nominal_model", "identify_session"]
 
 CHANNELS = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
 CHANNEL_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
@@ -162,11 +162,34 @@ class SessionIdentification:
                 "converged": self.fit.converged}
 
 
-def identify_session(session: Session, arm: str, sigma: tuple[float, float] | None = None,
+def nominal_model(arm: Any, where: str = "--arm") -> ArmModel:
+    """The self-calibration model to start from: the registry's (``NOMINAL``) for a registered
+    name, else the arm a shipped arm file, a URDF, an arm file or an ``ArmDefinition`` defines
+    (:func:`tmscal.formats.armdef.resolve_arm`) with the sensor on the flange and the default
+    tool. ConfigError naming ``where`` for an unknown name or an arm self-calibration cannot
+    take (a passive, mimicking row); CalibrationError naming the file for a file that is not an
+    arm."""
+    from ..calib.kinematics.arms import ARMS
+    from ..errors import ConfigError
+    from ..formats.armdef import ArmDefinition, resolve_arm
+
+    if isinstance(arm, str) and arm in ARMS:
+        return NOMINAL[spec_by_name(arm, where).name]
+    if isinstance(arm, ArmDefinition) and arm.kind == "registry":
+        return NOMINAL[arm.name]
+    d = arm if isinstance(arm, ArmDefinition) else resolve_arm(arm, where)
+    try:
+        return ArmModel.from_arm(d.arm)
+    except ValueError as e:
+        raise ConfigError(f"{where}: {e}") from None
+
+
+def identify_session(session: Session, arm: Any, sigma: tuple[float, float] | None = None,
                      form: str = "map", prior_length_mm: float = 2.0,
                      prior_angle_deg: float = 1.0, max_iter: int = 50,
                      where: str = "--arm") -> SessionIdentification:
-    """Identify the arm named ``arm`` (a registry name; ``where`` says where it came from)
+    """Identify the arm ``arm`` names (a registry name, a shipped arm file's, or the path of a
+    URDF or arm file: :func:`nominal_model`; ``where`` says where it came from)
     from the session's wrenches (module docstring). ``sigma`` the channel noise (N, N·m) or
     None (from the recorded spreads); ``form`` "map" (the estimator) or "kept" (the paper's
     protocol); the prior of the MAP form ±``prior_length_mm`` mm and ±``prior_angle_deg``
@@ -175,7 +198,8 @@ def identify_session(session: Session, arm: str, sigma: tuple[float, float] | No
     unknown arm)."""
     if form not in FORMS:
         raise CalibrationError(f"selfcal: form must be one of {', '.join(FORMS)}, got {form!r}")
-    model0 = NOMINAL[spec_by_name(arm, where).name]
+    model0 = nominal_model(arm, where)
+    arm = model0.name
     q, w, sem, idx = session_wrenches(session)
     src = session.path or "session"
     if q.shape[1] != model0.n_joints:

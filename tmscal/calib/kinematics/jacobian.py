@@ -22,8 +22,11 @@ gives J_t = u, J_ω = 0. With F_i the world ← DH frame i (F_0 the base):
 * flange (the same form in frame F_n): x, y, z shift along F_n's axes; yaw, pitch, roll turn
   about F_n z, F_n Rz(yaw) y, F_n Rz(yaw) Ry(pitch) x through the flange origin (J_t = 0).
 
-A joint value q_i moves the flange exactly as θ0_i does: :func:`joint_jacobian` is those
-columns. Roll/pitch/yaw columns are singular at pitch = ±π/2 (gimbal lock). This Jacobian is
+A joint value q_i moves the flange exactly as θ0_i does (d_i for a prismatic joint; through
+the joint map M, docs of :mod:`.model`, the columns combine as J_q = J_rows · M):
+:func:`joint_jacobian` is those columns. The root transform of a chain read from a URDF is
+fixed (not a parameter); the base's columns turn about the base origin, before it.
+Roll/pitch/yaw columns are singular at pitch = ±π/2 (gimbal lock). This Jacobian is
 that of an arm without Hayati angles (``arm.beta`` zero, every nominal model).
 
 Body twists of named deviations (:func:`deviation_twists`, the tracker-based kinematic
@@ -84,7 +87,7 @@ def pose_jacobian(arm: Arm, q: Any) -> np.ndarray:
     q = np.atleast_2d(check_joints(arm, q))
     if q.ndim != 2:
         raise ValueError(f"q must be (m, {arm.n_joints}), got shape {q.shape}")
-    m, n = q.shape
+    m, n = q.shape[0], arm.n_rows
     F = joint_frames(arm, q)                                   # (m, n+1, 4, 4)
     flange = F[:, -1] @ arm.flange                             # (m, 4, 4)
     t = flange[:, None, :3, 3]                                 # (m, 1, 3)
@@ -114,8 +117,14 @@ def pose_jacobian(arm: Arm, q: Any) -> np.ndarray:
 
 def joint_jacobian(arm: Arm, q: Any) -> np.ndarray:
     """d(flange pose)/d(joint values), shape (m, 6, n), for q (m, n) rad: rows dt (mm) and
-    dω (rad) in the world frame per rad (the θ0 columns of :func:`pose_jacobian`)."""
-    return pose_jacobian(arm, q)[:, :, 0:4 * arm.n_joints:4]
+    dω (rad) in the world frame per rad (per mm for a prismatic joint): the θ0 columns of
+    :func:`pose_jacobian` (d for a prismatic row), combined by the joint map."""
+    J = pose_jacobian(arm, q)
+    if arm.joint_types is None and arm.joint_map is None:
+        return J[:, :, 0:4 * arm.n_joints:4]
+    cols = np.stack([J[:, :, 4 * i + (1 if t == "prismatic" else 0)]
+                     for i, t in enumerate(arm.types)], axis=-1)       # (m, 6, rows)
+    return cols if arm.joint_map is None else cols @ arm.joint_map
 
 
 # --- body twists of named deviations ------------------------------------------------------------
@@ -147,10 +156,15 @@ def _steps(arm: Arm, q: np.ndarray) -> list[list[tuple[str, np.ndarray]]]:
     enters it ("theta0": the joint rotation, which also carries q)."""
     out = []
     m = q.shape[0]
-    for i in range(arm.n_joints):
+    x = arm.row_values(q)
+    for i, kind in enumerate(arm.types):
         th0, d, a, al = arm.dh[i]
-        rz = _elementary(2, True, q[:, i] + th0)
-        tz = _elementary(2, False, np.full(m, d))
+        if kind == "revolute":
+            rz = _elementary(2, True, x[:, i] + th0)
+            tz = _elementary(2, False, np.full(m, d))
+        else:
+            rz = _elementary(2, True, np.full(m, th0))
+            tz = _elementary(2, False, x[:, i] + d)
         tx = _elementary(0, False, np.full(m, a))
         rx = _elementary(0, True, np.full(m, al))
         ry = _elementary(1, True, np.full(m, arm.beta[i]))
@@ -176,10 +190,10 @@ def deviation_twists(arm: Arm, q: Any, names: list[str]) -> tuple[np.ndarray, np
     m = q.shape[0]
     wanted = {}
     for col, nm in enumerate(names):
-        kind, i = split_deviation(nm, arm.n_joints)
+        kind, i = split_deviation(nm, arm.n_rows)
         wanted[(i, kind)] = col
     pre: dict[int, np.ndarray] = {}
-    T = np.broadcast_to(np.eye(4), (m, 4, 4)).copy()
+    T = np.broadcast_to(np.eye(4) if arm.root is None else arm.root, (m, 4, 4)).copy()
     for i, joint in enumerate(_steps(arm, q)):
         for kind, M in joint:
             if (i, kind) in wanted:
@@ -206,10 +220,10 @@ def parallel_joints(arm: Arm, tol_deg: float = 1.0) -> list[int]:
     F = joint_frames(replace_base(arm), np.zeros(arm.n_joints))
     if arm.convention == "standard":
         z = F[:, :3, 2]
-        pairs = [(i, z[i - 1], z[i]) for i in range(1, arm.n_joints)]
+        pairs = [(i, z[i - 1], z[i]) for i in range(1, arm.n_rows)]
     else:
         z = F[1:, :3, 2]
-        pairs = [(i, z[i - 2], z[i - 1]) for i in range(2, arm.n_joints + 1)]
+        pairs = [(i, z[i - 2], z[i - 1]) for i in range(2, arm.n_rows + 1)]
     c = np.cos(np.radians(tol_deg))
     return [i for i, u, w in pairs if abs(float(u @ w)) >= c]
 

@@ -69,6 +69,10 @@ class ArmModel(Arm):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.n_rows != self.n_joints:
+            raise ValueError(f"{self.name}: self-calibration needs an arm whose every DH row is "
+                             f"a joint of its own ({self.n_rows} rows, {self.n_joints} joints: "
+                             "a passive, mimicking row)")
         for key, val, shape in (("flange_from_sensor", self.flange_from_sensor, (4, 4)),
                                 ("tool_cog_mm", self.tool_cog_mm, (3,)), ("bias", self.bias, (6,))):
             arr = np.array(val, dtype=float)
@@ -83,7 +87,9 @@ class ArmModel(Arm):
         Hayati angles and limits) with the sensor and tool fields ``sensor`` (defaults: sensor
         on the flange, a 1.5 kg tool 60 mm out along the sensor axis, no bias)."""
         return cls(name=arm.name, dh=arm.dh, base=arm.base, joint_limits_rad=arm.joint_limits_rad,
-                   convention=arm.convention, flange=arm.flange, beta=arm.beta, **sensor)
+                   convention=arm.convention, flange=arm.flange, beta=arm.beta,
+                   joint_types=arm.joint_types, joint_map=arm.joint_map, root=arm.root,
+                   **sensor)
 
     def parameter_names(self) -> list[str]:
         """Names of the parameter vector p, in its one order (module docstring)."""
