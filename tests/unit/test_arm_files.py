@@ -189,7 +189,7 @@ def test_shipped_registry_arm_files_are_the_registry() -> None:
 
 
 @pytest.mark.parametrize("name", ["xarm6", "xarm7", "kuka_lbr_iiwa7", "kuka_lbr_iiwa14",
-                                  "kuka_lbr_med7", "kinova_gen3", "doosan_m1013"])
+                                  "kinova_gen3", "doosan_m1013"])
 def test_the_new_arms_resolve_by_name_and_cite_their_source(name: str) -> None:
     d = resolve_arm(name)
     assert d.kind == "arm-file" and d.arm.name == name and d.sha256
