@@ -68,6 +68,7 @@ import pyigtl
 
 from .calib import Calibration
 from .drivers.base import Tracker, TrackerFrame
+from .drivers.igtl.wire import STATUS_CODES, StatusMessage
 from .errors import CalibrationError
 from .geometry import angle_between
 
@@ -75,8 +76,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["TRANSFORMS", "MAX_NAME_BYTES", "DEFAULT_PORT", "frame_transforms", "StreamServer",
            "StreamStats", "CrossCheck", "stream_frames", "coil_source", "coil_difference",
-           "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S", "MAX_BODY_BYTES", "StatusMessage",
-           "STATUS_CODES"]
+           "MAX_CLIENTS", "QUEUE_FRAMES", "STALL_S", "MAX_BODY_BYTES", "STATUS_CODES"]
 
 #: OpenIGTLink's registered TCP port, the default of Slicer's OpenIGTLinkIF and PlusServer
 DEFAULT_PORT = 18944
@@ -110,36 +110,6 @@ TRANSFORMS: dict[str, str] = {
     "MarkerToTracker": "tracker ← coil marker: B as the tracker measures it",
     "TrackerToRobotBase": "robot base ← tracker: Z of the calibration",
 }
-
-
-#: OpenIGTLink STATUS codes (openigtlink.org, "STATUS" message, protocol version 2) used here
-STATUS_CODES = {"ok": 1, "error": 2, "not_found": 4, "not_present": 16, "exiting": 19}
-
-
-class StatusMessage(pyigtl.MessageBase):
-    """An OpenIGTLink STATUS message (pyigtl 0.3 has none): the content is the status
-    ``code`` (uint16, :data:`STATUS_CODES`), a ``subcode`` (int64, device-specific), an
-    ``error_name`` (char[20], zero-padded) and a ``status_string`` (UTF-8, zero-terminated),
-    all big-endian, as the specification defines it."""
-
-    def __init__(self, code: int = 1, subcode: int = 0, error_name: str = "",
-                 status_string: str = "", timestamp: float | None = None,
-                 device_name: str | None = None) -> None:
-        super().__init__(timestamp=timestamp, device_name=device_name)
-        self._message_type = "STATUS"
-        self.code, self.subcode = int(code), int(subcode)
-        self.error_name, self.status_string = error_name, status_string
-        self._valid_message = True
-
-    def _pack_content(self) -> bytes:
-        name = self.error_name.encode("utf-8")[:20]
-        return (struct.pack(">Hq20s", self.code, self.subcode, name)
-                + self.status_string.encode("utf-8") + b"\0")
-
-    def _unpack_content(self, content: bytes) -> None:
-        self.code, self.subcode, name = struct.unpack_from(">Hq20s", content)
-        self.error_name = name.rstrip(b"\0").decode("utf-8", "replace")
-        self.status_string = content[30:].split(b"\0", 1)[0].decode("utf-8", "replace")
 
 
 def coil_source(tools: Iterable[str], cal: Calibration, marker: str = "marker",

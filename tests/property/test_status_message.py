@@ -1,8 +1,9 @@
-"""Property tests of the monitor's OpenIGTLink STATUS message (``tmscal.stream.StatusMessage``):
-any code, subcode, error name and status string packs into a message whose header and CRC the
-OpenIGTLink parser of the igtl driver accepts, whose content is laid out as the specification
-says (uint16 code, int64 subcode, char[20] error name, zero-terminated string: unpacked here
-with ``struct``), and which unpacks back to what was sent; a name over 20 bytes is cut."""
+"""Property tests of the monitor's OpenIGTLink STATUS message
+(``tmscal.drivers.igtl.wire.StatusMessage``): any code, subcode, error name and status string
+packs into a message whose header and CRC the OpenIGTLink parser of the igtl driver accepts,
+whose content is laid out as the specification says (uint16 code, int64 subcode, char[20] error
+name, zero-terminated string: unpacked here with ``struct``), and which unpacks back to what was
+sent; a name over 20 bytes is cut."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from hypothesis import strategies as st
 
 from tests.fuzz import fuzz_settings
 from tmscal.drivers.igtl import wire
-from tmscal.stream import StatusMessage
+from tmscal.drivers.igtl.wire import StatusMessage
 
 text = st.text(st.characters(min_codepoint=1, max_codepoint=0x10FFFF,
                              blacklist_categories=("Cs",)), max_size=200)

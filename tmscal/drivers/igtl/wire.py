@@ -1,5 +1,6 @@
 """OpenIGTLink on the wire: the 58-byte header, the version-2 body layout (extended header,
-content, metadata), the CRC, and TRANSFORM messages, for the driver and the mock alike.
+content, metadata), the CRC and TRANSFORM messages, for the driver and the mock alike, and the
+STATUS message tmscal's stream server sends.
 
 The OpenIGTLink specification (openigtlink.org, "OpenIGTLink Protocol", header versions 1
 and 2) defines every message as a 58-byte big-endian header (header version uint16, type
@@ -35,7 +36,8 @@ from pyigtl.messages import CRC64
 
 from ...errors import ProtocolError
 
-__all__ = ["HEADER_SIZE", "MAX_BODY_SIZE", "MAX_NAME_BYTES", "Header", "Transform",
+__all__ = ["STATUS_CODES", "StatusMessage", "HEADER_SIZE", "MAX_BODY_SIZE", "MAX_NAME_BYTES",
+           "Header", "Transform",
            "parse_header", "split_body", "decode_transform", "encode", "encode_transform",
            "timestamp_parts"]
 
@@ -209,6 +211,37 @@ class _Message(MessageBase):
 
     def _pack_content(self) -> bytes:
         return self._content
+
+
+#: OpenIGTLink STATUS codes (openigtlink.org, "STATUS" message, protocol version 2) used here
+STATUS_CODES = {"ok": 1, "error": 2, "not_found": 4, "not_present": 16, "exiting": 19}
+
+
+class StatusMessage(MessageBase):
+    """An OpenIGTLink STATUS message (pyigtl 0.3 has none): the content is the status
+    ``code`` (uint16, :data:`STATUS_CODES`), a ``subcode`` (int64, device-specific), an
+    ``error_name`` (char[20], zero-padded) and a ``status_string`` (UTF-8, zero-terminated),
+    all big-endian, as the specification defines it (the live monitor's alarms, sent by
+    ``tmscal.stream.StreamServer.send_status``)."""
+
+    def __init__(self, code: int = 1, subcode: int = 0, error_name: str = "",
+                 status_string: str = "", timestamp: float | None = None,
+                 device_name: str | None = None) -> None:
+        super().__init__(timestamp=timestamp, device_name=device_name)
+        self._message_type = "STATUS"
+        self.code, self.subcode = int(code), int(subcode)
+        self.error_name, self.status_string = error_name, status_string
+        self._valid_message = True
+
+    def _pack_content(self) -> bytes:
+        name = self.error_name.encode("utf-8")[:20]
+        return (struct.pack(">Hq20s", self.code, self.subcode, name)
+                + self.status_string.encode("utf-8") + b"\0")
+
+    def _unpack_content(self, content: bytes) -> None:
+        self.code, self.subcode, name = struct.unpack_from(">Hq20s", content)
+        self.error_name = name.rstrip(b"\0").decode("utf-8", "replace")
+        self.status_string = content[30:].split(b"\0", 1)[0].decode("utf-8", "replace")
 
 
 def _pack(msg: MessageBase, stamp: int | None, version: int,
